@@ -1,0 +1,115 @@
+"""Loader throughput: psg-data frame iteration vs a plain ``cv2.imread`` loop over the same files.
+
+Also measures ``import psg_data`` time in fresh interpreters. Run:
+
+    python bench/bench_loader.py [--quick]
+
+Prints a table with the ratio loader / baseline measured in the same run (target >= 0.8x) and
+writes bench/out/loader.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def make_dataset(root: Path, frames: int, width: int, height: int) -> Path:
+    from psg_data.schemas import CameraIntrinsics
+    from psg_data.writers import DatasetWriter
+
+    rng = np.random.default_rng(0)
+    v, u = np.mgrid[0:height, 0:width]
+    cam = CameraIntrinsics("cam", width, height, 0.9 * width, 0.9 * width, width / 2 - 0.5, height / 2 - 0.5)
+    with DatasetWriter(root, timezone="UTC") as w:
+        w.add_camera(cam)
+        with w.scan("s0") as sw:
+            for i in range(frames):
+                depth = (1500 + 2 * u + 3 * v + rng.normal(0, 8, (height, width))).astype(np.uint16)
+                color = np.stack([(u * 255 / width), (v * 255 / height), np.full_like(u, 40 + i)], -1).astype(np.uint8)
+                sw.add_frame(i * 10**8, np.eye(4), color, depth, "cam")
+    return root
+
+
+def time_loader(root: Path, prefetch: int = 2) -> tuple[float, int]:
+    import psg_data
+
+    scan = psg_data.open_dataset(root).scan("s0")
+    t = time.perf_counter()
+    n = 0
+    for fr in scan.frames(prefetch=prefetch):
+        n += fr.color.shape[0] > 0
+    return time.perf_counter() - t, n
+
+
+def time_imread(root: Path) -> tuple[float, int]:
+    import cv2
+
+    files = sorted((root / "images/s0/color").glob("*.png"))
+    dfiles = sorted((root / "images/s0/depth").glob("*.png"))
+    t = time.perf_counter()
+    n = 0
+    for c, d in zip(files, dfiles):
+        a = cv2.imread(str(c), cv2.IMREAD_COLOR)
+        b = cv2.imread(str(d), cv2.IMREAD_UNCHANGED)
+        n += a is not None and b is not None
+    return time.perf_counter() - t, n
+
+
+def import_time(reps: int) -> float:
+    times = []
+    for _ in range(reps):
+        out = subprocess.run([sys.executable, "-c", "import time; t=time.perf_counter(); import psg_data; "
+                              "print(time.perf_counter()-t)"], capture_output=True, text=True, check=True,
+                             cwd=str(Path(__file__).resolve().parents[1]))
+        times.append(float(out.stdout))
+    return statistics.median(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true", help="fewer, smaller frames")
+    args = ap.parse_args()
+    frames, (w, h) = (20, (320, 240)) if args.quick else (60, (640, 480))
+    with tempfile.TemporaryDirectory() as tmp:
+        root = make_dataset(Path(tmp) / "ds", frames, w, h)
+        size_mb = sum(p.stat().st_size for p in (root / "images").rglob("*.png")) / 1e6
+        time_loader(root), time_imread(root)  # warm the page cache
+        lo, lo0, im = [], [], []
+        for _ in range(3):  # interleave to share machine noise
+            lo.append(time_loader(root)[0])
+            lo0.append(time_loader(root, prefetch=0)[0])
+            im.append(time_imread(root)[0])
+        t_lo, t_lo0, t_im = min(lo), min(lo0), min(im)
+    imp = import_time(5)
+    rows = [
+        ("psg_data loader (RGB + depth metres)", frames / t_lo, size_mb / t_lo),
+        ("plain cv2.imread loop (baseline)", frames / t_im, size_mb / t_im),
+        ("psg_data loader, prefetch=0", frames / t_lo0, size_mb / t_lo0),
+    ]
+    print(f"frames: {frames} x {w}x{h}, {size_mb:.1f} MB of PNG; machine: {platform.machine()}, "
+          f"{platform.python_version()}")
+    print(f"{'reader':40s} {'frames/s':>10s} {'MB/s':>8s} {'ratio':>7s}")
+    for name, fps, mbs in rows:
+        print(f"{name:40s} {fps:10.1f} {mbs:8.1f} {fps / rows[1][1]:7.2f}x")
+    print(f"import psg_data: {imp * 1000:.1f} ms (median of 5 fresh interpreters)")
+    out = Path(__file__).parent / "out"
+    out.mkdir(exist_ok=True)
+    (out / "loader.json").write_text(json.dumps({
+        "frames": frames, "resolution": [w, h], "loader_fps": rows[0][1], "imread_fps": rows[1][1],
+        "ratio": rows[0][1] / rows[1][1], "ratio_no_prefetch": rows[2][1] / rows[1][1], "import_s": imp}, indent=2))
+
+
+if __name__ == "__main__":
+    main()

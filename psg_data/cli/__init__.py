@@ -1,0 +1,1 @@
+"""psg_data.cli"""

@@ -1,0 +1,82 @@
+"""``psg-data validate`` and ``psg-data info``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from psg_data.cli._common import EXIT_PROBLEMS, handle_errors
+
+__all__ = ["validate_cmd", "info_cmd"]
+
+
+@click.command("validate")
+@click.argument("path", type=click.Path(path_type=Path))
+@click.option("--no-checksums", is_flag=True, help="Check file sizes only, not SHA-256 checksums (faster).")
+@handle_errors
+def validate_cmd(path: Path, no_checksums: bool) -> None:
+    """Check a dataset: manifest, schemas, ids, value ranges, images and checksums.
+
+    Prints one line per problem (``file[:row]: field: what is wrong, what was expected``) and exits
+    1, or prints ``OK`` and exits 0.
+
+    \b
+    Example:
+      psg-data validate /tmp/lab
+    """
+    from psg_data.schemas.validate import validate_dataset
+
+    problems = validate_dataset(path, checksums=not no_checksums)
+    if problems:
+        for p in problems:
+            click.echo(str(p))
+        click.echo(f"{len(problems)} problem(s) in {path}", err=True)
+        sys.exit(EXIT_PROBLEMS)
+    click.echo("OK")
+
+
+def _fmt_bytes(n: float) -> str:
+    for unit in ("B", "KB", "MB", "GB"):
+        if n < 1024 or unit == "GB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.1f} GB"  # pragma: no cover
+
+
+@click.command("info")
+@click.argument("path", type=click.Path(path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@handle_errors
+def info_cmd(path: Path, as_json: bool) -> None:
+    """Summarise a dataset: scans, frames, time span, rooms, receptacles, objects, doors, size.
+
+    \b
+    Example:
+      psg-data info /tmp/lab
+    """
+    import json
+
+    from psg_data.loaders import open_dataset
+    from psg_data.loaders._summary import summarize
+
+    summary = summarize(open_dataset(path))
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+        return
+    s = summary
+    click.echo(f"dataset      {s['name']}  ({s['format']} {s['format_version']}, colour {s['color_encoding']})")
+    click.echo(f"path         {s['path']}")
+    click.echo(f"scans        {s['scans']}  (splits: {', '.join(f'{k} {v}' for k, v in s['splits'].items()) or '-'})")
+    click.echo(f"frames       {s['frames']}  ({s['frames_per_scan_min']}-{s['frames_per_scan_max']} per scan)")
+    click.echo(f"time span    {s['start_local']} .. {s['end_local']}  ({s['timezone']}, {s['span_days']:.1f} days)")
+    click.echo(f"cameras      {', '.join(s['cameras'])}")
+    click.echo(f"rooms        {s['rooms']}")
+    click.echo(f"receptacles  {s['receptacles']}  (" + ", ".join(f"{k}: {v}" for k, v in s['receptacles_per_room'].items()) + ")")
+    click.echo(f"doors        {s['doors']}  (states: " + ", ".join(f"{k} {v}" for k, v in s['door_states'].items()) + ")")
+    click.echo(f"objects      {s['objects']}")
+    click.echo(f"schedule     {s['schedule_rows']} rows ({s['schedule_absent']} absent)")
+    if s["extra_tables"]:
+        click.echo(f"other tables {', '.join(s['extra_tables'])}")
+    click.echo(f"size         {_fmt_bytes(s['size_bytes'])} in {s['files']} files")

@@ -1,0 +1,124 @@
+"""The estimator plugin interface: observation streams, per-edge filters and estimators.
+
+An *edge* is one binary feature: an (object, receptacle) pair, or a (door, state) pair. Its
+observations form an :class:`EdgeStream`. A :class:`PersistenceEstimator` is configured by
+keyword-only settings (scikit-learn style), learns shared and per-edge parameters in
+:meth:`PersistenceEstimator.fit`, and hands out one :class:`EdgeFilter` per edge, which is updated
+recursively with observations and predicts P(present) at any later time.
+
+Typical use (what ``psg-eval`` does)::
+
+    est = get_estimator("perpetua_star", random_state=0).fit(train_streams, val_streams=val)
+    f = est.make_filter(("redmug", "kitchen_table"))
+    f.update_many(train.t_s, train.y)          # history up to the end of training
+    belief = f.predict(test_times_s)           # predictive setting
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from psg_data.errors import EstimatorError
+
+__all__ = ["EdgeKey", "EdgeStream", "EdgeFilter", "PersistenceEstimator"]
+
+EdgeKey = tuple[str, str]
+"""(object_id, receptacle_id), or (door_id, state) for doors."""
+
+
+@dataclass(frozen=True)
+class EdgeStream:
+    """Observations of one edge.
+
+    Attributes:
+        edge: the edge key.
+        t_s: (N,) observation times, float64 seconds since the Unix epoch (UTC), non-decreasing.
+        y: (N,) int8 observations, 1 = seen present, 0 = seen absent.
+    """
+
+    edge: EdgeKey
+    t_s: NDArray[np.float64]
+    y: NDArray[np.int8]
+    meta: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t_s, dtype=np.float64).reshape(-1)
+        y = np.asarray(self.y).reshape(-1)
+        if t.shape != y.shape:
+            raise EstimatorError(f"edge {self.edge}: t_s and y differ in length ({t.size} vs {y.size})")
+        if not np.all(np.isfinite(t)):
+            raise EstimatorError(f"edge {self.edge}: t_s contains non-finite times")
+        if t.size > 1 and np.any(np.diff(t) < 0):
+            i = int(np.argmax(np.diff(t) < 0)) + 1
+            raise EstimatorError(f"edge {self.edge}: t_s must be non-decreasing, got {t[i]} after {t[i - 1]} at index {i}")
+        if y.size and not np.all((y == 0) | (y == 1)):
+            raise EstimatorError(f"edge {self.edge}: y must be 0 or 1")
+        object.__setattr__(self, "t_s", t)
+        object.__setattr__(self, "y", y.astype(np.int8))
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+    def between(self, start_s: float, end_s: float) -> EdgeStream:
+        """Observations with ``start_s <= t_s < end_s``."""
+        m = (self.t_s >= start_s) & (self.t_s < end_s)
+        return EdgeStream(self.edge, self.t_s[m], self.y[m], dict(self.meta))
+
+
+@runtime_checkable
+class EdgeFilter(Protocol):
+    """Recursive per-edge belief. Times are float64 seconds since the Unix epoch (UTC).
+
+    ``update`` with a time earlier than the last observation raises :class:`EstimatorError`;
+    ``predict`` is vectorised and defined for times >= the last observation time (earlier times
+    are clamped to it or raise, as documented by the implementation); values lie in [0, 1].
+    """
+
+    @property
+    def last_t_s(self) -> float | None: ...
+
+    def update(self, t_s: float, y: int) -> None: ...
+
+    def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None: ...
+
+    def predict(self, t_s: ArrayLike) -> NDArray[np.float64]: ...
+
+    def get_state(self) -> dict[str, Any]:
+        """JSON-serialisable state; ``estimator.filter_from_state(state)`` restores the filter."""
+        ...
+
+
+@runtime_checkable
+class PersistenceEstimator(Protocol):
+    """An estimator of P(present) per edge over time.
+
+    ``__init__`` takes keyword-only settings and stores them unchanged; learned attributes end in
+    ``_``; using ``make_filter`` before ``fit`` raises :class:`psg_data.errors.NotFittedError`.
+    """
+
+    def fit(
+        self,
+        streams: Sequence[EdgeStream],
+        *,
+        val_streams: Sequence[EdgeStream] | None = None,
+        timezone: str = "UTC",
+    ) -> PersistenceEstimator:
+        """Learn parameters from training streams (and optionally validation streams); return self."""
+        ...
+
+    def make_filter(self, edge: EdgeKey) -> EdgeFilter:
+        """A fresh filter for ``edge`` with its learned parameters (defaults for unseen edges)."""
+        ...
+
+    def filter_from_state(self, state: dict[str, Any]) -> EdgeFilter:
+        """Rebuild a filter from :meth:`EdgeFilter.get_state`."""
+        ...
+
+    def get_params(self) -> dict[str, Any]:
+        """The keyword-only settings (scikit-learn's ``get_params``)."""
+        ...

@@ -1,0 +1,313 @@
+"""Reading a psg-dataset: :func:`open_dataset` -> :class:`Dataset` -> :class:`Scan` -> :class:`Frame`.
+
+Tables are read on first access and cached; images are decoded one frame at a time.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+from collections.abc import Iterator
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.errors import FormatError
+from psg_data.schemas._manifest import DatasetInfo, read_manifest
+from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
+from psg_data.schemas._tables import TABLES, table_path
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pandas as pd
+    import pyarrow as pa
+
+__all__ = ["open_dataset", "Dataset", "Scan"]
+
+log = logging.getLogger(__name__)
+
+
+def _box(row: dict[str, Any]) -> Box:
+    return Box(np.asarray(row["center_m"], float), np.asarray(row["extent_m"], float),
+               np.asarray(row["rotation"], float).reshape(3, 3))
+
+
+class Dataset:
+    """A psg-dataset directory opened for reading.
+
+    Attributes:
+        root: dataset directory.
+        info: the manifest.
+    """
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise FormatError(f"{self.root}: not a directory; expected a psg-dataset directory")
+        self.info: DatasetInfo = read_manifest(self.root)
+        self._arrow: dict[str, pa.Table] = {}
+
+    def __repr__(self) -> str:
+        return f"Dataset({str(self.root)!r}, scans={len(self.scan_ids)}, frames={self.table('frames').num_rows})"
+
+    # -- tables -------------------------------------------------------------------------------
+    def has_table(self, name: str) -> bool:
+        return (self.root / table_path(name)).is_file()
+
+    def table(self, name: str) -> pa.Table:
+        """Table ``name`` as an Arrow table (cached)."""
+        if name not in self._arrow:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            path = self.root / table_path(name)
+            if not path.is_file():
+                raise FormatError(f"{path}: missing table {name!r}")
+            try:
+                self._arrow[name] = pq.read_table(path)
+            except (OSError, pa.ArrowException) as exc:
+                raise FormatError(f"{path}: unreadable Parquet ({exc})") from exc
+        return self._arrow[name]
+
+    def df(self, name: str) -> pd.DataFrame:
+        """Table ``name`` as a pandas DataFrame."""
+        return self.table(name).to_pandas()
+
+    @property
+    def table_names(self) -> list[str]:
+        return [n for n in TABLES if self.has_table(n)] + sorted(
+            p.stem for p in (self.root / "tables").glob("*.parquet") if p.stem not in TABLES)
+
+    # -- records ------------------------------------------------------------------------------
+    @cached_property
+    def cameras(self) -> dict[str, CameraIntrinsics]:
+        out = {}
+        for r in self.table("cameras").to_pylist():
+            r["distortion_coeffs"] = tuple(r["distortion_coeffs"] or ())
+            out[r["camera_id"]] = CameraIntrinsics(**r)
+        return out
+
+    @cached_property
+    def rooms(self) -> dict[str, Room]:
+        return {r["room_id"]: Room(r["room_id"], r["name"],
+                                   None if r["floor_polygon_m"] is None else np.asarray(r["floor_polygon_m"], float))
+                for r in self.table("rooms").to_pylist()}
+
+    @cached_property
+    def receptacles(self) -> dict[str, Receptacle]:
+        return {r["receptacle_id"]: Receptacle(r["receptacle_id"], r["name"], r["room_id"], _box(r), r["category"])
+                for r in self.table("receptacles").to_pylist()}
+
+    @cached_property
+    def doors(self) -> dict[str, Door]:
+        return {r["door_id"]: Door(r["door_id"], r["name"], r["room_a"], r["room_b"], _box(r))
+                for r in self.table("doors").to_pylist()}
+
+    @cached_property
+    def objects(self) -> dict[str, ObjectInfo]:
+        return {r["object_id"]: ObjectInfo(r["object_id"], r["name"], r["description"])
+                for r in self.table("objects").to_pylist()}
+
+    # -- scans --------------------------------------------------------------------------------
+    @cached_property
+    def _scan_rows(self) -> list[dict[str, Any]]:
+        return sorted(self.table("scans").to_pylist(), key=lambda r: (r["start_stamp_ns"], r["scan_id"]))
+
+    @cached_property
+    def scan_ids(self) -> list[str]:
+        """Scan ids ordered by start time."""
+        return [r["scan_id"] for r in self._scan_rows]
+
+    @property
+    def scans(self) -> list[Scan]:
+        """Every scan, ordered by start time."""
+        return [self.scan(s) for s in self.scan_ids]
+
+    @cached_property
+    def _frames_by_scan(self) -> dict[str, dict[str, NDArray[Any]]]:
+        t = self.table("frames")
+        scan = np.asarray(t.column("scan_id").to_numpy(zero_copy_only=False))
+        order = np.lexsort((t.column("frame_index").to_numpy(), scan))
+        cols = {
+            "frame_index": t.column("frame_index").to_numpy()[order],
+            "stamp_ns": t.column("stamp_ns").to_numpy()[order],
+            "camera_id": np.asarray(t.column("camera_id").to_numpy(zero_copy_only=False))[order],
+            "T": np.asarray(t.column("T_world_camera").combine_chunks().flatten().to_numpy(),
+                            dtype=np.float64).reshape(-1, 4, 4)[order],
+            "color_path": np.asarray(t.column("color_path").to_numpy(zero_copy_only=False))[order],
+            "depth_path": np.asarray(t.column("depth_path").to_numpy(zero_copy_only=False))[order],
+        }
+        scan = scan[order]
+        out: dict[str, dict[str, NDArray[Any]]] = {}
+        if scan.size == 0:
+            return out
+        bounds = np.flatnonzero(scan[1:] != scan[:-1]) + 1
+        starts = np.concatenate([[0], bounds])
+        ends = np.concatenate([bounds, [scan.size]])
+        for a, b in zip(starts, ends):
+            out[str(scan[a])] = {k: v[a:b] for k, v in cols.items()}
+        return out
+
+    def scan(self, scan_id: str) -> Scan:
+        """The scan with id ``scan_id``."""
+        rows = {r["scan_id"]: r for r in self._scan_rows}
+        if scan_id not in rows:
+            raise KeyError(f"{self.root}: no scan {scan_id!r}; scans are {', '.join(self.scan_ids[:5])}"
+                           f"{', ...' if len(self.scan_ids) > 5 else ''}")
+        return Scan(self, rows[scan_id], self._frames_by_scan.get(scan_id, {}))
+
+    def scan_at(self, stamp_ns: int) -> Scan | None:
+        """The scan whose [start, end] contains ``stamp_ns``, else the latest scan that started before it.
+
+        Returns None if ``stamp_ns`` is before the first scan.
+        """
+        starts = [r["start_stamp_ns"] for r in self._scan_rows]
+        i = bisect.bisect_right(starts, int(stamp_ns)) - 1
+        return None if i < 0 else self.scan(self._scan_rows[i]["scan_id"])
+
+
+class Scan:
+    """One scan (mapping session): metadata and lazy access to its frames."""
+
+    def __init__(self, dataset: Dataset, row: dict[str, Any], frames: dict[str, NDArray[Any]]) -> None:
+        self.dataset = dataset
+        self.scan_id: str = row["scan_id"]
+        self.start_stamp_ns: int = int(row["start_stamp_ns"])
+        self.end_stamp_ns: int = int(row["end_stamp_ns"])
+        self.source: str | None = row.get("source")
+        self.split: str | None = row.get("split")
+        self._f = frames
+
+    def __repr__(self) -> str:
+        return f"Scan({self.scan_id!r}, frames={len(self)})"
+
+    def __len__(self) -> int:
+        return 0 if not self._f else int(self._f["frame_index"].size)
+
+    @property
+    def stamps_ns(self) -> NDArray[np.int64]:
+        """(N,) frame stamps, int64 UTC nanoseconds."""
+        return self._f["stamp_ns"] if self._f else np.zeros(0, np.int64)
+
+    @property
+    def poses(self) -> NDArray[np.float64]:
+        """(N, 4, 4) camera-to-world poses."""
+        return self._f["T"] if self._f else np.zeros((0, 4, 4))
+
+    def frame(self, i: int, *, color: bool = True, depth: bool = True) -> Frame:
+        """Frame ``i`` (random access: reads only that frame's two images)."""
+        if not 0 <= i < len(self):
+            raise IndexError(f"scan {self.scan_id}: frame index {i} out of range 0..{len(self) - 1}")
+        import cv2
+
+        root = self.dataset.root
+        cam = self.dataset.cameras[str(self._f["camera_id"][i])]
+        rgb = np.zeros((0, 0, 3), np.uint8)
+        dm = np.zeros((0, 0), np.float32)
+        if color:
+            path = root / str(self._f["color_path"][i])
+            rgb = _imread_rgb(cv2, str(path))
+            if rgb is None:
+                raise FormatError(f"{path}: missing or unreadable colour image")
+        if depth:
+            path = root / str(self._f["depth_path"][i])
+            raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if raw is None:
+                raise FormatError(f"{path}: missing or unreadable depth image")
+            if raw.dtype != np.uint16 or raw.ndim != 2:
+                raise FormatError(f"{path}: depth must be single-channel uint16, got {raw.dtype} with shape {raw.shape}")
+            dm = np.multiply(raw, np.float32(cam.depth_scale_m), dtype=np.float32)
+        return Frame(self.scan_id, int(self._f["frame_index"][i]), int(self._f["stamp_ns"][i]), rgb, dm, cam,
+                     self._f["T"][i].copy())
+
+    def frames(self, *, color: bool = True, depth: bool = True, stride: int = 1, prefetch: int = 2) -> Iterator[Frame]:
+        """Yield frames lazily in order (every ``stride``-th).
+
+        Args:
+            prefetch: frames decoded ahead in background threads (OpenCV releases the GIL while
+                decoding); 0 decodes each frame only when it is requested.
+        """
+        indices = range(0, len(self), max(1, stride))
+        if prefetch <= 0 or len(indices) < 2:
+            for i in indices:
+                yield self.frame(i, color=color, depth=depth)
+            return
+        from collections import deque
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=prefetch) as pool:
+            pending: deque = deque()
+            it = iter(indices)
+            for i in it:
+                pending.append(pool.submit(self.frame, i, color=color, depth=depth))
+                if len(pending) > prefetch:
+                    break
+            while pending:
+                fut = pending.popleft()
+                nxt = next(it, None)
+                if nxt is not None:
+                    pending.append(pool.submit(self.frame, nxt, color=color, depth=depth))
+                yield fut.result()
+
+    def point_cloud(self, *, stride: int = 4, frame_stride: int = 1, max_depth_m: float = 5.0,
+                    voxel_size_m: float | None = None) -> Any:
+        """Fused coloured point cloud of the scan in the world frame (an ``open3d.geometry.PointCloud``).
+
+        Args:
+            stride: pixel subsampling step in both image axes.
+            frame_stride: use every ``frame_stride``-th frame.
+            max_depth_m: ignore depth beyond this range, metres.
+            voxel_size_m: optional voxel down-sampling of the fused cloud, metres.
+        """
+        from psg_data.open3d_import import import_open3d
+
+        o3d = import_open3d()
+        pts, cols = [], []
+        for fr in self.frames(stride=frame_stride):
+            p, c = backproject(fr, stride=stride, max_depth_m=max_depth_m)
+            pts.append(p)
+            cols.append(c)
+        pcd = o3d.geometry.PointCloud()
+        if pts:
+            pcd.points = o3d.utility.Vector3dVector(np.concatenate(pts))
+            pcd.colors = o3d.utility.Vector3dVector(np.concatenate(cols))
+        if voxel_size_m:
+            pcd = pcd.voxel_down_sample(voxel_size_m)
+        return pcd
+
+
+def _imread_rgb(cv2: Any, path: str) -> NDArray[np.uint8] | None:
+    """Decode an image file straight to RGB (OpenCV >= 4.11 has IMREAD_COLOR_RGB)."""
+    flag = getattr(cv2, "IMREAD_COLOR_RGB", None)
+    if flag is not None:
+        return cv2.imread(path, flag)
+    bgr = cv2.imread(path, cv2.IMREAD_COLOR)
+    return None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def backproject(frame: Frame, *, stride: int = 1, max_depth_m: float = np.inf
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """World points (N, 3) and RGB colours in [0, 1] (N, 3) of a frame's valid depth pixels."""
+    cam = frame.camera
+    d = frame.depth_m[::stride, ::stride]
+    v, u = np.mgrid[0:frame.depth_m.shape[0]:stride, 0:frame.depth_m.shape[1]:stride]
+    ok = (d > 0) & (d <= max_depth_m)
+    z = d[ok].astype(np.float64)
+    x = (u[ok] - cam.cx) / cam.fx * z
+    y = (v[ok] - cam.cy) / cam.fy * z
+    pc = np.stack([x, y, z], axis=1)
+    T = frame.T_world_camera
+    pw = pc @ T[:3, :3].T + T[:3, 3]
+    col = frame.color[::stride, ::stride][ok].astype(np.float64) / 255.0 if frame.color.size else np.zeros_like(pw)
+    return pw, col
+
+
+def open_dataset(path: str | Path) -> Dataset:
+    """Open the psg-dataset at ``path`` (reads only the manifest; tables load on first use).
+
+    Raises:
+        FormatError: not a dataset, bad manifest, or a newer format major version.
+    """
+    return Dataset(path)

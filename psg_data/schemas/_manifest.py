@@ -1,0 +1,115 @@
+"""The dataset manifest ``dataset.json`` read into a dataclass (cf. lerobot's ``info.json``)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import zoneinfo
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from psg_data.errors import FormatError
+
+__all__ = ["DatasetInfo", "FORMAT_NAME", "FORMAT_VERSION", "read_manifest", "manifest_from_dict"]
+
+log = logging.getLogger(__name__)
+
+FORMAT_NAME = "psg-dataset"
+FORMAT_VERSION = "1.0"
+"""``MAJOR.MINOR``: readers accept any minor of their major and refuse a newer major."""
+
+COLOR_ENCODINGS = ("png", "jpeg")
+
+
+@dataclass
+class DatasetInfo:
+    """Contents of ``dataset.json``.
+
+    Attributes:
+        name: dataset name.
+        timezone: IANA timezone of the site (e.g. ``America/Toronto``), used for weekday and
+            time-of-day; all stamps are UTC.
+        color_encoding: ``png`` (lossless) or ``jpeg``.
+        files_sha256: hex SHA-256 of ``tables/files.parquet``, which holds every other checksum.
+        counts: number of rows per table plus ``images``.
+        units: unit of every kind of quantity (fixed by the format, stored for readers).
+        created_by: the software and version that wrote the dataset.
+        extra: free-form provenance (converter config, generator parameters, ...).
+    """
+
+    name: str
+    timezone: str
+    color_encoding: str
+    files_sha256: str = ""
+    counts: dict[str, int] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=lambda: {
+        "length": "m",
+        "time": "int64 nanoseconds since the Unix epoch, UTC",
+        "depth_image": "uint16 millimetres, 0 = invalid",
+        "angles": "rad",
+    })
+    created_by: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+    format: str = FORMAT_NAME
+    format_version: str = FORMAT_VERSION
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2, sort_keys=False) + "\n"
+
+    @property
+    def tz(self) -> zoneinfo.ZoneInfo:
+        return zoneinfo.ZoneInfo(self.timezone)
+
+
+def _major(version: str, where: str) -> int:
+    try:
+        return int(str(version).split(".")[0])
+    except ValueError as exc:
+        raise FormatError(f"{where}: format_version: expected 'MAJOR.MINOR', got {version!r}") from exc
+
+
+def manifest_from_dict(data: Any, where: str) -> DatasetInfo:
+    """Build a :class:`DatasetInfo` from parsed JSON, checking format, version and fields."""
+    if not isinstance(data, dict):
+        raise FormatError(f"{where}: expected a JSON object, got {type(data).__name__}")
+    if data.get("format") != FORMAT_NAME:
+        raise FormatError(f"{where}: format: expected {FORMAT_NAME!r}, got {data.get('format')!r}")
+    version = data.get("format_version")
+    if version is None:
+        raise FormatError(f"{where}: format_version: missing, expected 'MAJOR.MINOR'")
+    if _major(version, where) > _major(FORMAT_VERSION, where):
+        raise FormatError(
+            f"{where}: format_version: {version} is newer than this psg-data reads "
+            f"({FORMAT_VERSION}); upgrade psg-data to a release that reads format {version.split('.')[0]}.x"
+        )
+    known = {f.name for f in fields(DatasetInfo)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        log.warning("%s: ignoring unknown manifest keys %s", where, ", ".join(unknown))
+    for key in ("name", "timezone", "color_encoding"):
+        if not isinstance(data.get(key), str) or not data.get(key):
+            raise FormatError(f"{where}: {key}: missing or not a string")
+    if data["color_encoding"] not in COLOR_ENCODINGS:
+        raise FormatError(f"{where}: color_encoding: expected one of {COLOR_ENCODINGS}, got {data['color_encoding']!r}")
+    try:
+        zoneinfo.ZoneInfo(data["timezone"])
+    except (zoneinfo.ZoneInfoNotFoundError, ValueError) as exc:
+        raise FormatError(f"{where}: timezone: {data['timezone']!r} is not an IANA timezone name") from exc
+    return DatasetInfo(**{k: v for k, v in data.items() if k in known})
+
+
+def read_manifest(root: str | Path) -> DatasetInfo:
+    """Read and check ``ROOT/dataset.json``.
+
+    Raises:
+        FormatError: missing or unreadable manifest, wrong format, newer major version.
+    """
+    path = Path(root) / "dataset.json"
+    if not path.is_file():
+        raise FormatError(f"{path}: missing manifest; is {root} a psg-dataset directory?")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise FormatError(f"{path}: not valid JSON ({exc})") from exc
+    return manifest_from_dict(data, str(path))

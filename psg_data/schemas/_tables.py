@@ -1,0 +1,219 @@
+"""Arrow schemas of every table of the psg-dataset format, version 1.
+
+These schemas are the single source of truth: the writer casts to them, the validator checks
+against them, and ``docs/FORMAT.md`` lists exactly their fields (a test keeps the two in step).
+Each field carries a ``doc`` metadata entry; units and frames are part of the field names
+(``stamp_ns``, ``T_world_camera``, ``extent_m``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pyarrow as pa
+
+__all__ = [
+    "TableSpec",
+    "TABLES",
+    "REQUIRED_TABLES",
+    "table_path",
+    "COLOR_PATH_TEMPLATE",
+    "DEPTH_PATH_TEMPLATE",
+    "MANIFEST_NAME",
+    "DOOR_STATES",
+]
+
+MANIFEST_NAME = "dataset.json"
+"""File name of the manifest at the dataset root."""
+
+COLOR_PATH_TEMPLATE = "images/{scan_id}/color/{frame_index:06d}.{ext}"
+"""Relative path of a colour image (``ext`` is ``png`` or ``jpg``)."""
+
+DEPTH_PATH_TEMPLATE = "images/{scan_id}/depth/{frame_index:06d}.png"
+"""Relative path of a depth image (16-bit PNG, millimetres, 0 = invalid)."""
+
+DOOR_STATES = ("open", "closed", "unknown")
+"""Allowed values of ``door_states.state``."""
+
+
+def _f(name: str, type_: pa.DataType, doc: str, *, nullable: bool = False) -> pa.Field:
+    return pa.field(name, type_, nullable=nullable, metadata={"doc": doc})
+
+
+_VEC3 = pa.list_(pa.float64(), 3)
+_MAT3 = pa.list_(pa.float64(), 9)
+_MAT4 = pa.list_(pa.float64(), 16)
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """One table of the format: its name, Arrow schema, primary key and foreign keys."""
+
+    name: str
+    schema: pa.Schema
+    doc: str
+    key: tuple[str, ...]
+    references: tuple[tuple[str, str, str], ...] = ()
+    """(column, referenced table, referenced column) triples checked by the validator."""
+    required: bool = True
+
+    @property
+    def path(self) -> str:
+        return table_path(self.name)
+
+
+def table_path(name: str) -> str:
+    """Relative path of table ``name`` inside a dataset directory."""
+    return f"tables/{name}.parquet"
+
+
+_BOX_FIELDS = [
+    _f("center_m", _VEC3, "box centre in the world frame, metres"),
+    _f("extent_m", _VEC3, "full box side lengths along the box's own x, y, z axes, metres, > 0"),
+    _f("rotation", _MAT3, "row-major 3x3 rotation world-from-box (orthonormal, det +1)"),
+]
+
+TABLES: dict[str, TableSpec] = {}
+
+
+def _add(spec: TableSpec) -> None:
+    TABLES[spec.name] = spec
+
+
+_add(TableSpec(
+    "cameras",
+    pa.schema([
+        _f("camera_id", pa.string(), "unique camera id"),
+        _f("width", pa.int32(), "image width, pixels"),
+        _f("height", pa.int32(), "image height, pixels"),
+        _f("fx", pa.float64(), "focal length x, pixels"),
+        _f("fy", pa.float64(), "focal length y, pixels"),
+        _f("cx", pa.float64(), "principal point x, pixels (OpenCV: pixel centres at integers)"),
+        _f("cy", pa.float64(), "principal point y, pixels"),
+        _f("distortion_model", pa.string(), "'none', 'plumb_bob' (OpenCV k1 k2 p1 p2 k3) or 'equidistant'"),
+        _f("distortion_coeffs", pa.list_(pa.float64()), "distortion coefficients of the model, may be empty"),
+        _f("depth_scale_m", pa.float64(), "metres per unit of the stored depth image (0.001: millimetres)"),
+        _f("frame_id", pa.string(), "optical frame name in the source recording", nullable=True),
+    ]),
+    "Pinhole intrinsics of every camera (colour and depth are registered: one camera).",
+    key=("camera_id",),
+))
+
+_add(TableSpec(
+    "scans",
+    pa.schema([
+        _f("scan_id", pa.string(), "unique scan (mapping session) id"),
+        _f("start_stamp_ns", pa.int64(), "first frame stamp, int64 UTC nanoseconds"),
+        _f("end_stamp_ns", pa.int64(), "last frame stamp, int64 UTC nanoseconds, >= start"),
+        _f("source", pa.string(), "source recording (file name) or generator", nullable=True),
+        _f("split", pa.string(), "declared split: 'train', 'val', 'test' or null", nullable=True),
+    ]),
+    "One row per scan (mapping session), ordered by start time.",
+    key=("scan_id",),
+))
+
+_add(TableSpec(
+    "frames",
+    pa.schema([
+        _f("scan_id", pa.string(), "scan this frame belongs to"),
+        _f("frame_index", pa.int32(), "0-based index of the frame within its scan"),
+        _f("stamp_ns", pa.int64(), "capture time, int64 UTC nanoseconds, increasing within a scan"),
+        _f("camera_id", pa.string(), "camera that took the frame"),
+        _f("T_world_camera", _MAT4, "row-major 4x4 camera-to-world pose (OpenCV camera axes), metres"),
+        _f("color_path", pa.string(), "relative path of the colour image"),
+        _f("depth_path", pa.string(), "relative path of the depth image"),
+    ]),
+    "One row per RGB-D frame; images are separate files addressed by path.",
+    key=("scan_id", "frame_index"),
+    references=(("scan_id", "scans", "scan_id"), ("camera_id", "cameras", "camera_id")),
+))
+
+_add(TableSpec(
+    "rooms",
+    pa.schema([
+        _f("room_id", pa.string(), "unique room id"),
+        _f("name", pa.string(), "human-readable room name"),
+        _f("floor_polygon_m", pa.list_(pa.list_(pa.float64(), 2)),
+           "floor outline as (x, y) vertices in the world frame, metres, counter-clockwise", nullable=True),
+    ]),
+    "Rooms of the site.",
+    key=("room_id",),
+))
+
+_add(TableSpec(
+    "receptacles",
+    pa.schema([
+        _f("receptacle_id", pa.string(), "unique receptacle id"),
+        _f("name", pa.string(), "human-readable name"),
+        _f("category", pa.string(), "furniture category (table, shelf, counter, ...)", nullable=True),
+        _f("room_id", pa.string(), "room the receptacle stands in"),
+        *_BOX_FIELDS,
+    ]),
+    "Receptacles (static furniture objects rest on) as oriented boxes in the world frame.",
+    key=("receptacle_id",),
+    references=(("room_id", "rooms", "room_id"),),
+))
+
+_add(TableSpec(
+    "doors",
+    pa.schema([
+        _f("door_id", pa.string(), "unique door id"),
+        _f("name", pa.string(), "human-readable name"),
+        _f("room_a", pa.string(), "first room the door joins"),
+        _f("room_b", pa.string(), "second room the door joins"),
+        *_BOX_FIELDS,
+    ]),
+    "Doors between rooms, their doorway as an oriented box in the world frame.",
+    key=("door_id",),
+    references=(("room_a", "rooms", "room_id"), ("room_b", "rooms", "room_id")),
+))
+
+_add(TableSpec(
+    "door_states",
+    pa.schema([
+        _f("scan_id", pa.string(), "scan during which the state holds"),
+        _f("door_id", pa.string(), "door"),
+        _f("state", pa.string(), "'open', 'closed' or 'unknown'"),
+    ]),
+    "Ground-truth door state per scan and door.",
+    key=("scan_id", "door_id"),
+    references=(("scan_id", "scans", "scan_id"), ("door_id", "doors", "door_id")),
+))
+
+_add(TableSpec(
+    "objects",
+    pa.schema([
+        _f("object_id", pa.string(), "unique object id"),
+        _f("name", pa.string(), "object name (e.g. 'redmug')"),
+        _f("description", pa.string(), "free-text description", nullable=True),
+    ]),
+    "Semi-static objects tracked in the dataset.",
+    key=("object_id",),
+))
+
+_add(TableSpec(
+    "schedule",
+    pa.schema([
+        _f("scan_id", pa.string(), "scan"),
+        _f("object_id", pa.string(), "object"),
+        _f("receptacle_id", pa.string(), "receptacle holding the object during the scan; null = absent",
+           nullable=True),
+    ]),
+    "Ground-truth schedule: where each object was during each scan.",
+    key=("scan_id", "object_id"),
+    references=(("scan_id", "scans", "scan_id"), ("object_id", "objects", "object_id"),
+                ("receptacle_id", "receptacles", "receptacle_id")),
+))
+
+_add(TableSpec(
+    "files",
+    pa.schema([
+        _f("path", pa.string(), "relative path of a file of the dataset (every file but dataset.json and this table)"),
+        _f("size_bytes", pa.int64(), "file size, bytes"),
+        _f("sha256", pa.string(), "hex SHA-256 of the file content"),
+    ]),
+    "Checksums of every file; dataset.json records the checksum of this table.",
+    key=("path",),
+))
+
+REQUIRED_TABLES: tuple[str, ...] = tuple(name for name, spec in TABLES.items() if spec.required)

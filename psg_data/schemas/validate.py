@@ -1,0 +1,345 @@
+"""``validate_dataset``: check a psg-dataset directory against the format.
+
+Each problem is one line ``file[:row]: field: what is wrong, what was expected``, where ``file`` is
+relative to the dataset root and ``row`` is the 0-based row of the table.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from psg_data.errors import FormatError
+from psg_data.schemas._image_headers import read_image_header
+from psg_data.schemas._manifest import manifest_from_dict
+from psg_data.schemas._tables import DOOR_STATES, MANIFEST_NAME, TABLES, table_path
+
+__all__ = ["Problem", "validate_dataset", "register_table_check"]
+
+log = logging.getLogger(__name__)
+
+_ROT_TOL = 1e-5
+_MAX_PER_CHECK = 20  # problems reported per check before summarising
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One validation problem."""
+
+    file: str
+    field: str
+    message: str
+    row: int | None = None
+
+    def __str__(self) -> str:
+        where = self.file if self.row is None else f"{self.file}:{self.row}"
+        return f"{where}: {self.field}: {self.message}"
+
+
+_EXTRA_CHECKS: list[Callable[[Path, dict], Iterable[Problem]]] = []
+
+
+def register_table_check(fn: Callable[[Path, dict], Iterable[Problem]]) -> Callable[[Path, dict], Iterable[Problem]]:
+    """Register an extra check (used by optional tables such as labels): ``fn(root, tables)``."""
+    _EXTRA_CHECKS.append(fn)
+    return fn
+
+
+class _Collector:
+    def __init__(self) -> None:
+        self.problems: list[Problem] = []
+        self._counts: dict[tuple[str, str], int] = {}
+
+    def add(self, file: str, field: str, message: str, row: int | None = None) -> None:
+        key = (file, field)
+        n = self._counts.get(key, 0) + 1
+        self._counts[key] = n
+        if n <= _MAX_PER_CHECK:
+            self.problems.append(Problem(file, field, message, row))
+        elif n == _MAX_PER_CHECK + 1:
+            self.problems.append(Problem(file, field, "more problems of this kind not shown"))
+
+
+def _rows_where(mask: np.ndarray) -> list[int]:
+    return [int(i) for i in np.flatnonzero(mask)]
+
+
+def _check_rotations(c: _Collector, file: str, field: str, mats: np.ndarray, rows: np.ndarray | None = None) -> None:
+    """mats: (N, 3, 3); ``rows`` maps them to table rows (default 0..N-1)."""
+    if mats.size == 0:
+        return
+    rows = np.arange(len(mats)) if rows is None else rows
+    finite = np.all(np.isfinite(mats), axis=(1, 2))
+    for i in _rows_where(~finite):
+        c.add(file, field, "contains NaN or infinite values, expected finite numbers", int(rows[i]))
+    m = mats[finite]
+    idx = rows[finite]
+    err = np.abs(np.einsum("nji,njk->nik", m, m) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(m)
+    for j in _rows_where((err > _ROT_TOL) | (det <= 0)):
+        c.add(file, field, f"rotation is not orthonormal with det +1 (max |R^T R - I| = {err[j]:.3g}, "
+                           f"det = {det[j]:.3g}), expected a proper rotation", int(idx[j]))
+
+
+def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool = True) -> list[Problem]:
+    """Validate the dataset at ``path``; returns every problem found (empty list = valid).
+
+    Args:
+        checksums: verify the SHA-256 of every file (reads every byte; sizes are always checked).
+        images: check that every image exists and that its header matches the camera
+            (colour: 8-bit 3-channel; depth: 16-bit single-channel PNG; size = camera size).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from psg_data.writers import sha256_file
+
+    root = Path(path)
+    c = _Collector()
+    if not root.is_dir():
+        return [Problem(str(root), "path", "not a directory, expected a psg-dataset directory")]
+
+    # -- manifest --------------------------------------------------------------------------
+    info = None
+    mpath = root / MANIFEST_NAME
+    if not mpath.is_file():
+        c.add(MANIFEST_NAME, "file", "missing manifest, expected dataset.json at the dataset root")
+    else:
+        try:
+            info = manifest_from_dict(json.loads(mpath.read_text(encoding="utf-8")), MANIFEST_NAME)
+        except json.JSONDecodeError as exc:
+            c.add(MANIFEST_NAME, "json", f"not valid JSON ({exc.msg} at line {exc.lineno})")
+        except FormatError as exc:
+            msg = str(exc)
+            prefix = f"{MANIFEST_NAME}: "
+            rest = msg[len(prefix):] if msg.startswith(prefix) else msg
+            field, _, what = rest.partition(": ")
+            c.add(MANIFEST_NAME, field or "manifest", what or rest)
+    if info is None:
+        return c.problems
+
+    # -- tables: presence, readability, schema -------------------------------------------------
+    tables: dict[str, pa.Table] = {}
+    for name, spec in TABLES.items():
+        rel = table_path(name)
+        p = root / rel
+        if not p.is_file():
+            if spec.required:
+                c.add(rel, "file", f"missing table '{name}', expected a Parquet file with columns {spec.schema.names}")
+            continue
+        try:
+            t = pq.read_table(p)
+        except (OSError, pa.ArrowException) as exc:
+            c.add(rel, "file", f"not a readable Parquet file ({str(exc).splitlines()[0][:120]}), "
+                               "expected a complete Parquet file (truncated or corrupt?)")
+            continue
+        ok = True
+        for f in spec.schema:
+            if f.name not in t.column_names:
+                c.add(rel, f.name, f"missing column, expected type {f.type}")
+                ok = False
+                continue
+            actual = t.schema.field(f.name).type
+            if not actual.equals(f.type):
+                c.add(rel, f.name, f"wrong type {actual}, expected {f.type}")
+                ok = False
+                continue
+            if not f.nullable and t.column(f.name).null_count:
+                nulls = np.flatnonzero(t.column(f.name).is_null().to_numpy(zero_copy_only=False))
+                for i in nulls[:3]:
+                    c.add(rel, f.name, "null value, expected a value (column is not nullable)", int(i))
+                ok = False
+        extra_cols = [n for n in t.column_names if n not in spec.schema.names]
+        for n in extra_cols:
+            c.add(rel, n, f"unknown column, expected only {spec.schema.names}")
+        if ok:
+            tables[name] = t
+
+    # -- checksums -------------------------------------------------------------------------------
+    files_rel = table_path("files")
+    if (root / files_rel).is_file() and info.files_sha256:
+        actual = sha256_file(root / files_rel)
+        if actual != info.files_sha256:
+            c.add(files_rel, "sha256", f"checksum {actual[:12]}... does not match dataset.json files_sha256 "
+                                       f"{info.files_sha256[:12]}...; the file was changed after writing")
+    elif (root / files_rel).is_file():
+        c.add(MANIFEST_NAME, "files_sha256", "missing, expected the SHA-256 of tables/files.parquet")
+    listed: set[str] = set()
+    if "files" in tables:
+        ft = tables["files"].to_pydict()
+        for i, (rel, size, digest) in enumerate(zip(ft["path"], ft["size_bytes"], ft["sha256"])):
+            listed.add(rel)
+            p = root / rel
+            if not p.is_file():
+                c.add(rel, "file", "missing, listed in tables/files.parquet", None)
+                continue
+            st = p.stat().st_size
+            if st != size:
+                c.add(rel, "size_bytes", f"file has {st} bytes, tables/files.parquet says {size} (truncated?)")
+            elif checksums and sha256_file(p) != digest:
+                c.add(rel, "sha256", "checksum mismatch: content differs from tables/files.parquet")
+        on_disk = {str(p.relative_to(root)) for p in root.rglob("*") if p.is_file()}
+        for rel in sorted(on_disk - listed - {MANIFEST_NAME, files_rel}):
+            c.add(rel, "file", "not listed in tables/files.parquet (stray file; rewrite the dataset to register it)")
+
+    # -- keys and referential integrity ------------------------------------------------------------
+    cols: dict[str, dict[str, list]] = {n: t.to_pydict() for n, t in tables.items() if n != "files"}
+    for name, spec in TABLES.items():
+        if name not in cols:
+            continue
+        rel = table_path(name)
+        seen: dict[tuple, int] = {}
+        keys = list(zip(*(cols[name][k] for k in spec.key)))
+        for i, k in enumerate(keys):
+            if k in seen:
+                c.add(rel, "+".join(spec.key), f"duplicate key {k if len(k) > 1 else k[0]!r} "
+                                               f"(also row {seen[k]}), expected unique values", i)
+            else:
+                seen[k] = i
+        for col, ref_table, ref_col in spec.references:
+            if ref_table not in cols:
+                continue
+            valid = set(cols[ref_table][ref_col])
+            for i, v in enumerate(cols[name][col]):
+                if v is not None and v not in valid:
+                    c.add(rel, col, f"dangling id {v!r}: not in {table_path(ref_table)} column {ref_col}", i)
+
+    # -- value ranges -----------------------------------------------------------------------------
+    cams: dict[str, dict] = {}
+    if "cameras" in cols:
+        rel = table_path("cameras")
+        cam = cols["cameras"]
+        for i, cid in enumerate(cam["camera_id"]):
+            w, h = cam["width"][i], cam["height"][i]
+            fx, fy, cx, cy = cam["fx"][i], cam["fy"][i], cam["cx"][i], cam["cy"][i]
+            if w <= 0 or h <= 0:
+                c.add(rel, "width/height", f"image size {w}x{h}, expected positive", i)
+            for fname, v in (("fx", fx), ("fy", fy)):
+                if not (np.isfinite(v) and 0 < v <= 50 * max(w, h, 1)):
+                    c.add(rel, fname, f"focal length {v}, expected a finite value in (0, 50 x image size]", i)
+            if not (np.isfinite(cx) and -0.5 <= cx <= w - 0.5 + 1e-9):
+                c.add(rel, "cx", f"principal point x {cx}, expected within [-0.5, width - 0.5] = [-0.5, {w - 0.5}]", i)
+            if not (np.isfinite(cy) and -0.5 <= cy <= h - 0.5 + 1e-9):
+                c.add(rel, "cy", f"principal point y {cy}, expected within [-0.5, height - 0.5] = [-0.5, {h - 0.5}]", i)
+            if not (np.isfinite(cam["depth_scale_m"][i]) and cam["depth_scale_m"][i] > 0):
+                c.add(rel, "depth_scale_m", f"{cam['depth_scale_m'][i]}, expected a positive number (0.001 for mm)", i)
+            if cam["distortion_model"][i] not in ("none", "plumb_bob", "rational_polynomial", "equidistant"):
+                c.add(rel, "distortion_model", f"unknown model {cam['distortion_model'][i]!r}, expected none, "
+                                               "plumb_bob, rational_polynomial or equidistant", i)
+            cams[cid] = {"width": w, "height": h}
+
+    for name in ("receptacles", "doors"):
+        if name not in tables:
+            continue
+        rel = table_path(name)
+        t = tables[name]
+        if t.num_rows == 0:
+            continue
+        ext = np.asarray(t.column("extent_m").combine_chunks().flatten().to_numpy(), float).reshape(-1, 3)
+        ctr = np.asarray(t.column("center_m").combine_chunks().flatten().to_numpy(), float).reshape(-1, 3)
+        rot = np.asarray(t.column("rotation").combine_chunks().flatten().to_numpy(), float).reshape(-1, 3, 3)
+        for i in _rows_where(~np.all(np.isfinite(ext), 1) | np.any(ext <= 0, 1)):
+            c.add(rel, "extent_m", f"{ext[i].tolist()}, expected three positive finite side lengths", i)
+        for i in _rows_where(~np.all(np.isfinite(ctr), 1)):
+            c.add(rel, "center_m", f"{ctr[i].tolist()}, expected finite coordinates", i)
+        _check_rotations(c, rel, "rotation", rot)
+
+    if "door_states" in cols:
+        rel = table_path("door_states")
+        for i, s in enumerate(cols["door_states"]["state"]):
+            if s not in DOOR_STATES:
+                c.add(rel, "state", f"{s!r}, expected one of {', '.join(DOOR_STATES)}", i)
+
+    scan_bounds: dict[str, tuple[int, int]] = {}
+    if "scans" in cols:
+        rel = table_path("scans")
+        sc = cols["scans"]
+        for i, sid in enumerate(sc["scan_id"]):
+            a, b = sc["start_stamp_ns"][i], sc["end_stamp_ns"][i]
+            if b < a:
+                c.add(rel, "end_stamp_ns", f"{b} before start_stamp_ns {a}, expected end >= start", i)
+            if sc["split"][i] not in (None, "train", "val", "test"):
+                c.add(rel, "split", f"{sc['split'][i]!r}, expected train, val, test or null", i)
+            scan_bounds[sid] = (a, b)
+
+    if "frames" in tables and tables["frames"].num_rows:
+        rel = table_path("frames")
+        t = tables["frames"]
+        scan = np.asarray(t.column("scan_id").to_numpy(zero_copy_only=False)).astype(str)
+        fidx = t.column("frame_index").to_numpy()
+        stamp = t.column("stamp_ns").to_numpy()
+        T = np.asarray(t.column("T_world_camera").combine_chunks().flatten().to_numpy(), float).reshape(-1, 4, 4)
+        bad_T = ~np.all(np.isfinite(T), axis=(1, 2))
+        for i in _rows_where(bad_T):
+            c.add(rel, "T_world_camera", "contains NaN or infinite values, expected a finite 4x4 pose", i)
+        good = np.flatnonzero(~bad_T)
+        _check_rotations(c, rel, "T_world_camera", T[good, :3, :3], rows=good)
+        bottom = np.abs(T[good, 3, :] - np.array([0, 0, 0, 1.0])).max(axis=1) if good.size else np.zeros(0)
+        for j in _rows_where(bottom > 1e-9):
+            c.add(rel, "T_world_camera", "last row is not [0, 0, 0, 1], expected a homogeneous rigid transform",
+                  int(good[j]))
+        order = np.lexsort((fidx, scan))
+        s_o, f_o, t_o = scan[order], fidx[order], stamp[order]
+        same = s_o[1:] == s_o[:-1]
+        for j in _rows_where(same & (t_o[1:] <= t_o[:-1])):
+            c.add(rel, "stamp_ns", f"must increase within scan {str(s_o[j + 1])!r}, got {t_o[j + 1]} after {t_o[j]}",
+                  int(order[j + 1]))
+        starts = np.concatenate([[True], ~same])
+        expect = np.zeros_like(f_o)
+        run_start = 0
+        for j in range(f_o.size):  # frame_index must be 0..N-1 per scan
+            if starts[j]:
+                run_start = j
+            expect[j] = j - run_start
+        for j in _rows_where(f_o != expect):
+            c.add(rel, "frame_index", f"{f_o[j]} in scan {str(s_o[j])!r}, expected consecutive indices from 0 "
+                                      f"(here {expect[j]})", int(order[j]))
+        for j, sid in enumerate(scan):
+            if sid in scan_bounds:
+                a, b = scan_bounds[sid]
+                if not a <= stamp[j] <= b:
+                    c.add(rel, "stamp_ns", f"{stamp[j]} outside its scan's [start_stamp_ns, end_stamp_ns] = "
+                                           f"[{a}, {b}]", j)
+
+        if images:
+            cam_ids = np.asarray(t.column("camera_id").to_numpy(zero_copy_only=False)).astype(str)
+            cpaths = t.column("color_path").to_pylist()
+            dpaths = t.column("depth_path").to_pylist()
+            for j in range(t.num_rows):
+                cam = cams.get(cam_ids[j])
+                for kind, rp in (("color_path", cpaths[j]), ("depth_path", dpaths[j])):
+                    p = root / rp
+                    if not p.is_file():
+                        c.add(rel, kind, f"image {rp} does not exist", j)
+                        continue
+                    try:
+                        hdr = read_image_header(p)
+                    except (OSError, ValueError) as exc:
+                        c.add(rp, "image", f"unreadable image header ({exc}), expected PNG or JPEG")
+                        continue
+                    if cam is not None and (hdr.width, hdr.height) != (cam["width"], cam["height"]):
+                        c.add(rp, "size", f"{hdr.width}x{hdr.height}, expected the camera's "
+                                          f"{cam['width']}x{cam['height']}")
+                    if kind == "depth_path" and (hdr.kind != "png" or hdr.bit_depth != 16 or hdr.channels != 1):
+                        c.add(rp, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), "
+                                           "expected a 16-bit single-channel PNG (uint16 millimetres)")
+                    if kind == "color_path":
+                        want = "jpeg" if info.color_encoding == "jpeg" else "png"
+                        if hdr.kind != want or hdr.bit_depth != 8 or hdr.channels != 3:
+                            c.add(rp, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected "
+                                               f"an 8-bit 3-channel {want} (dataset color_encoding)")
+
+    for check in _EXTRA_CHECKS:
+        for p in check(root, tables):
+            c.add(p.file, p.field, p.message, p.row)
+
+    # -- manifest counts ------------------------------------------------------------------------
+    for name, t in tables.items():
+        if name in info.counts and info.counts[name] != t.num_rows:
+            c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
+    return c.problems

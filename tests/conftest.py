@@ -1,0 +1,73 @@
+"""Factory fixtures building tiny datasets in tmp_path (no binaries in the repository)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from psg_data.schemas import Box, CameraIntrinsics, Door, ObjectInfo, Receptacle, Room
+from psg_data.writers import DatasetWriter
+
+T0_NS = 1_700_000_000 * 10**9  # 2023-11-14 UTC
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def tiny_images(rng: np.random.Generator, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    color = rng.integers(0, 256, size=(h, w, 3), dtype=np.uint8)
+    depth = rng.integers(0, 5000, size=(h, w), dtype=np.uint16)
+    depth[rng.random((h, w)) < 0.05] = 0
+    return color, depth
+
+
+def write_tiny_dataset(root: Path, *, scans: int = 3, frames: int = 4, width: int = 32, height: int = 24,
+                       color_encoding: str = "png", seed: int = 0, overwrite: bool = False) -> Path:
+    """A small but complete dataset: 2 rooms, 3 receptacles, 1 door, 2 objects, images, schedule."""
+    rng = np.random.default_rng(seed)
+    cam = CameraIntrinsics("d435", width, height, 0.9 * width, 0.9 * width, (width - 1) / 2, (height - 1) / 2,
+                           "plumb_bob", (0.01, -0.02, 0.0, 0.0, 0.0), 0.001, "camera_color_optical_frame")
+    with DatasetWriter(root, name="tiny", timezone="America/Toronto", color_encoding=color_encoding,
+                       overwrite=overwrite, extra={"generator": "tests"}) as w:
+        w.add_camera(cam)
+        w.set_rooms([Room("kitchen", "Kitchen", np.array([[0, 0], [4, 0], [4, 3], [0, 3.0]])), Room("office", "Office")])
+        w.set_receptacles([
+            Receptacle("table", "kitchen table", "kitchen", Box(np.array([1, 1, 0.375]), np.array([1.2, 0.8, 0.75]),
+                                                                _rot_z(0.3)), "table"),
+            Receptacle("shelf", "shelf", "kitchen", Box(np.array([3, 2, 0.9]), np.array([0.8, 0.4, 1.8])), "shelf"),
+            Receptacle("desk", "desk", "office", Box(np.array([6, 1, 0.37]), np.array([1.4, 0.7, 0.74])), "desk"),
+        ])
+        w.set_doors([Door("door1", "kitchen-office", "kitchen", "office",
+                          Box(np.array([4, 1.5, 1.0]), np.array([0.1, 0.9, 2.0])))])
+        w.set_objects([ObjectInfo("redmug", "redmug", "a red mug"), ObjectInfo("spoon", "spoon", "a spoon")])
+        door_rows, sched = [], []
+        for s in range(scans):
+            sid = f"scan_{s:03d}"
+            with w.scan(sid, source=f"scan_{s:03d}.bag", split="train" if s < scans - 1 else "test") as sw:
+                for i in range(frames):
+                    T = np.eye(4)
+                    T[:3, :3] = _rot_z(0.1 * i) @ np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0.0]])
+                    T[:3, 3] = [0.5 + 0.1 * i, 0.2 * s, 1.2]
+                    color, depth = tiny_images(rng, height, width)
+                    sw.add_frame(T0_NS + s * 7200 * 10**9 + i * 10**8, T, color, depth, "d435")
+            door_rows.append({"scan_id": sid, "door_id": "door1", "state": "open" if s % 2 == 0 else "closed"})
+            sched.append({"scan_id": sid, "object_id": "redmug", "receptacle_id": "table" if s % 2 == 0 else "desk"})
+            sched.append({"scan_id": sid, "object_id": "spoon", "receptacle_id": None if s == 1 else "shelf"})
+        w.set_table("door_states", door_rows)
+        w.set_table("schedule", sched)
+    return root
+
+
+@pytest.fixture
+def make_dataset(tmp_path: Path) -> Callable[..., Path]:
+    """Factory: ``make_dataset(name="ds", **kwargs)`` writes a tiny dataset under tmp_path."""
+
+    def factory(name: str = "ds", **kwargs: object) -> Path:
+        return write_tiny_dataset(tmp_path / name, **kwargs)  # type: ignore[arg-type]
+
+    return factory
