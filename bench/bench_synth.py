@@ -1,0 +1,66 @@
+"""Benchmark of the synthetic lab: demo build time and renderer throughput.
+
+Run: ``/work/venv/bin/python bench/bench_synth.py`` (from the repository root).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from psg_data.synth import LabConfig, LabModel, build_lab
+
+
+def main() -> None:
+    cfg = LabConfig()
+    t0 = time.perf_counter()
+    lab = LabModel(cfg)
+    t_model = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _ = lab.scans
+    t_plan = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        build_lab(Path(tmp) / "demo", cfg, lab=lab)
+        t_build = time.perf_counter() - t0
+        size = sum(p.stat().st_size for p in (Path(tmp) / "demo").rglob("*") if p.is_file())
+    n_frames = sum(len(p.poses) for p in lab.scans)
+    # full cold build as demo() does it (model + planning + rendering + writing)
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        build_lab(Path(tmp) / "demo", LabConfig())
+        t_cold = time.perf_counter() - t0
+    # renderer throughput: rays per second of LabRenderer.render (no encoding), two resolutions
+    plan = lab.scans[0]
+    rend = lab.renderer(plan.state)
+    results = {}
+    for w, h in ((160, 120), (640, 480)):
+        cam = lab.camera.__class__(**{**lab.camera.__dict__, "width": w, "height": h,
+                                      "fx": lab.camera.fx * h / 120, "fy": lab.camera.fy * h / 120,
+                                      "cx": (w - 1) / 2, "cy": (h - 1) / 2})
+        n = 40 if w == 160 else 6
+        t0 = time.perf_counter()
+        for i in range(n):
+            rend.render(plan.poses[i % len(plan.poses)], cam, noise=cfg.noise, rng=np.random.default_rng(i))
+        dt = time.perf_counter() - t0
+        results[(w, h)] = (n * w * h / dt, n / dt)
+    t0 = time.perf_counter()
+    for i in range(40):
+        rend.cast(np.broadcast_to(plan.poses[0][:3, 3], (19200, 3)),
+                  np.random.default_rng(i).normal(size=(19200, 3)))
+    raw = 40 * 19200 / (time.perf_counter() - t0)
+    print(f"demo lab: {len(lab.scans)} scans, {n_frames} frames at {cfg.width}x{cfg.height}, "
+          f"{size / 1e6:.1f} MB")
+    print(f"  LabModel (layout + schedules): {t_model:.2f} s; scan planning: {t_plan:.2f} s; "
+          f"render + write: {t_build:.2f} s")
+    print(f"  cold build (what demo() does): {t_cold:.2f} s")
+    for (w, h), (rps, fps) in results.items():
+        print(f"  render {w}x{h}: {rps / 1e6:.2f} Mrays/s ({fps:.1f} frames/s, colour + noisy depth + ids)")
+    print(f"  raw ray casting (RaycastingScene.cast_rays): {raw / 1e6:.2f} Mrays/s")
+
+
+if __name__ == "__main__":
+    main()

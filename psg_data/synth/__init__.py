@@ -1,0 +1,41 @@
+"""psg_data.synth: the built-in synthetic three-room lab (geometry, schedules, renderer, detections).
+
+Main entry points:
+    LabModel(LabConfig(seed=...))        geometry, dense ground-truth schedule, scan plans, renderer
+    build_lab(out, config)               write the lab as a canonical psg-dataset
+    rerender_frame(dataset, scan, i)     re-render a stored frame with per-pixel instance ids
+    write_detections(ds_or_lab, path)    simulated scene-graph detections (Parquet)
+"""
+
+from __future__ import annotations
+
+from psg_data.synth._build import build_lab, object_description, rerender_frame
+from psg_data.synth._catalog import CONFUSABLE, FURNITURE, OBJECTS, FurnitureSpec, ObjectSpec
+from psg_data.synth._lab_schedule import LabSchedule
+from psg_data.synth._layout import (
+    DOOR_ID0,
+    ID_CEILING,
+    ID_FLOOR,
+    ID_NONE,
+    OBJECT_ID0,
+    RECEPTACLE_ID0,
+    WALL_ID0,
+    Instance,
+    LabLayout,
+    make_layout,
+)
+from psg_data.synth._model import SYNTH_VERSION, LabConfig, LabModel, ScanPlan, camera_pose
+from psg_data.synth._perception import DETECTIONS_SCHEMA, detect, write_detections
+from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
+from psg_data.synth._schedule import SHIFTS, WEEKDAYS, DenseSchedule, EntityModel, HourPattern, Timeline, WeekPattern
+
+__all__ = [
+    "LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION",
+    "LabLayout", "Instance", "make_layout",
+    "ID_NONE", "ID_FLOOR", "ID_CEILING", "WALL_ID0", "DOOR_ID0", "RECEPTACLE_ID0", "OBJECT_ID0",
+    "LabSchedule", "DenseSchedule", "EntityModel", "HourPattern", "WeekPattern", "Timeline", "SHIFTS", "WEEKDAYS",
+    "DepthNoise", "LabRenderer", "RenderedFrame", "SceneState", "d435_intrinsics",
+    "build_lab", "rerender_frame", "object_description",
+    "write_detections", "detect", "DETECTIONS_SCHEMA",
+    "OBJECTS", "FURNITURE", "CONFUSABLE", "ObjectSpec", "FurnitureSpec",
+]

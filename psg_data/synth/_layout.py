@@ -1,0 +1,290 @@
+"""Geometry of the synthetic three-room lab: rooms, walls, doors, receptacles and object placement.
+
+World frame: x east, y north, z up, metres; the floor is ``z = 0``. The rooms form a chain along x,
+``room_a | door_ab | room_b | door_bc | room_c``; walls are 0.1 m thick boxes centred on the room
+boundaries with doorways cut out. Receptacles stand against the walls (back to the wall), leaving the
+centre of every room and the door swing areas free for the robot.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.schemas._records import Box, Door, Receptacle, Room
+from psg_data.synth._catalog import FURNITURE, OBJECTS, ROOM_FURNITURE, ObjectSpec
+
+__all__ = ["LabLayout", "WallBox", "Instance", "make_layout", "yaw_matrix",
+           "WALL_HEIGHT_M", "DOOR_WIDTH_M", "DOOR_HEIGHT_M", "WALL_THICKNESS_M",
+           "ID_NONE", "ID_FLOOR", "ID_CEILING", "WALL_ID0", "DOOR_ID0", "RECEPTACLE_ID0", "OBJECT_ID0"]
+
+log = logging.getLogger(__name__)
+
+WALL_HEIGHT_M = 2.6
+WALL_THICKNESS_M = 0.10
+DOOR_WIDTH_M = 0.90
+DOOR_HEIGHT_M = 2.05
+LEAF_THICKNESS_M = 0.04
+
+# Instance ids of the renderer's per-pixel id image (int32).
+ID_NONE = 0
+"""No surface hit (beyond the scene)."""
+ID_FLOOR = 1
+ID_CEILING = 2
+WALL_ID0 = 10
+"""Wall segment k has id ``WALL_ID0 + k``."""
+DOOR_ID0 = 100
+"""Door leaf i (order of :attr:`LabLayout.doors`) has id ``DOOR_ID0 + i``."""
+RECEPTACLE_ID0 = 1000
+"""Receptacle i (order of :attr:`LabLayout.receptacles`) has id ``RECEPTACLE_ID0 + i``."""
+OBJECT_ID0 = 2000
+"""Object j (order of :attr:`LabLayout.objects`) has id ``OBJECT_ID0 + j``."""
+
+_ROOMS = [  # id, name, theme, x range, n receptacles
+    ("room_a", "kitchen", "kitchen", (0.0, 6.0), 10),
+    ("room_b", "office", "office", (6.0, 12.0), 10),
+    ("room_c", "workshop", "workshop", (12.0, 17.0), 8),
+]
+_Y_RANGE = (0.0, 5.5)
+
+
+def yaw_matrix(yaw_rad: float) -> NDArray[np.float64]:
+    """3x3 rotation about +z by ``yaw_rad`` (entries rounded so that right angles are exact)."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    R[np.abs(R) < 1e-12] = 0.0
+    return R
+
+
+@dataclass(frozen=True)
+class WallBox:
+    """An axis-aligned solid box of the static structure (wall segment), min/max corners, metres."""
+
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+
+    @property
+    def box(self) -> Box:
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        return Box((lo + hi) / 2, hi - lo, np.eye(3))
+
+
+@dataclass(frozen=True)
+class Instance:
+    """What an instance id of the rendered id image refers to.
+
+    Attributes:
+        kind: ``floor``, ``ceiling``, ``wall``, ``door``, ``receptacle`` or ``object``.
+        key: the table id (``receptacle_id``, ``object_id``, ``door_id``) or a wall name.
+    """
+
+    kind: str
+    key: str
+
+
+@dataclass
+class LabLayout:
+    """Static geometry of the lab (deterministic from the seed).
+
+    Attributes:
+        rooms: the three rooms with floor polygons (wall centre lines, counter-clockwise).
+        doors: the two doors; their box is the doorway opening (x along the wall normal).
+        receptacles: 28 receptacles, boxes with x along the wall they stand against.
+        objects: the 21 object specs (ids are their names).
+        walls: wall segments (solid boxes).
+        door_hinges: per door, hinge position (x, y) and the swing direction (+1/-1 along x).
+        dock_room: room where the robot starts every scan.
+    """
+
+    rooms: list[Room]
+    doors: list[Door]
+    receptacles: list[Receptacle]
+    objects: list[ObjectSpec]
+    walls: list[WallBox]
+    door_hinges: list[tuple[float, float, float]]
+    dock_room: str = "room_b"
+    receptacle_colors: list[tuple[float, float, float]] = field(default_factory=list)
+
+    # -- lookups --------------------------------------------------------------------------------
+    @property
+    def receptacle_ids(self) -> list[str]:
+        return [r.receptacle_id for r in self.receptacles]
+
+    @property
+    def object_ids(self) -> list[str]:
+        return [o.name for o in self.objects]
+
+    @property
+    def door_ids(self) -> list[str]:
+        return [d.door_id for d in self.doors]
+
+    @property
+    def room_ids(self) -> list[str]:
+        return [r.room_id for r in self.rooms]
+
+    @property
+    def instances(self) -> dict[int, Instance]:
+        """Instance id -> what it is (see the ``*_ID0`` constants)."""
+        out = {ID_FLOOR: Instance("floor", "floor"), ID_CEILING: Instance("ceiling", "ceiling")}
+        out.update({WALL_ID0 + k: Instance("wall", f"wall_{k:02d}") for k in range(len(self.walls))})
+        out.update({DOOR_ID0 + i: Instance("door", d.door_id) for i, d in enumerate(self.doors)})
+        out.update({RECEPTACLE_ID0 + i: Instance("receptacle", r.receptacle_id)
+                    for i, r in enumerate(self.receptacles)})
+        out.update({OBJECT_ID0 + j: Instance("object", o.name) for j, o in enumerate(self.objects)})
+        return out
+
+    def instance_id(self, key: str) -> int:
+        """Instance id of a receptacle, object or door id."""
+        for iid, inst in self.instances.items():
+            if inst.key == key:
+                return iid
+        raise KeyError(f"no instance with key {key!r}")
+
+    def room_of_point(self, xy: NDArray[np.float64]) -> str | None:
+        """Room containing the (x, y) point (by floor polygon bounds), or None outside."""
+        for r in self.rooms:
+            p = np.asarray(r.floor_polygon_m)
+            if p[:, 0].min() <= xy[0] <= p[:, 0].max() and p[:, 1].min() <= xy[1] <= p[:, 1].max():
+                return r.room_id
+        return None
+
+    def room_bounds(self, room_id: str, inset_m: float = 0.0) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax) of the room's interior (inner wall faces) shrunk by ``inset_m``."""
+        p = np.asarray(next(r for r in self.rooms if r.room_id == room_id).floor_polygon_m)
+        h = WALL_THICKNESS_M / 2 + inset_m
+        return (p[:, 0].min() + h, p[:, 0].max() - h, p[:, 1].min() + h, p[:, 1].max() - h)
+
+    # -- door leaves ------------------------------------------------------------------------------
+    def door_leaf_box(self, i: int, is_open: bool) -> Box:
+        """Box of door ``i``'s leaf: in the doorway when closed, swung 90 deg against the wall when open."""
+        hx, hy, sign = self.door_hinges[i]
+        w = DOOR_WIDTH_M - 0.02
+        if not is_open:
+            return Box(np.array([hx, hy + w / 2, DOOR_HEIGHT_M / 2 - 0.01]),
+                       np.array([LEAF_THICKNESS_M, w, DOOR_HEIGHT_M - 0.03]), np.eye(3))
+        return Box(np.array([hx + sign * (WALL_THICKNESS_M / 2 + w / 2), hy + LEAF_THICKNESS_M / 2 + 0.01,
+                             DOOR_HEIGHT_M / 2 - 0.01]),
+                   np.array([w, LEAF_THICKNESS_M, DOOR_HEIGHT_M - 0.03]), np.eye(3))
+
+    # -- object placement -------------------------------------------------------------------------
+    def object_boxes(self, placement: dict[str, str | None]) -> dict[str, Box]:
+        """World boxes of the present objects given ``object_id -> receptacle_id | None``.
+
+        Objects sharing a receptacle are spread on a grid over its top surface (in object order),
+        so an object's position depends on which other objects share its receptacle.
+        """
+        rec = {r.receptacle_id: r for r in self.receptacles}
+        by_rec: dict[str, list[int]] = {}
+        for j, o in enumerate(self.objects):
+            rid = placement.get(o.name)
+            if rid is not None:
+                by_rec.setdefault(rid, []).append(j)
+        out: dict[str, Box] = {}
+        for rid, js in by_rec.items():
+            box = rec[rid].box
+            W, D, H = np.asarray(box.extent_m)
+            uw, ud = max(W - 0.16, 0.05), max(D - 0.16, 0.05)
+            n = len(js)
+            nx = max(1, int(np.ceil(np.sqrt(n * uw / ud))))
+            ny = int(np.ceil(n / nx))
+            nx = int(np.ceil(n / ny))
+            for k, j in enumerate(js):
+                ix, iy = k % nx, k // nx
+                lx = -uw / 2 + (ix + 0.5) * uw / nx
+                ly = -ud / 2 + (iy + 0.5) * ud / ny
+                size = np.asarray(self.objects[j].size_m, float)
+                local = np.array([lx, ly, H / 2 + size[2] / 2])
+                R = np.asarray(box.rotation)
+                out[self.objects[j].name] = Box(R @ local + np.asarray(box.center_m), size, R.copy())
+        return out
+
+
+def _wall_segments(door_ys: list[float]) -> list[WallBox]:
+    t, h = WALL_THICKNESS_M / 2, WALL_HEIGHT_M
+    y0, y1 = _Y_RANGE
+    x_all = (_ROOMS[0][3][0], _ROOMS[-1][3][1])
+    walls = [
+        WallBox((x_all[0] - t, y0 - t, 0.0), (x_all[1] + t, y0 + t, h)),  # south
+        WallBox((x_all[0] - t, y1 - t, 0.0), (x_all[1] + t, y1 + t, h)),  # north
+        WallBox((x_all[0] - t, y0 + t, 0.0), (x_all[0] + t, y1 - t, h)),  # west
+        WallBox((x_all[1] - t, y0 + t, 0.0), (x_all[1] + t, y1 - t, h)),  # east
+    ]
+    for k, yd in enumerate(door_ys):
+        x = _ROOMS[k][3][1]
+        a, b = yd - DOOR_WIDTH_M / 2, yd + DOOR_WIDTH_M / 2
+        walls += [WallBox((x - t, y0 + t, 0.0), (x + t, a, h)),
+                  WallBox((x - t, b, 0.0), (x + t, y1 - t, h)),
+                  WallBox((x - t, a, DOOR_HEIGHT_M), (x + t, b, h))]  # lintel
+    return walls
+
+
+def _overlap(a: tuple[float, float, float, float], b: tuple[float, float, float, float], gap: float) -> bool:
+    return not (a[1] + gap <= b[0] or b[1] + gap <= a[0] or a[3] + gap <= b[2] or b[3] + gap <= a[2])
+
+
+def make_layout(seed: int) -> LabLayout:
+    """Build the lab geometry from ``seed`` (door positions, furniture choice and placement)."""
+    rng = np.random.default_rng([int(seed), 101])
+    door_ys = [float(rng.uniform(1.3, 4.2)) for _ in range(len(_ROOMS) - 1)]
+    walls = _wall_segments(door_ys)
+    rooms: list[Room] = []
+    for rid, name, _, (xa, xb), _ in _ROOMS:
+        y0, y1 = _Y_RANGE
+        rooms.append(Room(rid, name, np.array([[xa, y0], [xb, y0], [xb, y1], [xa, y1]], float)))
+    doors: list[Door] = []
+    hinges: list[tuple[float, float, float]] = []
+    for k, yd in enumerate(door_ys):
+        x = _ROOMS[k][3][1]
+        a, b = _ROOMS[k][0], _ROOMS[k + 1][0]
+        doors.append(Door(f"door_{a[-1]}{b[-1]}", f"door {a[-1].upper()}-{b[-1].upper()}", a, b,
+                          Box(np.array([x, yd, DOOR_HEIGHT_M / 2]),
+                              np.array([WALL_THICKNESS_M + 0.04, DOOR_WIDTH_M, DOOR_HEIGHT_M]), np.eye(3))))
+        hinges.append((x, yd - DOOR_WIDTH_M / 2 + 0.01, +1.0))  # leaves swing into the eastern room
+
+    receptacles: list[Receptacle] = []
+    colors: list[tuple[float, float, float]] = []
+    for rid, name, theme, (xa, xb), n in _ROOMS:
+        cats = list(ROOM_FURNITURE[theme])
+        rng.shuffle(cats)
+        cats = (cats * 2)[:n]
+        t = WALL_THICKNESS_M / 2
+        ix0, ix1, iy0, iy1 = xa + t, xb - t, _Y_RANGE[0] + t, _Y_RANGE[1] - t
+        forbidden = []
+        for k, yd in enumerate(door_ys):  # door passage and swing zones on both sides of each doorway
+            x = _ROOMS[k][3][1]
+            forbidden.append((x - 1.1, x + 1.1, yd - 0.75, yd + 0.75))
+        placed: list[tuple[float, float, float, float]] = list(forbidden)
+        count = 0
+        for cat in sorted(cats, key=lambda c: -FURNITURE[c].width_m):
+            spec = FURNITURE[cat]
+            w, d = spec.width_m, spec.depth_m
+            for _attempt in range(2000):
+                side = int(rng.integers(4))
+                if side in (0, 1):  # south / north wall: width along x
+                    cx = float(rng.uniform(ix0 + w / 2 + 0.05, ix1 - w / 2 - 0.05))
+                    cy = iy0 + d / 2 + 0.03 if side == 0 else iy1 - d / 2 - 0.03
+                    yaw = 0.0 if side == 0 else np.pi
+                    fp = (cx - w / 2, cx + w / 2, cy - d / 2, cy + d / 2)
+                else:  # west / east wall: width along y
+                    cy = float(rng.uniform(iy0 + w / 2 + 0.05, iy1 - w / 2 - 0.05))
+                    cx = ix0 + d / 2 + 0.03 if side == 2 else ix1 - d / 2 - 0.03
+                    yaw = -np.pi / 2 if side == 2 else np.pi / 2
+                    fp = (cx - d / 2, cx + d / 2, cy - w / 2, cy + w / 2)
+                if any(_overlap(fp, q, 0.15) for q in placed):
+                    continue
+                placed.append(fp)
+                count += 1
+                rec_id = f"{rid[-1]}{count:02d}_{cat}"
+                receptacles.append(Receptacle(
+                    rec_id, f"{cat.replace('_', ' ')} {count} ({name})", rid,
+                    Box(np.array([cx, cy, spec.height_m / 2]), np.array([w, d, spec.height_m]), yaw_matrix(yaw)),
+                    cat))
+                jitter = rng.uniform(-0.06, 0.06, 3)
+                colors.append(tuple(float(c) for c in np.clip(np.asarray(spec.color) + jitter, 0.05, 0.95)))
+                break
+            else:  # pragma: no cover - the room sizes leave ample space
+                raise RuntimeError(f"could not place a {cat} in {rid}")
+    return LabLayout(rooms, doors, receptacles, list(OBJECTS), walls, hinges, "room_b", colors)

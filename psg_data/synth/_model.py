@@ -1,0 +1,391 @@
+"""``LabModel``: the synthetic lab (geometry, schedules, camera, scan trajectories) from a seed.
+
+Scan trajectories: the robot starts every scan in the dock room (room B) and visits the rooms it
+can reach through open doors (a closed door is never crossed; with the chain A-B-C a closed door
+hides the room behind it for that scan). Keyframe viewpoints are chosen greedily from a grid of
+candidate poses (positions in the free centre of each room, yaw every 15 deg, camera 1.25 m above
+the floor pitched 28 deg down) so that the top surfaces of as many receptacles as possible are seen;
+the frame budget is shared between the reachable rooms in proportion to their receptacles.
+
+Odometry drift: the stored ``T_world_camera`` is exactly the pose the renderer used (images and
+poses are consistent). What a real robot's drift would do is represented by the trajectory itself
+being irregular: every keyframe is perturbed by a random walk (2 cm per frame in x/y, 0.7 deg in
+yaw) plus independent jitter (3 cm, 2 deg yaw, 1 deg pitch and roll, 1 cm height).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.errors import PsgDataError
+from psg_data.schemas._records import CameraIntrinsics
+from psg_data.synth._lab_schedule import LabSchedule
+from psg_data.synth._layout import RECEPTACLE_ID0, LabLayout, make_layout
+from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
+from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
+
+__all__ = ["LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION"]
+
+log = logging.getLogger(__name__)
+
+SYNTH_VERSION = "1"
+"""Version of the generator; part of the manifest ``extra`` and of the demo cache key."""
+
+CAMERA_HEIGHT_M = 1.25
+CAMERA_PITCH_DEG = 28.0
+
+
+@dataclass(frozen=True)
+class LabConfig:
+    """Parameters of a synthetic lab (all stored in the manifest ``extra``).
+
+    Attributes:
+        seed: seed of everything (layout, schedules, trajectories, noise).
+        days: number of days (4 scans a day).
+        train_days: first days with split 'train', the rest 'test' (default: 2/3 of the days, 14 of 21).
+        frames_per_scan: keyframes per scan.
+        width, height: image size, pixels.
+        shift: distribution shift of the test days: None or 'long-weekend'.
+        shift_weekdays: weekdays ('Mon'..'Sun') of the test days that follow the weekend pattern.
+        start_date: first local date, ISO (2025-03-03 is a Monday; DST starts on day 6).
+        scan_hours: local start hours of the scans of a day.
+        timezone: IANA site timezone.
+        noise: depth/colour noise model.
+    """
+
+    seed: int = 0
+    days: int = 21
+    train_days: int | None = None
+    frames_per_scan: int = 8
+    width: int = 160
+    height: int = 120
+    shift: str | None = None
+    shift_weekdays: tuple[str, ...] = ("Mon", "Fri")
+    start_date: str = "2025-03-03"
+    scan_hours: tuple[int, ...] = (9, 11, 13, 15)
+    timezone: str = "America/Toronto"
+    noise: DepthNoise = field(default_factory=DepthNoise)
+
+    def __post_init__(self) -> None:
+        if self.days < 1:
+            raise PsgDataError(f"days: expected >= 1, got {self.days}")
+        if self.frames_per_scan < 1:
+            raise PsgDataError(f"frames_per_scan: expected >= 1, got {self.frames_per_scan}")
+        if self.width < 8 or self.height < 8:
+            raise PsgDataError(f"resolution: expected at least 8x8, got {self.width}x{self.height}")
+        if self.shift is not None and self.shift not in SHIFTS:
+            raise PsgDataError(f"shift: expected one of {SHIFTS} or None, got {self.shift!r}")
+        bad = [d for d in self.shift_weekdays if d not in WEEKDAYS]
+        if bad:
+            raise PsgDataError(f"shift_weekdays: unknown {bad}, expected names from {WEEKDAYS}")
+
+    @property
+    def n_train_days(self) -> int:
+        return int(self.train_days) if self.train_days is not None else int(round(self.days * 2 / 3))
+
+    @property
+    def date(self) -> dt.date:
+        return dt.date.fromisoformat(self.start_date)
+
+    def shifted_days(self) -> frozenset[int]:
+        """Day indices changed by the shift (test days on ``shift_weekdays``)."""
+        if self.shift is None:
+            return frozenset()
+        return frozenset(d for d in range(self.n_train_days, self.days)
+                         if WEEKDAYS[(self.date + dt.timedelta(days=d)).weekday()] in self.shift_weekdays)
+
+    def to_extra(self) -> dict[str, Any]:
+        """JSON-able parameters for the manifest ``extra``."""
+        d = asdict(self)
+        d["shift_weekdays"] = list(self.shift_weekdays)
+        d["scan_hours"] = list(self.scan_hours)
+        d["train_days"] = self.n_train_days
+        d["resolution"] = [self.width, self.height]
+        return {"generator": "psg_data.synth", "synth_version": SYNTH_VERSION, **d}
+
+    @staticmethod
+    def from_extra(extra: dict[str, Any]) -> LabConfig:
+        """Inverse of :meth:`to_extra`."""
+        if extra.get("generator") != "psg_data.synth":
+            raise PsgDataError("manifest extra: not a psg_data.synth dataset (no generator 'psg_data.synth')")
+        keys = {"seed", "days", "train_days", "frames_per_scan", "width", "height", "shift", "start_date",
+                "timezone"}
+        kw: dict[str, Any] = {k: extra[k] for k in keys if k in extra}
+        kw["shift_weekdays"] = tuple(extra.get("shift_weekdays", ("Mon", "Fri")))
+        kw["scan_hours"] = tuple(extra.get("scan_hours", (9, 11, 13, 15)))
+        if "noise" in extra:
+            kw["noise"] = DepthNoise(**extra["noise"])
+        return LabConfig(**kw)
+
+
+@dataclass
+class ScanPlan:
+    """One scan: when, where the robot looked and the lab state during the scan.
+
+    Attributes:
+        scan_id: ``scan_DDD_HH`` (day index, local start hour).
+        index: scan index (0-based, chronological).
+        day: day index.
+        split: 'train' or 'test'.
+        start_ns: scan start (the state of objects and doors is taken at this instant).
+        stamps_ns: (N,) frame stamps, int64 UTC nanoseconds.
+        poses: (N, 4, 4) camera-to-world poses used for rendering.
+        state: object placement and door states during the scan.
+        reachable_rooms: rooms the robot could enter.
+    """
+
+    scan_id: str
+    index: int
+    day: int
+    split: str
+    start_ns: int
+    stamps_ns: NDArray[np.int64]
+    poses: NDArray[np.float64]
+    state: SceneState
+    reachable_rooms: list[str]
+
+
+def camera_pose(x_m: float, y_m: float, yaw_rad: float, *, height_m: float = CAMERA_HEIGHT_M,
+                pitch_deg: float = CAMERA_PITCH_DEG, roll_deg: float = 0.0) -> NDArray[np.float64]:
+    """Camera-to-world pose (OpenCV axes) of a camera at (x, y, height) whose optical axis points
+    along ``yaw_rad`` (from +x towards +y), pitched down by ``pitch_deg`` and rolled by ``roll_deg``."""
+    fwd = np.array([np.cos(yaw_rad), np.sin(yaw_rad), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    p, r = np.deg2rad(pitch_deg), np.deg2rad(roll_deg)
+    ez = np.cos(p) * fwd - np.sin(p) * up  # optical axis
+    ey0 = -(np.sin(p) * fwd + np.cos(p) * up)  # image down
+    ex0 = np.cross(ey0, ez)  # image right
+    ex = np.cos(r) * ex0 + np.sin(r) * ey0
+    ey = -np.sin(r) * ex0 + np.cos(r) * ey0
+    T = np.eye(4)
+    T[:3, :3] = np.stack([ex, ey, ez], axis=1)
+    T[:3, 3] = [x_m, y_m, height_m]
+    return T
+
+
+class LabModel:
+    """The synthetic lab: geometry, ground-truth schedules, camera and scan plans, from a seed.
+
+    Args:
+        config: lab parameters, or None for the defaults with ``seed``.
+        seed: shortcut for ``LabConfig(seed=seed)``.
+
+    Example::
+
+        lab = LabModel(seed=0)
+        dense = lab.schedule.dense(step_s=3600)      # hourly ground truth of all 21 objects
+        plan = lab.scans[0]
+        fr = lab.render_scan_frame(0, 0)              # the images stored for frame 0 of scan 0
+    """
+
+    def __init__(self, config: LabConfig | None = None, *, seed: int | None = None) -> None:
+        if config is None:
+            config = LabConfig(seed=0 if seed is None else int(seed))
+        elif seed is not None:
+            raise PsgDataError("LabModel: pass either config or seed, not both")
+        self.config = config
+        self.layout: LabLayout = make_layout(config.seed)
+        self.schedule = LabSchedule(self.layout, config.seed, config.date, config.days, config.timezone,
+                                    config.shifted_days())
+        self.camera: CameraIntrinsics = d435_intrinsics(config.width, config.height)
+        self._scans: list[ScanPlan] | None = None
+        self._candidates: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None
+
+    @staticmethod
+    def from_dataset(dataset: Any) -> LabModel:
+        """Rebuild the lab of a dataset written by :func:`build_lab` (from its manifest ``extra``)."""
+        return LabModel(LabConfig.from_extra(dict(dataset.info.extra)))
+
+    # -- scans ----------------------------------------------------------------------------------
+    @property
+    def scans(self) -> list[ScanPlan]:
+        """Plans of all scans (computed on first use)."""
+        if self._scans is None:
+            self._scans = self._plan_scans()
+        return self._scans
+
+    def scan_plan(self, scan: int | str) -> ScanPlan:
+        if isinstance(scan, str):
+            for p in self.scans:
+                if p.scan_id == scan:
+                    return p
+            raise KeyError(f"no scan {scan!r} in this lab")
+        return self.scans[scan]
+
+    def state_at(self, stamp_ns: int) -> SceneState:
+        """Lab state (object placement, door states) at ``stamp_ns`` from the dense schedule."""
+        return SceneState(self.schedule.objects_at(stamp_ns), self.schedule.doors_at(stamp_ns))
+
+    def reachable_rooms(self, doors_open: dict[str, bool]) -> list[str]:
+        """Rooms reachable from the dock room through open doors (breadth-first order)."""
+        seen = [self.layout.dock_room]
+        frontier = [self.layout.dock_room]
+        while frontier:
+            room = frontier.pop(0)
+            for d in self.layout.doors:
+                if not doors_open.get(d.door_id, False):
+                    continue
+                for a, b in ((d.room_a, d.room_b), (d.room_b, d.room_a)):
+                    if a == room and b not in seen:
+                        seen.append(b)
+                        frontier.append(b)
+        return seen
+
+    def _view_candidates(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Per room: candidate (x, y, yaw) rows and their (C, R) receptacle-top visibility scores."""
+        if self._candidates is not None:
+            return self._candidates
+        L = self.layout
+        closed = SceneState({}, {d: False for d in L.door_ids})
+        rend = LabRenderer(L, closed)
+        cam = d435_intrinsics(160, 120)
+        tops = []  # 5 points on every receptacle top
+        for r in L.receptacles:
+            c, e, R = np.asarray(r.box.center_m), np.asarray(r.box.extent_m), np.asarray(r.box.rotation)
+            loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[:2]
+            pts = np.column_stack([loc, np.full(5, e[2] / 2 + 0.01)]) @ R.T + c
+            tops.append(pts)
+        tops_a = np.asarray(tops)  # (R, 5, 3)
+        out: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        for room in L.room_ids:
+            x0, x1, y0, y1 = L.room_bounds(room, inset_m=0.9)
+            xs, ys = np.arange(x0, x1 + 1e-9, 0.5), np.arange(y0, y1 + 1e-9, 0.5)
+            cands = []
+            for x in xs:
+                for y in ys:
+                    p = np.array([x, y, 0.3])
+                    if any(r.box.contains(p[None], margin_m=0.45)[0] for r in L.receptacles):
+                        continue
+                    for yaw in np.deg2rad(np.arange(0, 360, 15)):
+                        cands.append((x, y, yaw))
+            C = np.asarray(cands, float)
+            scores = np.zeros((len(C), len(L.receptacles)))
+            for ci, (x, y, yaw) in enumerate(C):
+                T = camera_pose(x, y, yaw)
+                Tinv = np.linalg.inv(T)
+                pc = tops_a.reshape(-1, 3) @ Tinv[:3, :3].T + Tinv[:3, 3]
+                z = pc[:, 2]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    u = cam.fx * pc[:, 0] / z + cam.cx
+                    v = cam.fy * pc[:, 1] / z + cam.cy
+                inimg = (z > 0.4) & (z < 6.0) & (u > 2) & (u < cam.width - 3) & (v > 2) & (v < cam.height - 3)
+                d = tops_a.reshape(-1, 3) - T[:3, 3]
+                t, iid, _ = rend.cast(np.broadcast_to(T[:3, 3], d.shape), d)
+                rid = RECEPTACLE_ID0 + np.repeat(np.arange(len(L.receptacles)), 5)
+                vis = inimg & (iid == rid) & (t > 0.97)
+                scores[ci] = vis.reshape(-1, 5).mean(axis=1)
+            out[room] = (C, scores)
+        self._candidates = out
+        return out
+
+    def _plan_scans(self) -> list[ScanPlan]:
+        cfg = self.config
+        cands = self._view_candidates()
+        L = self.layout
+        rec_room = np.array([r.room_id for r in L.receptacles])
+        door_pos = {d.door_id: np.asarray(d.box.center_m)[:2] for d in L.doors}
+        plans: list[ScanPlan] = []
+        idx = 0
+        for day in range(cfg.days):
+            date = cfg.date + dt.timedelta(days=day)
+            for hour in cfg.scan_hours:
+                rng = np.random.default_rng([cfg.seed, 401, day, hour])
+                start = local_time_ns(date, hour, cfg.timezone) + int(rng.uniform(0, 480)) * 1_000_000_000
+                state = self.state_at(start)
+                rooms = self.reachable_rooms(state.doors_open)
+                n_rec = np.array([np.sum(rec_room == r) for r in rooms], float)
+                budget = np.floor(cfg.frames_per_scan * n_rec / n_rec.sum()).astype(int)
+                for i in np.argsort(-(cfg.frames_per_scan * n_rec / n_rec.sum() - budget), kind="stable"):
+                    if budget.sum() >= cfg.frames_per_scan:
+                        break
+                    budget[i] += 1
+                views: list[tuple[float, float, float]] = []
+                for room, b in zip(rooms, budget):
+                    if b == 0:
+                        continue
+                    C, S = cands[room]
+                    covered = np.zeros(S.shape[1])
+                    order: list[int] = []
+                    for _ in range(int(b)):
+                        gain = np.minimum(S + covered, 1.0).sum(axis=1) - np.minimum(covered, 1.0).sum()
+                        gain = gain + 0.05 * S.sum(axis=1) + rng.uniform(0, 0.3, len(C))
+                        gain[order] = -np.inf
+                        k = int(np.argmax(gain))
+                        order.append(k)
+                        covered = covered + S[k]
+                    # visit order inside the room: by bearing around the room centre
+                    pts = C[order]
+                    cxy = pts[:, :2].mean(axis=0)
+                    ang = np.arctan2(pts[:, 1] - cxy[1], pts[:, 0] - cxy[0])
+                    views += [tuple(pts[i]) for i in np.argsort(ang)]
+                poses = []
+                walk = np.zeros(3)
+                stamps = []
+                t = start
+                prev = None
+                for (x, y, yaw) in views:
+                    walk += rng.normal(0, [0.02, 0.02, np.deg2rad(0.7)])
+                    jit = rng.normal(0, [0.03, 0.03, np.deg2rad(2.0)])
+                    T = camera_pose(x + walk[0] + jit[0], y + walk[1] + jit[1], yaw + walk[2] + jit[2],
+                                    height_m=CAMERA_HEIGHT_M + rng.normal(0, 0.01),
+                                    pitch_deg=CAMERA_PITCH_DEG + rng.normal(0, 1.0), roll_deg=rng.normal(0, 1.0))
+                    if prev is not None:
+                        dist = float(np.linalg.norm(T[:2, 3] - prev[:2, 3]))
+                        ra, rb = L.room_of_point(prev[:2, 3]), L.room_of_point(T[:2, 3])
+                        if ra != rb:  # through the doorway(s)
+                            via = [door_pos[d.door_id] for d in L.doors if {d.room_a, d.room_b} & {ra, rb}]
+                            dist = float(np.linalg.norm(prev[:2, 3] - via[0]) + np.linalg.norm(T[:2, 3] - via[-1])
+                                         + (np.linalg.norm(via[0] - via[-1]) if len(via) > 1 else 0.0))
+                        t += int((dist / 0.4 + rng.uniform(4.0, 8.0)) * 1e9)
+                    poses.append(T)
+                    stamps.append(t)
+                    prev = T
+                split = "train" if day < cfg.n_train_days else "test"
+                plans.append(ScanPlan(f"scan_{day:03d}_{hour:02d}", idx, day, split, int(start),
+                                      np.asarray(stamps, np.int64), np.asarray(poses), state, rooms))
+                idx += 1
+        return plans
+
+    # -- rendering --------------------------------------------------------------------------------
+    def renderer(self, state: SceneState) -> LabRenderer:
+        """A ray-casting scene of the lab in ``state``."""
+        return LabRenderer(self.layout, state)
+
+    def noise_rng(self, scan_index: int, frame_index: int) -> np.random.Generator:
+        """Random generator of the sensor noise of one stored frame."""
+        return np.random.default_rng([self.config.seed, 501, int(scan_index), int(frame_index)])
+
+    def render_frame(self, T_world_camera: NDArray[np.float64], state: SceneState | int, *,
+                     camera: CameraIntrinsics | None = None, noise: DepthNoise | None | str = "config",
+                     rng: np.random.Generator | None = None) -> RenderedFrame:
+        """Render the lab in ``state`` (or the state at a stamp, int UTC ns) from ``T_world_camera``.
+
+        Args:
+            T_world_camera: (4, 4) camera-to-world pose, OpenCV axes.
+            state: a :class:`SceneState` or a stamp (int64 UTC ns) whose ground-truth state is used.
+            camera: intrinsics (default: the lab's camera).
+            noise: noise model; ``"config"`` uses the lab's, None renders noise-free.
+            rng: noise generator.
+        """
+        st = self.state_at(state) if isinstance(state, (int, np.integer)) else state
+        nz = self.config.noise if isinstance(noise, str) else noise
+        return self.renderer(st).render(T_world_camera, camera or self.camera, noise=nz, rng=rng)
+
+    def render_scan_frame(self, scan: int | str, frame_index: int, *, noise: DepthNoise | None | str = "config"
+                          ) -> RenderedFrame:
+        """Render frame ``frame_index`` of a planned scan exactly as :func:`build_lab` stores it."""
+        plan = self.scan_plan(scan)
+        return self.render_frame(plan.poses[frame_index], plan.state, noise=noise,
+                                 rng=self.noise_rng(plan.index, frame_index))
+
+
+def yaw_noise_rotation(yaw_rad: float) -> NDArray[np.float64]:
+    """3x3 rotation about +z by ``yaw_rad``."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
