@@ -1,0 +1,66 @@
+"""``psg-data convert``: raw recordings -> psg-dataset."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+
+
+@click.command("convert")
+@click.argument("input_path", metavar="INPUT", type=click.Path(path_type=Path))
+@click.argument("out", metavar="OUT", type=click.Path(path_type=Path))
+@click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="YAML/JSON file with any conversion setting (command-line options win).")
+@click.option("--color-topic", help="Colour topic (sensor_msgs/Image or CompressedImage).")
+@click.option("--depth-topic", help="Depth topic (Image 16UC1/32FC1 or compressedDepth).")
+@click.option("--camera-info-topic", help="sensor_msgs/CameraInfo topic of the colour camera.")
+@click.option("--poses", help="Pose source: tf:WORLD->FRAME, odom:/TOPIC or tum:FILE.")
+@click.option("--camera-frame", help="Optical frame of the camera (default: CameraInfo header.frame_id).")
+@click.option("--split", help="Split one long recording into scans: gap:SECONDS or slot:SECONDS.")
+@click.option("--keyframes", help="Keep only keyframes: every:N or motion:METRES,DEGREES.")
+@click.option("--color-encoding", type=click.Choice(["auto", "png", "jpeg"]), default=None,
+              help="Colour images in the dataset (auto: JPEG input is passed through as JPEG).")
+@click.option("--depth-scale", "depth_scale_m", type=float, default=None,
+              help="Metres per unit of 16-bit depth input (default 0.001; TUM folders 0.0002).")
+@click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=None,
+              help="Largest colour/depth stamp difference paired, seconds (default 0.02).")
+@click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet"]), default=None)
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Scans converted in parallel (worker processes).")
+@click.option("--overwrite", is_flag=True, help="Replace OUT if it exists (once the new dataset is complete).")
+@quiet_option
+@handle_errors
+def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bool, jobs: int, overwrite: bool,
+                **opts: object) -> None:
+    """Convert raw recordings in INPUT into the psg-dataset OUT.
+
+    INPUT is a recording (ROS 1 .bag, ROS 2 bag directory with sqlite3 or MCAP storage, .mcap
+    file), a TUM RGB-D or ScanNet folder, or a directory of them with side files (site.json,
+    door_states.csv, schedule.csv, scans.csv). Frames that cannot be associated are counted and
+    reported. An interrupted conversion resumes when rerun. Exit codes: 0 done (skipped frames
+    are warnings), 1 bad input or output exists (one "error:" line, nothing left behind), 2 bad
+    command line, 130 interrupted (rerun to resume).
+
+    \b
+    Examples:
+      psg-data convert recordings/ lab/
+      psg-data convert long.bag lab/ --split gap:60 --keyframes motion:0.1,10
+      psg-data convert run.mcap lab/ --poses tf:map->camera_color_optical_frame -j 2
+      psg-data convert rgbd_dataset_freiburg1_xyz/ fr1/ --config tum.yaml
+    """
+    setup_logging(quiet)
+    from psg_data.convert import ConvertConfig, convert, load_config
+
+    cfg = load_config(config_file) if config_file else ConvertConfig()
+    cfg = cfg.merged(**opts)
+    progress = Progress("convert", unit="frames", quiet=quiet)
+    report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress)
+    progress.close()
+    skipped = ", ".join(f"{k} {v}" for k, v in report.skipped.items())
+    click.echo(f"converted {len(report.scans)} scans, {report.frames} frames to {report.output} in "
+               f"{report.seconds:.1f} s ({report.mb_per_s:.1f} MB/s)"
+               + (f"; resumed {len(report.resumed)} scans" if report.resumed else "")
+               + (f"; skipped {report.n_skipped} frames ({skipped})" if report.n_skipped else ""))

@@ -1,0 +1,337 @@
+"""``convert``: raw recordings (or frame folders) -> a canonical psg-dataset, atomically.
+
+See docs/RAW_FORMATS.md for the inputs, topics, side files, configuration and exit codes.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from psg_data.convert._config import ConvertConfig
+from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, run_task
+from psg_data.errors import ConversionError, DatasetExistsError, PsgDataError
+from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format
+from psg_data.loaders.raw._folders import folder_format
+from psg_data.loaders.raw._images import inspect_encoded
+from psg_data.loaders.raw._side import SideData, read_side_files
+
+__all__ = ["convert", "ConversionReport", "plan_sources"]
+
+log = logging.getLogger(__name__)
+
+_STATE_FILE = "state.json"
+_FORMAT_FAMILY = {"ros1": "ros1", "ros2-sqlite3": "ros2", "ros2-mcap": "ros2", "mcap": "mcap",
+                  "tum": "tum", "scannet": "scannet"}
+
+
+@dataclass
+class ConversionReport:
+    """What a conversion did.
+
+    Attributes:
+        output: dataset directory.
+        scans: converted scan ids (including resumed ones).
+        frames: frames written.
+        skipped: frames that could not be associated, by reason (see ``SKIP_REASONS``).
+        keyframe_dropped: frames left out by ``--keyframes``.
+        resumed: scans kept from an interrupted run (verified by checksum).
+        bytes_in: bytes of input read.
+        seconds: wall time.
+        passthrough: images stored without re-encoding, by kind (``color``, ``depth``).
+    """
+
+    output: str
+    scans: list[str] = field(default_factory=list)
+    frames: int = 0
+    skipped: dict[str, int] = field(default_factory=dict)
+    keyframe_dropped: int = 0
+    resumed: list[str] = field(default_factory=list)
+    bytes_in: int = 0
+    seconds: float = 0.0
+    passthrough: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def mb_per_s(self) -> float:
+        return self.bytes_in / 1e6 / max(self.seconds, 1e-9)
+
+    @property
+    def n_skipped(self) -> int:
+        return sum(self.skipped.values())
+
+
+def plan_sources(path: Path, cfg: ConvertConfig) -> list[tuple[Path, str]]:
+    """Sources (path, kind) of an input path: one recording/folder or a directory of them.
+
+    Raises:
+        ConversionError: nothing convertible, a zero-byte file, or a directory mixing formats.
+    """
+    if not path.exists():
+        raise ConversionError(f"{path}: input not found; expected a recording, a frame folder or a directory of them")
+    if path.is_file() and path.stat().st_size == 0:
+        raise ConversionError(f"{path}: zero-byte file; expected a ROS 1 bag, ROS 2 bag or MCAP file")
+    fmt = recording_format(path) or folder_format(path)
+    if fmt is not None:
+        sources = [(path, fmt)]
+    elif path.is_dir():
+        recs = find_recordings(path)
+        folders = [(p, f) for p in sorted(path.iterdir()) if (f := folder_format(p)) is not None]
+        if recs and folders:
+            raise ConversionError(f"{path}: directory mixes recording formats ({len(recs)} recordings, "
+                                  f"{len(folders)} frame folders); expected one format per directory")
+        fams = {_FORMAT_FAMILY[f] for _, f in folders}
+        if len(fams) > 1:
+            raise ConversionError(f"{path}: directory mixes recording formats ({', '.join(sorted(fams))} folders); "
+                                  f"expected one format per directory")
+        sources = recs or folders
+        if not sources:
+            raise ConversionError(f"{path}: no recordings found; expected .bag files, ROS 2 bag directories, .mcap "
+                                  f"files, TUM RGB-D or ScanNet folders")
+    else:
+        raise ConversionError(f"{path}: not a recording; expected a .bag, .mcap or .db3 file, a ROS 2 bag directory "
+                              f"or a TUM RGB-D / ScanNet folder")
+    want = cfg.input_format
+    for p, f in sources:
+        if want != "auto" and _FORMAT_FAMILY[f] != want:
+            raise ConversionError(f"{p}: is {f}, but input_format is {want!r}")
+        if p.is_file() and p.stat().st_size == 0:
+            raise ConversionError(f"{p}: zero-byte file; expected a {f} recording")
+        if p.is_dir() and f.startswith("ros2"):
+            for db in p.iterdir():
+                if db.suffix in (".db3", ".mcap") and db.stat().st_size == 0:
+                    raise ConversionError(f"{db}: zero-byte file; expected a {f} recording")
+    return sources
+
+
+def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
+    if cfg.color_encoding != "auto":
+        return cfg.color_encoding
+    if kind == "tum":
+        first = [ln.split() for ln in (src / "rgb.txt").read_text().splitlines() if ln.strip() and ln[0] != "#"]
+        return "jpeg" if first and first[0][1].lower().endswith((".jpg", ".jpeg")) else "png"
+    if kind == "scannet":
+        return "jpeg" if any((src / "color").glob("*.jpg")) else "png"
+    with RosRecording(src) as rec:
+        topics = discover_topics(rec.topics, cfg, str(src))
+        if topics["color_type"] != "sensor_msgs/msg/CompressedImage":
+            return "png"
+        for conn, _, raw in rec.raw_messages({topics["color"]}):
+            msg = rec.deserialize(raw, conn.msgtype, conn.topic)
+            info = inspect_encoded(bytes(memoryview(msg.data)[:65536]))
+            return "jpeg" if info is not None and info.kind == "jpeg" else "png"
+    return "png"
+
+
+def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None]:
+    if cfg.side_dir:
+        d: Path | None = Path(cfg.side_dir)
+        if not d.is_dir():  # type: ignore[union-attr]
+            raise ConversionError(f"{cfg.side_dir}: side_dir not found")
+    elif path.is_dir() and recording_format(path) is None and folder_format(path) is None:
+        d = path
+    else:
+        d = path.parent
+    return read_side_files(d), d
+
+
+def _run_parallel(tasks: list[ScanTask], jobs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
+    import multiprocessing
+    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+
+    results: list[ScanResult] = []
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+        futs = {pool.submit(run_task, t): t for t in tasks}
+        pending = set(futs)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_EXCEPTION)
+            for f in done:
+                exc = f.exception()
+                if exc is not None:
+                    for p in pending:
+                        p.cancel()
+                    raise exc
+                for r in f.result():
+                    results.append(r)
+                    if progress is not None:
+                        progress(r.frames, r.bytes_in)
+    return results
+
+
+def convert(
+    input_path: str | Path,
+    out: str | Path,
+    *,
+    config: ConvertConfig | None = None,
+    overwrite: bool = False,
+    jobs: int = 1,
+    threads: int = 2,
+    progress: Callable[..., Any] | None = None,
+) -> ConversionReport:
+    """Convert raw recordings into a psg-dataset at ``out``.
+
+    An interrupted conversion (``OUT.partial`` left behind) resumes when rerun with the same input
+    and config: scans already complete are verified by checksum and kept.
+
+    Args:
+        input_path: a recording, a frame folder, or a directory of them (plus side files).
+        out: output dataset directory.
+        config: settings (default :class:`ConvertConfig`).
+        overwrite: replace ``out`` if it exists (only once the new dataset is complete).
+        jobs: worker processes converting scans in parallel.
+        threads: image-encoding threads per worker.
+        progress: called as ``progress(n_frames, nbytes)``.
+
+    Returns:
+        A :class:`ConversionReport`.
+
+    Raises:
+        ConversionError: bad input (one line: file, topic/field, what was expected); nothing is
+            left behind.
+        DatasetExistsError: ``out`` exists and ``overwrite`` is False.
+    """
+    from psg_data.writers import DatasetWriter
+
+    t_start = time.perf_counter()
+    cfg = config or ConvertConfig()
+    src = Path(input_path)
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise DatasetExistsError(f"{out}: output exists; pass --overwrite to replace it")
+    sources = plan_sources(src, cfg)
+    side, side_dir = _resolve_side(src, cfg)
+    color_encoding = _auto_color_encoding(sources[0][0], sources[0][1], cfg)
+    cfg_dict = cfg.to_dict()
+    tmp = out.with_name(out.name + ".partial")
+    state = {"input": str(src.resolve()), "config": cfg_dict, "color_encoding": color_encoding}
+    resume = False
+    state_path = tmp / STATE_DIR / _STATE_FILE
+    if state_path.is_file():
+        try:
+            resume = json.loads(state_path.read_text()) == state
+        except (OSError, json.JSONDecodeError):
+            resume = False
+        if not resume:
+            log.warning("%s: found a partial conversion with another input or config; starting over", tmp)
+    name = cfg.name or side.name or (src.stem if src.is_file() else src.name)
+    timezone = cfg.timezone or side.timezone or "UTC"
+    try:
+        writer = DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding,
+                               overwrite=overwrite, resume=resume, threads=threads)
+    except PsgDataError:
+        raise
+    except Exception as exc:
+        raise ConversionError(f"{out}: cannot create the output ({exc})") from exc
+    report = ConversionReport(output=str(out))
+    try:
+        (tmp / STATE_DIR).mkdir(exist_ok=True)
+        state_path.write_text(json.dumps(state))
+        completed = writer.completed_scans() if resume else {}
+        scan_rows = side.scan_rows()
+        tasks: list[ScanTask] = []
+        seen_ids: dict[str, Path] = {}
+        for path, kind in sources:
+            row = scan_rows.get(path.name) or scan_rows.get(path.stem)
+            scan_id = str(row["scan_id"]) if row else path.stem if path.is_file() else path.name
+            split_label = (row.get("split") or None) if row else None
+            if scan_id in seen_ids:
+                raise ConversionError(f"{path}: scan id {scan_id!r} also used by {seen_ids[scan_id]}; expected unique "
+                                      f"recording names (or scan ids in scans.csv)")
+            seen_ids[scan_id] = path
+            if cfg.split is None and scan_id in completed:
+                continue
+            tasks.append(ScanTask(str(path), kind, scan_id, split_label, cfg_dict, str(out), color_encoding,
+                                  dict(side.cameras), sorted(completed), threads))
+        if jobs > 1 and len(tasks) > 1:
+            results = _run_parallel(tasks, jobs, progress)
+        else:
+            results = [r for t in tasks for r in run_task(t, progress)]
+        # scans written now or by an interrupted run: records from the writer, cameras from our state
+        completed = writer.completed_scans()
+        by_scan: dict[str, ScanResult] = {}
+        for f in (tmp / STATE_DIR).glob("*.json"):
+            if f.name != _STATE_FILE:
+                by_scan[f.stem] = ScanResult(**json.loads(f.read_text()))
+        new_ids = {r.scan_id for r in results}
+        cameras: dict[str, dict[str, Any]] = {}
+        skipped: Counter[str] = Counter()
+        passthrough: Counter[str] = Counter()
+        from psg_data.schemas._records import CameraIntrinsics
+
+        for scan_id, rec in sorted(completed.items()):
+            res = by_scan.get(scan_id)
+            if res is None:
+                continue
+            cam = dict(res.camera)
+            cam["distortion_coeffs"] = tuple(cam["distortion_coeffs"])
+            cid, k = cam["camera_id"], 1
+            while cid in cameras and cameras[cid] != {**cam, "camera_id": cid}:
+                cid = f"{cam['camera_id']}_{k}"
+                k += 1
+            cam["camera_id"] = cid
+            if cid not in cameras:
+                cameras[cid] = cam
+                writer.add_camera(CameraIntrinsics(**cam))
+            for fr in rec["frames"]:
+                fr["camera_id"] = cid
+            writer.adopt_scan(rec)
+            report.scans.append(scan_id)
+            report.frames += len(rec["frames"])
+            if scan_id not in new_ids:
+                report.resumed.append(scan_id)
+            skipped.update(res.skipped)
+            passthrough.update(res.passthrough)
+            report.keyframe_dropped += res.keyframe_dropped
+            report.bytes_in += res.bytes_in if scan_id in new_ids else 0
+        if not report.scans:
+            raise ConversionError(f"{src}: no scan could be converted")
+        _set_side_tables(writer, side, side_dir, set(report.scans))
+        report.skipped = {k: v for k, v in sorted(skipped.items()) if v}
+        report.passthrough = dict(passthrough)
+        report.seconds = time.perf_counter() - t_start
+        writer.extra["convert"] = {
+            "input": str(src), "config": cfg_dict, "side_files": side.files,
+            "report": {"frames": report.frames, "skipped": report.skipped,
+                       "keyframe_dropped": report.keyframe_dropped, "passthrough": report.passthrough},
+        }
+        shutil.rmtree(tmp / STATE_DIR, ignore_errors=True)
+        writer.close()
+    except KeyboardInterrupt:
+        writer.abort(keep_partial=True)
+        raise
+    except BaseException:
+        writer.abort(keep_partial=False)
+        raise
+    report.seconds = time.perf_counter() - t_start
+    for reason, n in report.skipped.items():
+        log.warning("%s: %d frames skipped: %s", src, n, reason)
+    return report
+
+
+def _set_side_tables(writer: Any, side: SideData, side_dir: Path | None, scan_ids: set[str]) -> None:
+    from psg_data.errors import FormatError
+
+    for name in ("rooms", "receptacles", "doors", "objects", "door_states", "schedule"):
+        rows = side.tables.get(name)
+        if rows is None:
+            continue
+        where = side.sources.get(name, str(side_dir))
+        for i, r in enumerate(rows):
+            sid = r.get("scan_id")
+            if sid is not None and str(sid) not in scan_ids:
+                raise ConversionError(f"{where}: row {i + 1}: scan_id {sid!r} is not a converted scan; expected one "
+                                      f"of {', '.join(sorted(scan_ids)[:5])}{', ...' if len(scan_ids) > 5 else ''}")
+        try:
+            writer.set_table(name, rows)
+        except FormatError as exc:
+            raise ConversionError(f"{where}: {exc}") from exc
+
+
+_ = asdict

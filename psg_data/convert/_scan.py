@@ -1,0 +1,654 @@
+"""Converting one source (a recording or a frame folder) into scans of a dataset being written.
+
+Streams messages in log-time order, pairs colour and depth on header stamps, resolves poses and
+writes frames as soon as they are complete: memory is bounded by the ``buffer_s`` window, not by the
+recording size. Runs in the main process or in a worker process (``--jobs``); each worker writes
+its scans into ``OUT.partial`` with its own :class:`DatasetWriter` opened with ``resume=True``, and
+the parent adopts the finished scans.
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import logging
+import math
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.convert._config import ConvertConfig, parse_keyframes, parse_pose_source, parse_split
+from psg_data.errors import ConversionError
+from psg_data.loaders.raw._folders import FolderRecording, read_scannet_folder, read_tum_folder, read_tum_poses
+from psg_data.loaders.raw._images import (
+    compressed_depth_png,
+    decode_color_image,
+    decode_compressed_color,
+    decode_compressed_depth,
+    decode_depth_image,
+    inspect_encoded,
+)
+from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform
+from psg_data.schemas._records import CameraIntrinsics
+
+__all__ = ["ScanTask", "ScanResult", "run_task", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
+
+log = logging.getLogger(__name__)
+
+STATE_DIR = ".psg_convert"
+"""Directory inside ``OUT.partial`` holding per-scan conversion records (removed on completion)."""
+
+SKIP_REASONS = {
+    "no_depth": "colour frame without a depth image within the sync tolerance",
+    "no_color": "depth image without a colour frame within the sync tolerance",
+    "no_pose": "no pose sample near the frame stamp (or a gap above max_pose_gap_s)",
+    "nonfinite_pose": "pose with NaN or infinite values",
+    "duplicate_stamp": "second colour frame with an already used header stamp",
+    "out_of_order": "colour frame older than one already written",
+}
+
+_IMAGE = "sensor_msgs/msg/Image"
+_COMPRESSED = "sensor_msgs/msg/CompressedImage"
+_INFO = "sensor_msgs/msg/CameraInfo"
+_TF = "tf2_msgs/msg/TFMessage"
+_ODOM = "nav_msgs/msg/Odometry"
+
+
+@dataclass
+class ScanTask:
+    """One source to convert (picklable, sent to worker processes)."""
+
+    source: str
+    kind: str
+    """Recording format (ros1, ros2-sqlite3, ros2-mcap, mcap) or folder format (tum, scannet)."""
+    scan_id: str
+    """Scan id, or the prefix of ``{prefix}_{k:03d}`` ids when splitting."""
+    split_label: str | None
+    config: dict[str, Any]
+    out: str
+    color_encoding: str
+    camera_ids: dict[str, str]
+    skip_scans: list[str] = field(default_factory=list)
+    threads: int = 2
+
+
+@dataclass
+class ScanResult:
+    scan_id: str
+    camera: dict[str, Any]
+    frames: int
+    skipped: dict[str, int]
+    keyframe_dropped: int
+    bytes_in: int
+    source: str
+    seconds: float
+    passthrough: dict[str, int]
+
+
+def _stamp(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def discover_topics(topics: dict[str, str], cfg: ConvertConfig, where: str) -> dict[str, Any]:
+    """Choose the colour, depth, camera-info, TF and odometry topics from their message types.
+
+    Raises:
+        ConversionError: no depth / colour / camera_info topic, an override that does not exist or
+            has the wrong type, or an ambiguous choice.
+    """
+    def check(topic: str, types: tuple[str, ...], what: str) -> str:
+        if topic not in topics:
+            raise ConversionError(f"{where}: {topic}: no such topic for the {what}; topics are "
+                                  f"{', '.join(sorted(topics))}")
+        if topics[topic] not in types:
+            raise ConversionError(f"{where}: {topic}: is a {topics[topic]}, expected {' or '.join(types)} for the "
+                                  f"{what}")
+        return topic
+
+    images = {t: m for t, m in topics.items() if m in (_IMAGE, _COMPRESSED)}
+    depth_c = [t for t in images if "depth" in t.lower()]
+    color_c = [t for t in images if "depth" not in t.lower() and not any(k in t.lower() for k in ("infra", "ir/"))]
+
+    def prefer(cands: list[str], compressed_first: bool, what: str, flag: str) -> str:
+        if not cands:
+            raise ConversionError(f"{where}: no {what} topic (sensor_msgs/Image or CompressedImage); expected a "
+                                  f"recording with {what} (or pass {flag})")
+        def rank(t: str) -> tuple[int, int, int, str]:
+            comp = topics[t] == _COMPRESSED
+            named = 0 if any(k in t.lower() for k in (("depth",) if what == "depth" else ("color", "rgb"))) else 1
+            aligned = 0 if ("aligned" in t or what != "depth") else 1
+            return (named, aligned, (0 if comp else 1) if compressed_first else (1 if comp else 0), t)
+        ranked = sorted(cands, key=rank)
+        return ranked[0]
+
+    jpeg_wanted = cfg.color_encoding == "jpeg"
+    color = check(cfg.color_topic, (_IMAGE, _COMPRESSED), "colour") if cfg.color_topic else \
+        prefer(color_c, jpeg_wanted, "colour", "--color-topic")
+    depth = check(cfg.depth_topic, (_IMAGE, _COMPRESSED), "depth") if cfg.depth_topic else \
+        prefer(depth_c, True, "depth", "--depth-topic")
+    infos = [t for t, m in topics.items() if m == _INFO]
+    if cfg.camera_info_topic:
+        info = check(cfg.camera_info_topic, (_INFO,), "camera intrinsics")
+    else:
+        if not infos:
+            raise ConversionError(f"{where}: no sensor_msgs/CameraInfo topic; expected the colour camera's "
+                                  f"camera_info (or pass --camera-info-topic)")
+        ns = color.rsplit("/", 2)[0] if color.count("/") >= 2 else ""
+        infos.sort(key=lambda t: (0 if ns and t.startswith(ns + "/") else 1, 0 if "color" in t else 1, t))
+        info = infos[0]
+    tf = [t for t, m in topics.items() if m == _TF]
+    odom = sorted(t for t, m in topics.items() if m == _ODOM)
+    return {"color": color, "depth": depth, "camera_info": info,
+            "tf": [t for t in tf if not t.endswith("tf_static")], "tf_static": [t for t in tf if t.endswith("tf_static")],
+            "odom": odom, "color_type": topics[color], "depth_type": topics[depth]}
+
+
+class _Payload:
+    """A colour or depth image as it arrived: a message, encoded bytes or a file."""
+
+    __slots__ = ("kind", "obj", "fmt")
+
+    def __init__(self, kind: str, obj: Any, fmt: str = "") -> None:
+        self.kind, self.obj, self.fmt = kind, obj, fmt
+
+
+def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> CameraIntrinsics:
+    K = np.asarray(getattr(msg, "K", None) if hasattr(msg, "K") else msg.k, dtype=float)
+    D = np.asarray(getattr(msg, "D", None) if hasattr(msg, "D") else msg.d, dtype=float)
+    if K.size != 9 or not np.all(np.isfinite(K)) or K[0] <= 0 or K[4] <= 0:
+        raise ConversionError(f"{where}: CameraInfo K: expected a finite 3x3 matrix with fx, fy > 0, got {K.tolist()}")
+    model = str(msg.distortion_model or "")
+    if D.size == 0 or not np.any(D):
+        model, coeffs = "none", ()
+    elif model in ("plumb_bob", "equidistant"):
+        coeffs = tuple(float(v) for v in D)
+    else:
+        raise ConversionError(f"{where}: CameraInfo distortion_model {model!r} with non-zero D; expected "
+                              f"'plumb_bob' or 'equidistant' (or an undistorted camera)")
+    return CameraIntrinsics(camera_id, int(msg.width), int(msg.height), float(K[0]), float(K[4]), float(K[2]),
+                            float(K[5]), model, coeffs, 0.001, frame_id.lstrip("/") or None)
+
+
+class _Assembler:
+    """Pairs colour and depth on header stamps within a tolerance, in stamp order."""
+
+    def __init__(self, tol_ns: int) -> None:
+        self.tol = tol_ns
+        self.colors: list[tuple[int, _Payload]] = []
+        self.depth_stamps: list[int] = []
+        self.depths: dict[int, _Payload] = {}
+        self.seen_colors: set[int] = set()
+        self.last_emitted = -(1 << 62)
+        self.skipped: Counter[str] = Counter()
+
+    def add_color(self, stamp: int, p: _Payload) -> None:
+        if stamp in self.seen_colors or stamp == self.last_emitted:
+            self.skipped["duplicate_stamp"] += 1
+            return
+        if stamp <= self.last_emitted:
+            self.skipped["out_of_order"] += 1
+            return
+        self.seen_colors.add(stamp)
+        bisect.insort(self.colors, (stamp, p), key=lambda x: x[0])
+
+    def add_depth(self, stamp: int, p: _Payload) -> None:
+        if stamp in self.depths:
+            return
+        bisect.insort(self.depth_stamps, stamp)
+        self.depths[stamp] = p
+
+    def ready(self, before_ns: int | None) -> Iterator[tuple[int, _Payload, _Payload]]:
+        """Pop colour frames with stamp < ``before_ns`` (all if None), paired with their depth."""
+        while self.colors and (before_ns is None or self.colors[0][0] < before_ns):
+            stamp, cp = self.colors.pop(0)
+            self.seen_colors.discard(stamp)  # pending stamps only: memory bounded by the window
+            # depth older than this colour's window can no longer match anything
+            while self.depth_stamps and self.depth_stamps[0] < stamp - self.tol:
+                self.depths.pop(self.depth_stamps.pop(0))
+                self.skipped["no_color"] += 1
+            i = bisect.bisect_left(self.depth_stamps, stamp - self.tol)
+            best = None
+            for j in range(i, len(self.depth_stamps)):
+                d = self.depth_stamps[j]
+                if d > stamp + self.tol:
+                    break
+                if best is None or abs(d - stamp) < abs(self.depth_stamps[best] - stamp):
+                    best = j
+            if best is None:
+                self.skipped["no_depth"] += 1
+                continue
+            dstamp = self.depth_stamps.pop(best)
+            self.last_emitted = stamp
+            yield stamp, cp, self.depths.pop(dstamp)
+        if before_ns is None:
+            self.skipped["no_color"] += len(self.depth_stamps)
+            self.depth_stamps.clear()
+            self.depths.clear()
+
+
+class _PoseSource:
+    """Camera-to-world poses (OpenCV optical axes) from TF, an odometry topic or a TUM file."""
+
+    def __init__(self, cfg: ConvertConfig, tf: TfBuffer, topics: dict[str, Any] | None, where: str) -> None:
+        self.cfg, self.tf, self.where = cfg, tf, where
+        self.max_gap = int(cfg.max_pose_gap_s * 1e9)
+        self.tol = int(cfg.pose_tolerance_s * 1e9)
+        self.series = PoseSeries()
+        self.kind: str | None = None
+        self.world = self.frame = ""
+        self.odom_topic: str | None = None
+        if cfg.poses:
+            kind, a, b = parse_pose_source(cfg.poses)
+            self.kind = kind
+            if kind == "tf":
+                self.world, self.frame = a, b or ""
+            elif kind == "odom":
+                self.odom_topic = a
+                if topics is not None and a not in [*topics["odom"]]:
+                    raise ConversionError(f"{where}: {a}: no nav_msgs/Odometry topic of that name for --poses; "
+                                          f"odometry topics: {', '.join(topics['odom']) or 'none'}")
+            else:
+                path = Path(a)
+                if not path.is_file():
+                    raise ConversionError(f"{a}: --poses tum: file not found")
+                for s, t, q in read_tum_poses(path):
+                    self.series.add(s, t, q)
+                self.frame = cfg.tum_frame or ""
+        elif topics is not None and not topics["tf"] and topics["odom"]:
+            self.kind, self.odom_topic = "odom", topics["odom"][0]
+        self.optical = ""
+
+    def resolve_auto(self) -> None:
+        if self.kind is None:
+            frames = set(self.tf.frames)
+            if "map" in frames:
+                self.kind, self.world = "tf", "map"
+            elif "odom" in frames:
+                self.kind, self.world = "tf", "odom"
+            else:
+                raise ConversionError(f"{self.where}: no pose source: /tf has no 'map' or 'odom' frame and there is "
+                                      f"no nav_msgs/Odometry topic; pass --poses tf:A->B, odom:/TOPIC or tum:FILE")
+
+    def add_odom(self, msg: Any) -> None:
+        p = msg.pose.pose
+        if not self.frame:
+            self.frame = str(msg.child_frame_id).lstrip("/")
+        self.series.add(_stamp(msg.header), (p.position.x, p.position.y, p.position.z),
+                        (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w))
+
+    def horizon(self) -> int | None:
+        """Newest stamp up to which every needed dynamic pose sample may have arrived."""
+        if self.kind == "tf":
+            return self.tf.last_dynamic_stamp()
+        return self.series.last_stamp
+
+    def at(self, stamp: int) -> NDArray[np.float64] | None:
+        self.resolve_auto()
+        target = self.frame or self.optical
+        if self.kind == "tf":
+            T = self.tf.lookup(self.world, target, stamp, self.where)
+        else:
+            T = self.series.at(stamp, self.max_gap, self.tol)
+        if T is None:
+            return None
+        if target and self.optical and target.lstrip("/") != self.optical.lstrip("/"):
+            E = self.tf.lookup(target, self.optical, stamp, self.where)
+            if E is None:
+                return None
+            T = T @ E
+        return T
+
+
+def _png_or_jpeg_passthrough(data: bytes, encoding: str) -> bool:
+    info = inspect_encoded(data)
+    if info is None:
+        return False
+    if encoding == "jpeg":
+        return info.kind == "jpeg" and info.channels == 3 and info.bit_depth == 8
+    return info.kind == "png" and info.channels == 3 and info.bit_depth == 8
+
+
+class _FrameWriter:
+    """Turns a (colour, depth) payload pair into stored images, passing encoded bytes through."""
+
+    def __init__(self, encoding: str, depth_scale_m: float, where: str) -> None:
+        self.encoding = encoding
+        self.depth_scale_m = depth_scale_m
+        self.where = where
+        self.passthrough: Counter[str] = Counter()
+
+    def color(self, p: _Payload, topic: str) -> tuple[bytes | None, NDArray[np.uint8] | None, tuple[int, int]]:
+        where = f"{self.where}: {topic}"
+        if p.kind == "msg":
+            arr = decode_color_image(p.obj, where)
+            return None, arr, (arr.shape[1], arr.shape[0])
+        data = bytes(memoryview(p.obj)) if p.kind == "bytes" else Path(p.obj).read_bytes()
+        if _png_or_jpeg_passthrough(data, self.encoding):
+            info = inspect_encoded(data)
+            assert info is not None
+            self.passthrough["color"] += 1
+            return data, None, (info.width, info.height)
+        arr = decode_compressed_color(data, p.fmt or "file", where)
+        return None, arr, (arr.shape[1], arr.shape[0])
+
+    def depth(self, p: _Payload, topic: str) -> tuple[bytes | None, NDArray[np.uint16] | None, tuple[int, int]]:
+        where = f"{self.where}: {topic}"
+        scale_ok = abs(self.depth_scale_m - 0.001) < 1e-12
+        if p.kind == "msg":
+            arr = decode_depth_image(p.obj, where, self.depth_scale_m)
+            return None, arr, (arr.shape[1], arr.shape[0])
+        fmt = p.fmt
+        data = bytes(memoryview(p.obj)) if p.kind == "bytes" else Path(p.obj).read_bytes()
+        png, src = data, "16UC1"
+        if "compresseddepth" in fmt.lower():
+            png, src, _ = compressed_depth_png(data, fmt, where)
+        info = inspect_encoded(png)
+        if info is None:
+            raise ConversionError(f"{where}: unknown depth image format {fmt or 'file'!r}; expected a 16-bit PNG "
+                                  f"('16UC1; compressedDepth png')")
+        if scale_ok and src.upper() in ("16UC1", "MONO16") and info.kind == "png" and info.bit_depth == 16 \
+                and info.channels == 1:
+            self.passthrough["depth"] += 1
+            return png, None, (info.width, info.height)
+        if info.kind == "png" and info.bit_depth != 16:
+            raise ConversionError(f"{where}: depth PNG is {info.bit_depth}-bit; expected 16-bit depth")
+        arr = decode_compressed_depth(data, fmt if "compresseddepth" in fmt.lower() else "png", where,
+                                      self.depth_scale_m)
+        return None, arr, (arr.shape[1], arr.shape[0])
+
+
+def _encode(arr: NDArray[Any], encoding: str) -> bytes:
+    import cv2
+
+    from psg_data.writers._dataset_writer import JPEG_QUALITY, PNG_LEVEL
+
+    if arr.ndim == 3:
+        bgr = cv2.cvtColor(arr, cv2.COLOR_RGB2BGR)
+        if encoding == "jpeg":
+            return cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1].tobytes()
+        return cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
+    return cv2.imencode(".png", arr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
+
+
+class _ScanSink:
+    """Receives complete frames; splits them into scans, applies keyframes, writes them."""
+
+    def __init__(self, task: ScanTask, cfg: ConvertConfig, writer: Any, fw: _FrameWriter, names: tuple[str, str],
+                 progress: Callable[..., Any] | None) -> None:
+        self.task, self.cfg, self.w, self.fw = task, cfg, writer, fw
+        self.names = names
+        self.progress = progress
+        self.split = parse_split(cfg.split)
+        self.keyframes = parse_keyframes(cfg.keyframes)
+        self.camera: CameraIntrinsics | None = None
+        self.results: list[ScanResult] = []
+        self.sw: Any = None
+        self.scan_id: str | None = None
+        self.k = 0
+        self.last_stamp: int | None = None
+        self.last_key_T: NDArray[np.float64] | None = None
+        self.n_seen = 0
+        self.kf_dropped = 0
+        self.skipped: Counter[str] = Counter()
+        self.t0 = time.perf_counter()
+        self.bytes_mark = 0
+        self.bytes_in = 0
+        self.skip_current = False
+        self.frames_in_scan = 0
+
+    def _scan_for(self, stamp: int) -> str:
+        if self.split is None:
+            return self.task.scan_id
+        kind, ns = self.split
+        if kind == "slot":
+            return f"{self.task.scan_id}_{stamp // ns:06d}"
+        if self.last_stamp is not None and stamp - self.last_stamp > ns:
+            self.k += 1
+        return f"{self.task.scan_id}_{self.k:03d}"
+
+    def _close_scan(self) -> None:
+        if self.scan_id is None:
+            return
+        if self.sw is not None:
+            if self.sw.n_frames == 0:
+                raise ConversionError(f"{self.task.source}: scan {self.scan_id}: no frame could be converted "
+                                      f"(skipped: {dict(self.skipped) or 'none'})")
+            self.sw.close()
+            assert self.camera is not None
+            res = ScanResult(self.scan_id, asdict(self.camera), self.sw.n_frames, dict(self.skipped),
+                             self.kf_dropped, self.bytes_in - self.bytes_mark, self.task.source,
+                             time.perf_counter() - self.t0, dict(self.fw.passthrough))
+            state = Path(self.w.tmp) / STATE_DIR
+            state.mkdir(exist_ok=True)
+            (state / f"{self.scan_id}.json").write_text(json.dumps(asdict(res)))
+            self.results.append(res)
+        self.sw = None
+        self.scan_id = None
+        self.skipped = Counter()
+        self.kf_dropped = 0
+        self.bytes_mark = self.bytes_in
+        self.t0 = time.perf_counter()
+        self.fw.passthrough.clear()
+
+    def _keep(self, T: NDArray[np.float64]) -> bool:
+        if self.keyframes is None:
+            return True
+        kind, a, b = self.keyframes
+        self.n_seen += 1
+        if kind == "every":
+            return (self.n_seen - 1) % int(a) == 0
+        if self.last_key_T is None:
+            return True
+        dT = np.linalg.inv(self.last_key_T) @ T
+        ang = math.acos(max(-1.0, min(1.0, (np.trace(dT[:3, :3]) - 1) / 2)))
+        return bool(np.linalg.norm(dT[:3, 3]) >= a or ang >= b)
+
+    def frame(self, stamp: int, T: NDArray[np.float64] | None, cp: _Payload, dp: _Payload, nbytes: int) -> None:
+        scan_id = self._scan_for(stamp)
+        self.last_stamp = stamp
+        if scan_id != self.scan_id:
+            self._close_scan()
+            self.scan_id = scan_id
+            self.n_seen = 0
+            self.last_key_T = None
+            self.skip_current = scan_id in self.task.skip_scans
+            if not self.skip_current:
+                self.sw = self.w.scan(scan_id, source=Path(self.task.source).name, split=self.task.split_label)
+        self.bytes_in += nbytes
+        if self.skip_current:
+            return
+        if T is None:
+            self.skipped["no_pose"] += 1
+            return
+        if not np.all(np.isfinite(T)):
+            self.skipped["nonfinite_pose"] += 1
+            return
+        if not self._keep(T):
+            self.kf_dropped += 1
+            return
+        self.last_key_T = T
+        assert self.camera is not None
+        if self.camera.camera_id not in self.w._cameras:
+            self.w.add_camera(self.camera)
+        cb, ca, csize = self.fw.color(cp, self.names[0])
+        db, da, dsize = self.fw.depth(dp, self.names[1])
+        cam = self.camera
+        if ca is not None and self.task.kind == "scannet" and csize != dsize:
+            import cv2
+
+            ca = cv2.resize(ca, dsize, interpolation=cv2.INTER_AREA)
+            csize = dsize
+        if csize != dsize:
+            raise ConversionError(f"{self.task.source}: {self.names[1]}: depth is {dsize[0]}x{dsize[1]} but colour is "
+                                  f"{csize[0]}x{csize[1]}; expected depth registered to colour (aligned_depth_to_color)")
+        if csize != (cam.width, cam.height):
+            raise ConversionError(f"{self.task.source}: {self.names[0]}: images are {csize[0]}x{csize[1]} but "
+                                  f"CameraInfo says {cam.width}x{cam.height}; expected the colour camera's camera_info")
+        T = np.asarray(T, dtype=np.float64)
+        if cb is not None and db is not None:
+            self.sw.add_encoded_frame(stamp, T, cb, db, cam.camera_id)
+        elif ca is not None and da is not None:
+            self.sw.add_frame(stamp, T, ca, da, cam.camera_id)
+        else:
+            self.sw.add_encoded_frame(stamp, T, cb if cb is not None else _encode(ca, self.fw.encoding),
+                                      db if db is not None else _encode(da, "png"), cam.camera_id)
+        if self.progress is not None:
+            self.progress(1, nbytes)
+
+    def finish(self, asm_skipped: Counter[str]) -> list[ScanResult]:
+        self.skipped.update(asm_skipped)
+        if self.scan_id is None and not self.results:
+            raise ConversionError(f"{self.task.source}: no frame could be converted (skipped: "
+                                  f"{dict(self.skipped) or 'no colour frames'}); check the topics and tolerances")
+        self._close_scan()
+        return self.results
+
+
+def _open_writer(task: ScanTask) -> Any:
+    from psg_data.writers import DatasetWriter
+
+    return DatasetWriter(task.out, color_encoding=task.color_encoding, overwrite=True, resume=True,
+                         threads=task.threads)
+
+
+def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None) -> list[ScanResult]:
+    from psg_data.loaders.raw._bag import RosRecording
+
+    rec = RosRecording(task.source)
+    where = str(rec.path)
+    with rec:
+        topics = discover_topics(rec.topics, cfg, where)
+        tf = TfBuffer(int(cfg.max_pose_gap_s * 1e9), int(cfg.pose_tolerance_s * 1e9))
+        for st in cfg.static_transforms:
+            tf.add(str(st["parent"]), str(st["child"]), 0, st["translation"], st["rotation_xyzw"], static=True)
+        poses = _PoseSource(cfg, tf, topics, where)
+        if cfg.poses and poses.kind == "tf" and not topics["tf"] and not topics["tf_static"] and not cfg.static_transforms:
+            raise ConversionError(f"{where}: /tf: no tf2_msgs/TFMessage topic for --poses {cfg.poses}")
+        asm = _Assembler(int(cfg.sync_tolerance_s * 1e9))
+        fw = _FrameWriter(task.color_encoding, cfg.depth_scale_m or 0.001, where)
+        writer = _open_writer(task)
+        try:
+            sink = _ScanSink(task, cfg, writer, fw, (topics["color"], topics["depth"]), progress)
+            wanted = {topics["color"], topics["depth"], topics["camera_info"], *topics["tf"], *topics["tf_static"]}
+            if poses.odom_topic:
+                wanted.add(poses.odom_topic)
+            window = int((cfg.buffer_s + cfg.max_pose_gap_s) * 1e9)
+            color_t, depth_t, info_t = topics["color"], topics["depth"], topics["camera_info"]
+            static_t = set(topics["tf_static"])
+            pending_bytes = 0
+
+            def emit(before: int | None) -> None:
+                nonlocal pending_bytes
+                if sink.camera is None:
+                    if before is not None:
+                        return
+                    raise ConversionError(f"{where}: {info_t}: no CameraInfo message; expected the colour camera's "
+                                          f"intrinsics")
+                for stamp, cp, dp in asm.ready(before):
+                    T = poses.at(stamp)
+                    sink.frame(stamp, T, cp, dp, pending_bytes)
+                    pending_bytes = 0
+
+            for conn, log_t, raw in rec.raw_messages(wanted):
+                topic = conn.topic
+                pending_bytes += len(raw)
+                msg = rec.deserialize(raw, conn.msgtype, topic)
+                if topic == color_t:
+                    if conn.msgtype == _COMPRESSED:
+                        asm.add_color(_stamp(msg.header), _Payload("bytes", msg.data, msg.format))
+                    else:
+                        asm.add_color(_stamp(msg.header), _Payload("msg", msg))
+                    if not poses.optical:
+                        poses.optical = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
+                elif topic == depth_t:
+                    if conn.msgtype == _COMPRESSED:
+                        asm.add_depth(_stamp(msg.header), _Payload("bytes", msg.data, msg.format))
+                    else:
+                        asm.add_depth(_stamp(msg.header), _Payload("msg", msg))
+                elif topic == info_t:
+                    if sink.camera is None:
+                        frame_id = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
+                        cid = task.camera_ids.get(frame_id) or cfg.camera_id or "camera"
+                        sink.camera = _camera_from_info(msg, cid, frame_id, f"{where}: {topic}")
+                        poses.optical = frame_id
+                elif topic == poses.odom_topic:
+                    poses.add_odom(msg)
+                elif conn.msgtype == _TF:
+                    static = topic in static_t
+                    for tr in msg.transforms:
+                        t, q = tr.transform.translation, tr.transform.rotation
+                        tf.add(str(tr.header.frame_id), str(tr.child_frame_id), _stamp(tr.header),
+                               (t.x, t.y, t.z), (q.x, q.y, q.z, q.w), static=static)
+                emit(log_t - window)
+            emit(None)
+            results = sink.finish(asm.skipped)
+        except BaseException:
+            writer.abort(keep_partial=True)
+            raise
+        writer.abort(keep_partial=True)  # the parent writer finishes the dataset
+    return results
+
+
+def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None) -> list[ScanResult]:
+    if task.kind == "tum":
+        fr: FolderRecording = read_tum_folder(task.source, cfg.intrinsics, cfg.depth_scale_m)
+    else:
+        fr = read_scannet_folder(task.source, cfg.fps, cfg.start_stamp_ns, cfg.depth_scale_m, cfg.intrinsics)
+    where = str(fr.path)
+    tf = TfBuffer(int(cfg.max_pose_gap_s * 1e9), int(cfg.pose_tolerance_s * 1e9))
+    poses = _PoseSource(cfg, tf, None, where)
+    if poses.kind is None:
+        if fr.format == "tum" and not fr.poses_tum:
+            raise ConversionError(f"{fr.path / 'groundtruth.txt'}: missing; expected poses (or pass --poses tum:FILE)")
+        poses.kind = "tum"
+        for s, t, q in fr.poses_tum:
+            poses.series.add(s, t, q)
+    asm = _Assembler(int(cfg.sync_tolerance_s * 1e9))
+    for s, p in fr.colors:
+        asm.add_color(s, _Payload("file", p))
+    for s, p in fr.depths:
+        asm.add_depth(s, _Payload("file", p))
+    fw = _FrameWriter(task.color_encoding, fr.depth_scale_m, where)
+    writer = _open_writer(task)
+    try:
+        sink = _ScanSink(task, cfg, writer, fw, ("rgb", "depth"), progress)
+        cid = cfg.camera_id or task.camera_ids.get("") or "camera"
+        sink.camera = CameraIntrinsics(cid, fr.width, fr.height, *fr.K, depth_scale_m=0.001)
+        for stamp, cp, dp in asm.ready(None):
+            if fr.poses_exact and not cfg.poses:
+                T = fr.poses_exact.get(stamp)
+            else:
+                T = poses.at(stamp)
+            nbytes = Path(cp.obj).stat().st_size + Path(dp.obj).stat().st_size
+            sink.frame(stamp, T, cp, dp, nbytes)
+        results = sink.finish(asm.skipped)
+    except BaseException:
+        writer.abort(keep_partial=True)
+        raise
+    writer.abort(keep_partial=True)
+    return results
+
+
+def run_task(task: ScanTask, progress: Callable[..., Any] | None = None) -> list[ScanResult]:
+    """Convert one source into one or more scans inside ``OUT.partial`` (see module docstring)."""
+    cfg = ConvertConfig.from_dict(task.config)
+    if task.kind in ("tum", "scannet"):
+        return _run_folder(task, cfg, progress)
+    return _run_bag(task, cfg, progress)
+
+
+def make_static(parent: str, child: str, T: NDArray[np.float64]) -> dict[str, Any]:
+    """A ``static_transforms`` config entry from a 4x4 transform."""
+    from psg_data.loaders.raw._transforms import matrix_to_quat_xyzw
+
+    return {"parent": parent, "child": child, "translation": [float(v) for v in T[:3, 3]],
+            "rotation_xyzw": [float(v) for v in matrix_to_quat_xyzw(T[:3, :3])]}
+
+
+_ = make_transform

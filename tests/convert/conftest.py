@@ -1,0 +1,164 @@
+"""Factories for tiny canonical datasets and raw recordings built in tmp_path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from psg_data.schemas._records import Box, CameraIntrinsics, Door, ObjectInfo, Receptacle, Room
+from psg_data.writers import DatasetWriter
+
+W, H = 32, 24
+CAMERA = CameraIntrinsics("cam0", W, H, 30.0, 31.0, 15.5, 11.5, frame_id="camera_color_optical_frame")
+
+
+def rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def pose(i: int, scan: int) -> np.ndarray:
+    """A camera-to-world pose in OpenCV axes (camera looking roughly along world +x)."""
+    base = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    T = np.eye(4)
+    T[:3, :3] = rot([0, 0, 1], 0.3 * scan + 0.1 * i) @ base @ rot([1, 0, 0], 0.05 * i)
+    T[:3, 3] = [0.5 + 0.1 * i, -0.2 * scan + 0.03 * i, 1.2 + 0.01 * i]
+    return T
+
+
+def images(i: int, scan: int, w: int = W, h: int = H) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(1000 * scan + i)
+    yy, xx = np.mgrid[0:h, 0:w]
+    color = np.stack([(xx * 7 + i * 5) % 256, (yy * 9 + scan * 40) % 256, (xx + yy) * 3 % 256], -1).astype(np.uint8)
+    color = np.clip(color.astype(int) + rng.integers(-3, 4, color.shape), 0, 255).astype(np.uint8)
+    depth = (800 + 40 * xx + 13 * yy + 7 * i + rng.integers(0, 50, (h, w))).astype(np.uint16)
+    depth[0, :3] = 0
+    depth[5, 5] = 60000
+    return color, depth
+
+
+def make_dataset(root: Path, *, n_scans: int = 2, n_frames: int = 4, color_encoding: str = "png",
+                 period_ns: int = 100_000_000, w: int = W, h: int = H) -> Path:
+    cam = CAMERA if (w, h) == (W, H) else CameraIntrinsics("cam0", w, h, 30.0 * w / W, 31.0 * w / W,
+                                                            w / 2 - 0.5, h / 2 - 0.5,
+                                                            frame_id="camera_color_optical_frame")
+    rooms = [Room("kitchen", "Kitchen", np.array([[0, 0], [4, 0], [4, 3], [0, 3.0]])), Room("office", "Office")]
+    recs = [Receptacle("table1", "Table", "kitchen", Box(np.array([1.0, 2.0, 0.4]), np.array([1.2, 0.8, 0.8]),
+                                                         rot([0, 0, 1], 0.3)), "table"),
+            Receptacle("shelf1", "Shelf", "office", Box(np.array([3.0, -1.0, 0.9]), np.array([0.4, 1.0, 1.8])))]
+    doors = [Door("door1", "Kitchen door", "kitchen", "office", Box(np.array([4.0, 1.0, 1.0]),
+                                                                       np.array([0.1, 0.9, 2.0])))]
+    objs = [ObjectInfo("mug", "redmug", "a red mug"), ObjectInfo("book", "book", None)]
+    with DatasetWriter(root, name="tiny", timezone="America/Toronto", color_encoding=color_encoding,
+                       threads=1) as wr:
+        wr.add_camera(cam)
+        wr.set_rooms(rooms)
+        wr.set_receptacles(recs)
+        wr.set_doors(doors)
+        wr.set_objects(objs)
+        ds_rows, sched = [], []
+        for s in range(n_scans):
+            sid = f"scan_{s:03d}"
+            t0 = 1_700_000_000_000_000_000 + s * 86_400_000_000_000
+            with wr.scan(sid, source="factory", split="train" if s % 2 == 0 else "test") as sw:
+                for i in range(n_frames):
+                    c, d = images(i, s, w, h)
+                    sw.add_frame(t0 + i * period_ns + 1234, pose(i, s), c, d, "cam0")
+            ds_rows.append({"scan_id": sid, "door_id": "door1", "state": "open" if s % 2 else "closed"})
+            sched.append({"scan_id": sid, "object_id": "mug", "receptacle_id": "table1" if s % 2 else "shelf1"})
+            sched.append({"scan_id": sid, "object_id": "book", "receptacle_id": None if s % 2 else "table1"})
+        wr.set_table("door_states", ds_rows)
+        wr.set_table("schedule", sched)
+    return root
+
+
+@pytest.fixture
+def tiny_dataset(tmp_path: Path) -> Path:
+    return make_dataset(tmp_path / "canon")
+
+
+def write_bag(path: Path, fmt: str = "ros1", *, n: int = 4, w: int = W, h: int = H, color: str | None = "rgb8",
+              depth: str | None = "16UC1", info: bool = True, tf: bool = True, tf_static: bool = True,
+              depth_size: tuple[int, int] | None = None, duplicate: bool = False, nan_pose_at: int | None = None,
+              t0: int = 1_700_000_000_000_000_000, period_ns: int = 100_000_000,
+              extra_topics: bool = False) -> Path:
+    """A hand-made recording with chosen defects (poses: pose(i, 0) in the map frame)."""
+    from psg_data.synth._raw_export import (
+        STATIC_BASE_CAMERA_LINK,
+        R_CAMERA_LINK_OPTICAL,
+        _BagWriter,
+        _Msgs,
+    )
+    from psg_data.loaders.raw._images import make_compressed_depth
+    from psg_data.loaders.raw._transforms import invert
+    import cv2
+
+    msgs = _Msgs(fmt == "ros1")
+    if extra_topics:
+        from rosbags.typesys import get_types_from_msg
+
+        msgs.ts.register(get_types_from_msg("std_msgs/Header header\nint32 ref_id\nfloat32 loop_closure",
+                                            "rtabmap_ros/msg/Info"))
+    bw = _BagWriter(path, fmt, msgs)
+    fid = "camera_color_optical_frame"
+    if color:
+        bw.connection("/camera/color/image_raw", "sensor_msgs/msg/Image")
+    if depth:
+        t = "sensor_msgs/msg/CompressedImage" if depth == "compressedDepth" else "sensor_msgs/msg/Image"
+        name = "/camera/aligned_depth_to_color/image_raw" + ("/compressedDepth" if depth == "compressedDepth" else "")
+        bw.connection(name, t)
+    if info:
+        bw.connection("/camera/color/camera_info", "sensor_msgs/msg/CameraInfo")
+    if tf:
+        bw.connection("/tf", "tf2_msgs/msg/TFMessage")
+    if tf_static:
+        bw.connection("/tf_static", "tf2_msgs/msg/TFMessage", latching=True)
+    if extra_topics:
+        bw.connection("/rtabmap/info", "rtabmap_ros/msg/Info")
+    cl_opt = np.eye(4)
+    cl_opt[:3, :3] = R_CAMERA_LINK_OPTICAL
+    T_base_opt = STATIC_BASE_CAMERA_LINK @ cl_opt
+    if tf_static:
+        bw.push("/tf_static", t0 - 10_000_000, msgs.tf_message(t0, [("base_link", "camera_link", STATIC_BASE_CAMERA_LINK),
+                                                                   ("camera_link", fid, cl_opt)]))
+    for i in range(n):
+        t = t0 + i * period_ns
+        c, d = images(i, 0, w, h)
+        if color:
+            m = msgs.image(t, fid, c, "rgb8")
+            if color != "rgb8":
+                m = msgs.T["sensor_msgs/msg/Image"](header=m.header, height=m.height, width=m.width, encoding=color,
+                                                    is_bigendian=0, step=m.step, data=m.data)
+            bw.push("/camera/color/image_raw", t + 7_000_000, m)
+            if duplicate and i == 1:
+                bw.push("/camera/color/image_raw", t + 9_000_000, msgs.image(t, fid, c, "rgb8"))
+        if depth:
+            dw, dh = depth_size or (w, h)
+            dd = cv2.resize(d, (dw, dh), interpolation=cv2.INTER_NEAREST)
+            if depth == "compressedDepth":
+                png = cv2.imencode(".png", dd)[1].tobytes()
+                bw.push("/camera/aligned_depth_to_color/image_raw/compressedDepth", t + 8_000_000,
+                        msgs.compressed(t, fid, "16UC1; compressedDepth png", make_compressed_depth(png)))
+            elif depth == "32FC1":
+                bw.push("/camera/aligned_depth_to_color/image_raw", t + 8_000_000,
+                        msgs.image(t, fid, dd.astype(np.float32) / 1000.0, "32FC1"))
+            else:
+                bw.push("/camera/aligned_depth_to_color/image_raw", t + 8_000_000, msgs.image(t, fid, dd, depth))
+        if info:
+            bw.push("/camera/color/camera_info", t + 6_000_000, msgs.camera_info(t, fid, CAMERA))
+        if tf:
+            T = pose(i, 0)
+            if nan_pose_at == i:
+                T = T.copy()
+                T[0, 3] = np.nan
+            T_ob = T @ invert(T_base_opt)
+            bw.push("/tf", t + 12_000_000, msgs.tf_message(t, [("map", "odom", np.eye(4)), ("odom", "base_link", T_ob)]))
+        if extra_topics:
+            bw.push("/rtabmap/info", t + 15_000_000, msgs.T["rtabmap_ros/msg/Info"](
+                header=msgs.header(t, "map"), ref_id=i, loop_closure=0.0))
+        bw.flush(before_ns=t)
+    bw.close()
+    return path
