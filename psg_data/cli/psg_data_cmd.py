@@ -18,6 +18,7 @@ _COMMANDS = {
     "info": "psg_data.cli._inspect_cmds:info_cmd",
     "synth": "psg_data.cli._synth_cmd:synth_cmd",
     "convert": "psg_data.cli._convert_cmd:convert_cmd",
+    "label": "psg_data.cli._label_cmd:label_cmd",
 }
 
 

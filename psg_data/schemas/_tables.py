@@ -21,6 +21,12 @@ __all__ = [
     "DEPTH_PATH_TEMPLATE",
     "MANIFEST_NAME",
     "DOOR_STATES",
+    "LABEL_CODES",
+    "CODE_PRESENT",
+    "CODE_ABSENT",
+    "CODE_MISSING",
+    "CODE_INVALID",
+    "VISIBILITY_KINDS",
 ]
 
 MANIFEST_NAME = "dataset.json"
@@ -34,6 +40,19 @@ DEPTH_PATH_TEMPLATE = "images/{scan_id}/depth/{frame_index:06d}.png"
 
 DOOR_STATES = ("open", "closed", "unknown")
 """Allowed values of ``door_states.state``."""
+
+CODE_PRESENT = 1
+"""Label code: observed present (the object was seen on the receptacle)."""
+CODE_ABSENT = 0
+"""Label code: observed absent (the receptacle was seen and the object was not on it)."""
+CODE_MISSING = -1
+"""Label code: no observation (receptacle not seen, or presence could not be confirmed)."""
+CODE_INVALID = -2
+"""Label code: the receptacle is not a valid location of the object (not an edge of the graph)."""
+LABEL_CODES = (CODE_PRESENT, CODE_ABSENT, CODE_MISSING, CODE_INVALID)
+"""Allowed values of ``labels.code`` (the paper's privileged codes)."""
+VISIBILITY_KINDS = ("receptacle", "object", "door")
+"""Allowed values of ``visibility.kind``."""
 
 
 def _f(name: str, type_: pa.DataType, doc: str, *, nullable: bool = False) -> pa.Field:
@@ -214,6 +233,39 @@ _add(TableSpec(
     ]),
     "Checksums of every file; dataset.json records the checksum of this table.",
     key=("path",),
+))
+
+_add(TableSpec(
+    "labels",
+    pa.schema([
+        _f("scan_id", pa.string(), "scan (mapping session)"),
+        _f("object_id", pa.string(), "semi-static object (or door, for door-state edges)"),
+        _f("receptacle_id", pa.string(), "receptacle (or door state 'open'/'closed', for door-state edges)"),
+        _f("stamp_ns", pa.int64(), "observation time: the scan's start_stamp_ns, int64 UTC nanoseconds"),
+        _f("code", pa.int8(), "1 present, 0 absent, -1 not observed, -2 receptacle not valid for the object"),
+        _f("source", pa.string(), "label source: 'gt', 'privileged', 'noisy:P_M,P_F' or 'detections:FILE'"),
+    ]),
+    "Observation codes of every (scan, object, receptacle) per label source.",
+    key=("source", "scan_id", "object_id", "receptacle_id"),
+    references=(("scan_id", "scans", "scan_id"),),
+    required=False,
+))
+
+_add(TableSpec(
+    "visibility",
+    pa.schema([
+        _f("scan_id", pa.string(), "scan (mapping session)"),
+        _f("kind", pa.string(), "'receptacle' (its top surface), 'object' (its box) or 'door' (its doorway)"),
+        _f("id", pa.string(), "receptacle_id, object_id or door_id"),
+        _f("seen_fraction", pa.float64(), "fraction of the surface samples seen in at least one frame, [0, 1]"),
+        _f("pixels", pa.float64(), "largest per-frame image area of the seen part of the surface, pixels"),
+        _f("frames_seen", pa.int32(), "frames in which part of the surface was seen"),
+        _f("visible", pa.bool_(), "seen_fraction and pixels reach the visibility thresholds"),
+    ]),
+    "What each scan saw of every receptacle top surface (and object box when known), from the depth images.",
+    key=("scan_id", "kind", "id"),
+    references=(("scan_id", "scans", "scan_id"),),
+    required=False,
 ))
 
 REQUIRED_TABLES: tuple[str, ...] = tuple(name for name, spec in TABLES.items() if spec.required)

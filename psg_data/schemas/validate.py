@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,9 +16,9 @@ import numpy as np
 from psg_data.errors import FormatError
 from psg_data.schemas._image_headers import read_image_header
 from psg_data.schemas._manifest import manifest_from_dict
-from psg_data.schemas._tables import DOOR_STATES, MANIFEST_NAME, TABLES, table_path
+from psg_data.schemas._tables import DOOR_STATES, LABEL_CODES, MANIFEST_NAME, TABLES, VISIBILITY_KINDS, table_path
 
-__all__ = ["Problem", "validate_dataset", "register_table_check"]
+__all__ = ["Problem", "validate_dataset"]
 
 log = logging.getLogger(__name__)
 
@@ -39,15 +38,6 @@ class Problem:
     def __str__(self) -> str:
         where = self.file if self.row is None else f"{self.file}:{self.row}"
         return f"{where}: {self.field}: {self.message}"
-
-
-_EXTRA_CHECKS: list[Callable[[Path, dict], Iterable[Problem]]] = []
-
-
-def register_table_check(fn: Callable[[Path, dict], Iterable[Problem]]) -> Callable[[Path, dict], Iterable[Problem]]:
-    """Register an extra check (used by optional tables such as labels): ``fn(root, tables)``."""
-    _EXTRA_CHECKS.append(fn)
-    return fn
 
 
 class _Collector:
@@ -334,12 +324,55 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                             c.add(rp, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected "
                                                f"an 8-bit 3-channel {want} (dataset color_encoding)")
 
-    for check in _EXTRA_CHECKS:
-        for p in check(root, tables):
-            c.add(p.file, p.field, p.message, p.row)
+    _check_label_tables(c, cols, scan_bounds)
 
     # -- manifest counts ------------------------------------------------------------------------
     for name, t in tables.items():
         if name in info.counts and info.counts[name] != t.num_rows:
             c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
     return c.problems
+
+
+def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bounds: dict[str, tuple[int, int]]) -> None:
+    """Value checks of the optional ``labels`` and ``visibility`` tables."""
+    objects = set(cols.get("objects", {}).get("object_id", []))
+    receptacles = set(cols.get("receptacles", {}).get("receptacle_id", []))
+    doors = set(cols.get("doors", {}).get("door_id", []))
+    door_edge_states = {"open", "closed"}
+    if "labels" in cols:
+        rel = table_path("labels")
+        d = cols["labels"]
+        for i, (sid, oid, rid, st, code) in enumerate(zip(d["scan_id"], d["object_id"], d["receptacle_id"],
+                                                          d["stamp_ns"], d["code"])):
+            if code not in LABEL_CODES:
+                c.add(rel, "code", f"{code}, expected one of 1, 0, -1, -2", i)
+            if sid in scan_bounds and not scan_bounds[sid][0] <= st <= scan_bounds[sid][1]:
+                c.add(rel, "stamp_ns", f"{st} outside scan {sid!r} [{scan_bounds[sid][0]}, {scan_bounds[sid][1]}], "
+                                       "expected a time within its scan", i)
+            if oid in doors:
+                if rid not in door_edge_states:
+                    c.add(rel, "receptacle_id", f"{rid!r} for door {oid!r}, expected 'open' or 'closed'", i)
+            elif oid not in objects:
+                c.add(rel, "object_id", f"dangling id {oid!r}: not in tables/objects.parquet nor tables/doors.parquet", i)
+            elif rid not in receptacles:
+                c.add(rel, "receptacle_id", f"dangling id {rid!r}: not in tables/receptacles.parquet column "
+                                            "receptacle_id", i)
+    if "visibility" in cols:
+        rel = table_path("visibility")
+        d = cols["visibility"]
+        ids = {"receptacle": receptacles, "object": objects, "door": doors}
+        for i, (kind, id_, frac, px, fs, vis) in enumerate(zip(d["kind"], d["id"], d["seen_fraction"], d["pixels"],
+                                                               d["frames_seen"], d["visible"])):
+            if kind not in VISIBILITY_KINDS:
+                c.add(rel, "kind", f"{kind!r}, expected one of {', '.join(VISIBILITY_KINDS)}", i)
+            elif id_ not in ids[kind]:
+                c.add(rel, "id", f"dangling {kind} id {id_!r}: not in {table_path(kind + 's')}", i)
+            if not (np.isfinite(frac) and 0.0 <= frac <= 1.0):
+                c.add(rel, "seen_fraction", f"{frac}, expected a number in [0, 1]", i)
+            if not (np.isfinite(px) and px >= 0):
+                c.add(rel, "pixels", f"{px}, expected a finite number >= 0", i)
+            if fs < 0:
+                c.add(rel, "frames_seen", f"{fs}, expected >= 0", i)
+            if vis and (frac <= 0 or fs <= 0):
+                c.add(rel, "visible", "true although nothing was seen (seen_fraction or frames_seen is 0), "
+                                      "expected false", i)

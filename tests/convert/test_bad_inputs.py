@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import write_bag
+from .conftest import write_bag
 
 from psg_data.cli.psg_data_cmd import main
 from psg_data.loaders import open_dataset

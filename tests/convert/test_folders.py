@@ -6,7 +6,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from conftest import CAMERA, images, pose
+from .conftest import CAMERA, images, pose
 
 from psg_data.convert import ConvertConfig, convert
 from psg_data.loaders import open_dataset

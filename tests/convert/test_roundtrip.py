@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import make_dataset
+from .conftest import make_dataset
 
 from psg_data.convert import ConvertConfig, convert
 from psg_data.loaders import open_dataset

@@ -1,0 +1,72 @@
+"""psg_data.labeling: visibility, privileged / perception labels, noise, error rates and label tables.
+
+Main entry points:
+    label_dataset(root, "privileged")        compute labels and store them in the dataset
+    compute_labels(ds, source)               the same without writing (returns a LabelGrid)
+    label_streams(ds, source) / load_label_streams(ds)   EdgeStream objects for estimators
+    compute_visibility(ds)                   what each scan saw of every receptacle top surface
+    error_rates(labels, gt)                  P_M / P_F with confidence intervals
+"""
+
+from psg_data.labeling._association import (
+    AssociationParams,
+    PerceptionInfo,
+    associate_objects,
+    match_boxes,
+    max_weight_matching,
+    perception_labels,
+)
+from psg_data.labeling._codes import (
+    ErrorRates,
+    LabelGrid,
+    binomial_interval,
+    error_rates,
+    ground_truth,
+    inject_noise,
+    privileged_codes,
+    schedule_support,
+    valid_mask,
+)
+from psg_data.labeling._detections import DETECTION_COLUMNS, Detections, read_detections
+from psg_data.labeling._geometry import (
+    SurfaceSamples,
+    box_iou,
+    box_iou_matrix,
+    box_surface_samples,
+    convex_polygon_intersection,
+    is_yaw_only,
+    polygon_area,
+    top_face_samples,
+)
+from psg_data.labeling._pipeline import (
+    LabelResult,
+    LabelSummary,
+    SourceSpec,
+    compute_labels,
+    grid_streams,
+    label_dataset,
+    label_streams,
+    load_label_streams,
+    parse_source,
+    summarize,
+)
+from psg_data.labeling._visibility import (
+    SurfaceVisibility,
+    VisibilityParams,
+    compute_visibility,
+    surface_visibility,
+    visibility_matrix,
+)
+
+__all__ = [
+    "AssociationParams", "PerceptionInfo", "associate_objects", "match_boxes", "max_weight_matching",
+    "perception_labels",
+    "ErrorRates", "LabelGrid", "binomial_interval", "error_rates", "ground_truth", "inject_noise", "privileged_codes",
+    "schedule_support", "valid_mask",
+    "DETECTION_COLUMNS", "Detections", "read_detections",
+    "SurfaceSamples", "box_iou", "box_iou_matrix", "box_surface_samples", "convex_polygon_intersection",
+    "is_yaw_only", "polygon_area", "top_face_samples",
+    "LabelResult", "LabelSummary", "SourceSpec", "compute_labels", "grid_streams", "label_dataset", "label_streams",
+    "load_label_streams", "parse_source", "summarize",
+    "SurfaceVisibility", "VisibilityParams", "compute_visibility", "surface_visibility", "visibility_matrix",
+]

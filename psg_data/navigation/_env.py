@@ -1,0 +1,260 @@
+"""The navigation environment: grid, receptacles, doors, map observations and dense ground truth.
+
+A :class:`NavigationEnv` is what the agent and the scorer need from a dataset:
+
+- the occupancy grid (:mod:`psg_data.navigation._grid`) and the receptacle / door records;
+- the *map*: the observations of every (object, receptacle) edge up to the last map update
+  ``t_map_s`` (one :class:`~psg_data.estimators.EdgeStream` per edge), which estimators are fitted
+  and updated on, and the state of every object and door at that update;
+- the dense ground truth: ``gt_at(object_id, t_s) -> receptacle_id | None`` and
+  ``doors_at(t_s) -> dict[door_id, bool]`` (True = open).
+
+Edges: for every object, the receptacles it was seen on during the mapping scans (the paper's
+"previously observed receptacles"). Every mapping scan yields, for each of those edges, ``y = 1``
+if the object was on that receptacle and ``y = 0`` otherwise, stamped at the scan start. These are
+privileged (ground-truth) observations from the ``schedule`` table.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psg_data.errors import EvaluationError
+from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.navigation._grid import OccupancyGrid, grid_from_dataset, grid_from_geometry
+from psg_data.schemas._records import Door, Receptacle
+
+__all__ = ["NavigationEnv", "streams_from_states", "WEEK_S"]
+
+log = logging.getLogger(__name__)
+
+WEEK_S = 7 * 86400.0
+
+
+def streams_from_states(times_s: Sequence[float], states: Sequence[Mapping[str, str | None]],
+                        object_ids: Sequence[str]) -> list[EdgeStream]:
+    """Edge streams from a sequence of full object placements.
+
+    Args:
+        times_s: (N,) observation times, float seconds (UTC), non-decreasing.
+        states: N mappings ``object_id -> receptacle_id | None``.
+        object_ids: objects to build edges for.
+
+    Returns:
+        One stream per (object, receptacle) pair seen at least once, with ``y = 1`` when the object
+        was on the receptacle and ``y = 0`` otherwise (including when the object was absent).
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    out: list[EdgeStream] = []
+    for o in object_ids:
+        seq = [s.get(o) for s in states]
+        for r in sorted({x for x in seq if x is not None}):
+            y = np.array([x == r for x in seq], dtype=np.int8)
+            out.append(EdgeStream((o, r), t, y))
+    return out
+
+
+@dataclass
+class NavigationEnv:
+    """Everything the navigation harness needs from one dataset (or synthetic lab).
+
+    Attributes:
+        name: short name (used in stored file names).
+        grid: occupancy grid.
+        receptacles: receptacle_id -> record.
+        doors: door_id -> record.
+        object_ids: target objects.
+        gt_at: ``(object_id, t_s) -> receptacle_id | None`` ground truth.
+        doors_at: ``t_s -> {door_id: is_open}`` ground truth.
+        map_streams: observations up to the last map update (one stream per edge).
+        t_map_s: time of the last map update, float seconds UTC.
+        t_end_s: latest time with ground truth, float seconds UTC.
+        map_state: object -> receptacle (None = absent) at the last map update.
+        map_doors: door -> is_open at the last map update.
+        timezone: IANA site timezone.
+    """
+
+    name: str
+    grid: OccupancyGrid
+    receptacles: dict[str, Receptacle]
+    doors: dict[str, Door]
+    object_ids: list[str]
+    gt_at: Callable[[str, float], str | None]
+    doors_at: Callable[[float], dict[str, bool]]
+    map_streams: list[EdgeStream]
+    t_map_s: float
+    t_end_s: float
+    map_state: dict[str, str | None]
+    map_doors: dict[str, bool]
+    timezone: str = "UTC"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def edges(self) -> list[EdgeKey]:
+        return [s.edge for s in self.map_streams]
+
+    # -- constructors ---------------------------------------------------------------------------
+    @classmethod
+    def from_dataset(
+        cls,
+        dataset: Any,
+        *,
+        grid: OccupancyGrid | None = None,
+        grid_source: str = "geometry",
+        map_scans: Sequence[str] | None = None,
+        gt_at: Callable[[str, float], str | None] | None = None,
+        doors_at: Callable[[float], dict[str, bool]] | None = None,
+        resolution_m: float = 0.05,
+        robot_radius_m: float = 0.25,
+        name: str | None = None,
+    ) -> NavigationEnv:
+        """Environment of a psg-dataset (a :class:`~psg_data.loaders.Dataset` or its path).
+
+        Args:
+            dataset: dataset or directory.
+            grid: a prebuilt grid (default: :func:`grid_from_dataset` with ``grid_source``).
+            map_scans: scans forming the map (default: split 'train'; if no scan has a split, the
+                first two thirds of the scans).
+            gt_at, doors_at: dense ground truth; default: the ``schedule`` / ``door_states`` row of
+                the latest scan starting at or before ``t`` (door state 'unknown' counts as open).
+            resolution_m, robot_radius_m: grid parameters.
+            name: environment name (default: the dataset name).
+
+        Raises:
+            EvaluationError: no schedule, no scans, or no map scans.
+        """
+        if isinstance(dataset, (str, Path)):
+            from psg_data.loaders._dataset import open_dataset
+
+            dataset = open_dataset(dataset)
+        if grid is None:
+            grid = grid_from_dataset(dataset, source=grid_source, resolution_m=resolution_m,
+                                     robot_radius_m=robot_radius_m)
+        scans = dataset.df("scans").sort_values(["start_stamp_ns", "scan_id"]).reset_index(drop=True)
+        if scans.empty:
+            raise EvaluationError(f"{dataset.root}: no scans; navigation needs scans with a schedule")
+        sched = dataset.df("schedule")
+        if sched.empty:
+            raise EvaluationError(f"{dataset.root}: table 'schedule' is empty; navigation needs ground truth")
+        if map_scans is None:
+            if scans["split"].notna().any():
+                map_ids = scans.loc[scans["split"] == "train", "scan_id"].tolist()
+            else:
+                map_ids = scans["scan_id"].tolist()[: max(1, int(round(len(scans) * 2 / 3)))]
+        else:
+            map_ids = list(map_scans)
+        if not map_ids:
+            raise EvaluationError(f"{dataset.root}: no map scans (no scan with split 'train')")
+        objects = sorted(dataset.objects) if dataset.has_table("objects") and len(dataset.objects) else sorted(
+            sched["object_id"].unique())
+        by_scan: dict[str, dict[str, str | None]] = {sid: {} for sid in scans["scan_id"]}
+        for sid, o, r in zip(sched["scan_id"], sched["object_id"], sched["receptacle_id"]):
+            by_scan.setdefault(sid, {})[o] = None if r is None or (isinstance(r, float) and np.isnan(r)) else str(r)
+        door_by_scan: dict[str, dict[str, bool]] = {}
+        if dataset.has_table("door_states"):
+            ds_ = dataset.df("door_states")
+            for sid, d, st in zip(ds_["scan_id"], ds_["door_id"], ds_["state"]):
+                door_by_scan.setdefault(sid, {})[d] = st != "closed"
+        start_s = (scans["start_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
+        end_s = (scans["end_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
+        ids = scans["scan_id"].tolist()
+        pos = {sid: k for k, sid in enumerate(ids)}
+        map_ids = sorted(map_ids, key=lambda s: pos[s])
+        door_ids = list(dataset.doors) if dataset.has_table("doors") else []
+
+        def _scan_before(t_s: float) -> str:
+            k = bisect.bisect_right(start_s, t_s) - 1
+            return ids[max(k, 0)]
+
+        def _gt(o: str, t_s: float) -> str | None:
+            return by_scan.get(_scan_before(t_s), {}).get(o)
+
+        def _doors(t_s: float) -> dict[str, bool]:
+            st = door_by_scan.get(_scan_before(t_s), {})
+            return {d: bool(st.get(d, True)) for d in door_ids}
+
+        last = map_ids[-1]
+        t_map = end_s[pos[last]]
+        later = [e for sid, e in zip(ids, end_s) if pos[sid] > pos[last]]
+        t_end = max(later) if later else t_map + WEEK_S
+        streams = streams_from_states([start_s[pos[s]] for s in map_ids], [by_scan[s] for s in map_ids], objects)
+        return cls(
+            name=name or dataset.info.name or str(dataset.root.name),
+            grid=grid,
+            receptacles=dict(dataset.receptacles),
+            doors=dict(dataset.doors) if dataset.has_table("doors") else {},
+            object_ids=objects,
+            gt_at=gt_at or _gt,
+            doors_at=doors_at or _doors,
+            map_streams=streams,
+            t_map_s=float(t_map),
+            t_end_s=float(t_end),
+            map_state={o: by_scan[last].get(o) for o in objects},
+            map_doors={d: door_by_scan.get(last, {}).get(d, True) for d in door_ids},
+            timezone=dataset.info.timezone or "UTC",
+            extra={"source": "dataset", "root": str(dataset.root), "map_scans": len(map_ids)},
+        )
+
+    @classmethod
+    def from_lab(cls, lab: Any, *, grid: OccupancyGrid | None = None, resolution_m: float = 0.05,
+                 robot_radius_m: float = 0.25, name: str | None = None) -> NavigationEnv:
+        """Environment of a synthetic lab (:class:`psg_data.synth.LabModel`), with its continuous-time
+        ground truth (``lab.schedule.objects_at`` / ``doors_at``) and its training scans as the map."""
+        L = lab.layout
+        if grid is None:
+            grid = grid_from_geometry(L.rooms, L.receptacles, L.doors, resolution_m=resolution_m,
+                                      robot_radius_m=robot_radius_m)
+        plans = [p for p in lab.scans if p.split == "train"]
+        if not plans:
+            raise EvaluationError("synthetic lab: no training scans")
+        sched = lab.schedule
+        objects = list(L.object_ids)
+        cache: dict[int, dict[str, str | None]] = {}
+
+        def _gt(o: str, t_s: float) -> str | None:
+            ns = int(round(t_s * 1e9))
+            if ns not in cache:
+                if len(cache) > 4096:
+                    cache.clear()
+                cache[ns] = sched.objects_at(ns)
+            return cache[ns].get(o)
+
+        def _doors(t_s: float) -> dict[str, bool]:
+            return dict(sched.doors_at(int(round(t_s * 1e9))))
+
+        times = [p.start_ns / 1e9 for p in plans]
+        streams = streams_from_states(times, [p.state.objects for p in plans], objects)
+        last = plans[-1]
+        return cls(
+            name=name or f"lab_seed{lab.config.seed}",
+            grid=grid,
+            receptacles={r.receptacle_id: r for r in L.receptacles},
+            doors={d.door_id: d for d in L.doors},
+            object_ids=objects,
+            gt_at=_gt,
+            doors_at=_doors,
+            map_streams=streams,
+            t_map_s=float(last.stamps_ns.max()) / 1e9,
+            t_end_s=float(sched.end_ns) / 1e9,
+            map_state=dict(last.state.objects),
+            map_doors=dict(last.state.doors_open),
+            timezone=lab.config.timezone,
+            extra={"source": "synth", "seed": lab.config.seed, "roles": dict(sched.roles)},
+        )
+
+    @classmethod
+    def coerce(cls, obj: Any, **kwargs: Any) -> NavigationEnv:
+        """A :class:`NavigationEnv` from an env, a dataset, a dataset path or a synthetic ``LabModel``."""
+        if isinstance(obj, NavigationEnv):
+            return obj
+        if hasattr(obj, "layout") and hasattr(obj, "schedule"):
+            return cls.from_lab(obj, **{k: v for k, v in kwargs.items()
+                                        if k in ("grid", "resolution_m", "robot_radius_m", "name")})
+        return cls.from_dataset(obj, **kwargs)

@@ -1,0 +1,188 @@
+"""Seeded navigation queries: target object, query time and start pose, stored so that every
+estimator is scored on the same set.
+
+Sampling (per query, from ``numpy.random.default_rng([seed, 8801])``): a query time uniform in
+``(t_map, min(t_map + horizon, t_end)]`` (horizon one week by default, the paper's "up to one week
+ahead of the last map update"), a target object uniform over the environment's objects, and a
+start cell uniform over the cells that are free with *every* door closed (so the start is free
+under any door configuration and never inside a doorway) and lie in the largest 8-connected
+component of the free space with every door open (no starts in isolated pockets).
+
+Categories (the paper's): ``static`` = the object is present and on the same receptacle as at the
+last map update; ``dynamic`` = present on another receptacle (or present now but absent at the map
+update); ``absent`` = not in the scene at the query time.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psg_data.errors import EvaluationError
+from psg_data.navigation._env import WEEK_S, NavigationEnv
+
+__all__ = ["Query", "make_queries", "queries_to_frame", "queries_from_frame", "save_queries", "load_queries",
+           "CATEGORIES"]
+
+log = logging.getLogger(__name__)
+
+CATEGORIES = ("static", "dynamic", "absent")
+
+
+@dataclass(frozen=True)
+class Query:
+    """One navigation query.
+
+    Attributes:
+        query_id: index within its set.
+        seed: seed of the set.
+        object_id: target object.
+        t_s: query time, float seconds UTC.
+        start_cell: (row, col) start cell.
+        start_xy: world (x, y) of the start cell centre, metres.
+        category: 'static', 'dynamic' or 'absent'.
+        gt_receptacle: receptacle holding the object at ``t_s`` (None = absent).
+        map_receptacle: receptacle holding it at the last map update (None = absent).
+        doors_open: true door states at ``t_s``.
+    """
+
+    query_id: int
+    seed: int
+    object_id: str
+    t_s: float
+    start_cell: tuple[int, int]
+    start_xy: tuple[float, float]
+    category: str
+    gt_receptacle: str | None
+    map_receptacle: str | None
+    doors_open: dict[str, bool] = field(default_factory=dict)
+
+
+def _start_cells(env: NavigationEnv) -> np.ndarray:
+    from scipy.ndimage import label
+
+    g = env.grid
+    closed = g.free({d: False for d in g.door_ids})
+    open_ = g.free({d: True for d in g.door_ids})
+    lab, n = label(open_, structure=np.ones((3, 3), dtype=int))
+    if n == 0:
+        raise EvaluationError(f"{env.name}: the occupancy grid has no free cell")
+    sizes = np.bincount(lab.ravel())
+    sizes[0] = 0
+    main = lab == int(np.argmax(sizes))
+    cells = np.flatnonzero((closed & main).ravel())
+    if cells.size == 0:
+        cells = np.flatnonzero(main.ravel())
+    return cells
+
+
+def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, horizon_s: float = WEEK_S,
+                 objects: list[str] | None = None, reachable_only: bool = False, reach_m: float = 1.0,
+                 max_tries: int = 100) -> list[Query]:
+    """Sample ``n_queries`` queries (deterministic for ``env`` and ``seed``).
+
+    Args:
+        env: the environment.
+        n_queries: number of queries.
+        seed: seed of the set.
+        horizon_s: latest query time after the last map update, seconds (default one week).
+        objects: restrict the targets to these objects.
+        reachable_only: redraw a query (time, object, start) whose present target cannot be
+            reached from the start with the true door states (up to ``max_tries`` draws; the last
+            draw is kept). Default False: unreachable targets occur and are reported separately.
+        reach_m: success radius used for the reachability test, metres.
+        max_tries: draws per query with ``reachable_only``.
+
+    Raises:
+        EvaluationError: no objects, no time window, or no free start cell.
+    """
+    if n_queries < 1:
+        raise EvaluationError(f"n_queries must be >= 1, got {n_queries}")
+    objs = list(objects) if objects is not None else list(env.object_ids)
+    if not objs:
+        raise EvaluationError(f"{env.name}: no target objects to query")
+    t_lo = env.t_map_s
+    t_hi = min(env.t_map_s + float(horizon_s), env.t_end_s)
+    if not t_hi > t_lo:
+        raise EvaluationError(f"{env.name}: no ground truth after the last map update (t_end <= t_map)")
+    rng = np.random.default_rng([int(seed), 8801])
+    cells = _start_cells(env)
+    W = env.grid.shape[1]
+    cache = None
+    if reachable_only:
+        from psg_data.navigation._planner import PlanningCache
+
+        cache = PlanningCache(env.grid, reach_m=reach_m)
+    out: list[Query] = []
+    for q in range(n_queries):
+        for _ in range(max(1, max_tries)):
+            t = float(t_hi - rng.uniform(0.0, 1.0) * (t_hi - t_lo))  # in (t_lo, t_hi]
+            o = objs[int(rng.integers(len(objs)))]
+            c = int(cells[int(rng.integers(cells.size))])
+            gt = env.gt_at(o, t)
+            doors = {k: bool(v) for k, v in env.doors_at(t).items()}
+            if cache is None or gt is None or np.isfinite(cache.distance(gt, cache.key(doors), c)):
+                break
+        ij = (c // W, c % W)
+        xy = env.grid.cell_to_world(ij)
+        mp = env.map_state.get(o)
+        cat = "absent" if gt is None else ("static" if gt == mp else "dynamic")
+        out.append(Query(q, int(seed), o, t, ij, (float(xy[0]), float(xy[1])), cat, gt, mp, doors))
+    return out
+
+
+def queries_to_frame(queries: list[Query]) -> Any:
+    """Queries as a pandas DataFrame (one row each; ``doors_open`` as a JSON string)."""
+    import pandas as pd
+
+    rows = []
+    for q in queries:
+        d = asdict(q)
+        d["start_row"], d["start_col"] = q.start_cell
+        d["start_x_m"], d["start_y_m"] = q.start_xy
+        d["doors_open"] = json.dumps(q.doors_open, sort_keys=True)
+        del d["start_cell"], d["start_xy"]
+        rows.append(d)
+    return pd.DataFrame(rows)
+
+
+def queries_from_frame(df: Any) -> list[Query]:
+    """Inverse of :func:`queries_to_frame`."""
+    out = []
+    for r in df.to_dict("records"):
+        def _opt(v: Any) -> str | None:
+            return None if v is None or (isinstance(v, float) and np.isnan(v)) else str(v)
+
+        out.append(Query(int(r["query_id"]), int(r["seed"]), str(r["object_id"]), float(r["t_s"]),
+                         (int(r["start_row"]), int(r["start_col"])), (float(r["start_x_m"]), float(r["start_y_m"])),
+                         str(r["category"]), _opt(r["gt_receptacle"]), _opt(r["map_receptacle"]),
+                         {k: bool(v) for k, v in json.loads(r["doors_open"]).items()}))
+    return out
+
+
+def save_queries(queries: list[Query], path: str | Path) -> Path:
+    """Write queries to ``path`` (``.parquet`` or ``.json``)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    df = queries_to_frame(queries)
+    if p.suffix == ".json":
+        p.write_text(json.dumps(df.to_dict("records"), indent=1))
+    else:
+        df.to_parquet(p, index=False)
+    return p
+
+
+def load_queries(path: str | Path) -> list[Query]:
+    """Read queries written by :func:`save_queries`."""
+    import pandas as pd
+
+    p = Path(path)
+    if not p.is_file():
+        raise EvaluationError(f"{p}: no query file")
+    df = pd.DataFrame(json.loads(p.read_text())) if p.suffix == ".json" else pd.read_parquet(p)
+    return queries_from_frame(df)

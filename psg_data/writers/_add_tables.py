@@ -1,0 +1,120 @@
+"""``add_tables``: add (or replace) optional tables of an existing dataset and keep it valid.
+
+Order of operations: every new Parquet file, the new ``tables/files.parquet`` and the new
+``dataset.json`` are first written to temporary files beside their targets (nothing visible
+changes if any of this fails; the temporaries are removed); then each is moved into place with
+``os.replace`` (atomic per file), tables first, then the files table, then the manifest. A crash
+between the renames can leave a dataset whose checksums disagree (``psg-data validate`` reports
+it; re-running the same command repairs it).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from psg_data.errors import FormatError
+from psg_data.schemas._manifest import read_manifest
+from psg_data.schemas._tables import MANIFEST_NAME, TABLES, table_path
+
+__all__ = ["add_tables"]
+
+log = logging.getLogger(__name__)
+
+_PROTECTED = frozenset(n for n, s in TABLES.items() if s.required) | {"files"}
+
+
+def _tmp(path: Path) -> Path:
+    return path.with_name(f".{path.name}.tmp-{os.getpid()}")
+
+
+def add_tables(root: str | Path, tables: Mapping[str, Any], *, overwrite: bool = False) -> list[Path]:
+    """Write optional tables into the dataset at ``root``; update the files table and the manifest.
+
+    Args:
+        root: dataset directory.
+        tables: table name -> Arrow table. Names of the label tables are cast to their schemas;
+            required core tables and ``files`` cannot be written this way.
+        overwrite: replace tables that already exist (otherwise that is an error).
+
+    Returns:
+        the paths written.
+
+    Raises:
+        FormatError: a protected or badly formed name, an existing table without ``overwrite``,
+            a table that does not fit its schema, or a dataset whose files table is unreadable.
+        FormatError: ``root`` is not a dataset.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from psg_data.writers import sha256_file
+
+    root = Path(root)
+    info = read_manifest(root)
+    for name in tables:
+        if name in _PROTECTED:
+            raise FormatError(f"add_tables: {name!r} is a core table of the format and cannot be replaced here")
+        if not name or not name.replace("_", "").isalnum():
+            raise FormatError(f"add_tables: table name {name!r}, expected letters, digits and underscores")
+        if (root / table_path(name)).exists() and not overwrite:
+            raise FormatError(f"{root / table_path(name)}: table {name!r} exists; pass --overwrite "
+                                "(overwrite=True) to replace it")
+    cast: dict[str, pa.Table] = {}
+    for name, t in tables.items():
+        spec = TABLES.get(name)
+        if spec is not None:
+            missing = [f.name for f in spec.schema if f.name not in t.column_names]
+            if missing:
+                raise FormatError(f"add_tables: table {name!r}: missing columns {missing}, expected {spec.schema.names}")
+            try:
+                meta = t.schema.metadata
+                t = t.select(spec.schema.names).cast(spec.schema)
+                if meta:
+                    t = t.replace_schema_metadata({**(spec.schema.metadata or {}), **meta})
+            except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError) as exc:
+                raise FormatError(f"add_tables: table {name!r} does not fit its schema: {exc}") from exc
+        cast[name] = t
+
+    files_path = root / table_path("files")
+    try:
+        files = pq.read_table(files_path).to_pylist()
+    except (OSError, pa.ArrowException) as exc:
+        raise FormatError(f"{files_path}: unreadable ({exc}); validate the dataset first") from exc
+    temps: list[tuple[Path, Path]] = []
+    try:
+        entries = {r["path"]: r for r in files}
+        for name, t in cast.items():
+            final = root / table_path(name)
+            final.parent.mkdir(parents=True, exist_ok=True)
+            tmp = _tmp(final)
+            pq.write_table(t, tmp, compression="zstd")
+            temps.append((tmp, final))
+            entries[table_path(name)] = {"path": table_path(name), "size_bytes": tmp.stat().st_size,
+                                         "sha256": sha256_file(tmp)}
+        from psg_data.writers import to_arrow
+
+        ftable = to_arrow("files", [entries[k] for k in sorted(entries)])
+        ftmp = _tmp(files_path)
+        pq.write_table(ftable, ftmp, compression="zstd")
+        temps.append((ftmp, files_path))
+        info.files_sha256 = sha256_file(ftmp)
+        counts = dict(info.counts)
+        counts.update({name: t.num_rows for name, t in cast.items()})
+        info.counts = dict(sorted(counts.items()))
+        mpath = root / MANIFEST_NAME
+        mtmp = _tmp(mpath)
+        mtmp.write_text(info.to_json(), encoding="utf-8")
+        temps.append((mtmp, mpath))
+    except BaseException:
+        for tmp, _ in temps:
+            tmp.unlink(missing_ok=True)
+        raise
+    for tmp, final in temps:
+        os.replace(tmp, final)
+    written = [final for _, final in temps[:-2]]
+    log.info("added %s to %s", ", ".join(table_path(n) for n in cast), root)
+    return written
