@@ -26,7 +26,9 @@ from psg_data.synth._layout import (
 )
 from psg_data.synth._model import SYNTH_VERSION, LabConfig, LabModel, ScanPlan, camera_pose
 from psg_data.synth._perception import DETECTIONS_SCHEMA, detect, write_detections
+from psg_data.synth._raw_export import RAW_EXPORT_FORMATS, export_raw
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
+from psg_data.synth.persistence_benchmark import BENCHMARK_FEATURES, PersistenceBenchmark, make_persistence_benchmark
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, DenseSchedule, EntityModel, HourPattern, Timeline, WeekPattern
 
 __all__ = [
@@ -38,4 +40,6 @@ __all__ = [
     "build_lab", "rerender_frame", "object_description",
     "write_detections", "detect", "DETECTIONS_SCHEMA",
     "OBJECTS", "FURNITURE", "CONFUSABLE", "ObjectSpec", "FurnitureSpec",
+    "export_raw", "RAW_EXPORT_FORMATS",
+    "make_persistence_benchmark", "PersistenceBenchmark", "BENCHMARK_FEATURES",
 ]

@@ -255,6 +255,9 @@ class DatasetWriter:
         self._tables: dict[str, pa.Table] = {}
         self._scans: dict[str, dict[str, Any]] = {}
         self._frames: dict[str, list[dict[str, Any]]] = {}
+        self._files: dict[str, tuple[int, str]] = {}
+        """relative path -> (size, sha256) of every file written or adopted (hashed from memory)."""
+        self._written: dict[str, tuple[int, str]] = {}
         self._closed = False
 
     # -- context manager -------------------------------------------------------------------
@@ -328,13 +331,7 @@ class DatasetWriter:
         scan_id = record["scan"]["scan_id"]
         self._scans[scan_id] = dict(record["scan"])
         self._frames[scan_id] = list(record["frames"])
-        self._file_cache.update({p: tuple(v) for p, v in record["files"].items()})
-
-    @property
-    def _file_cache(self) -> dict[str, tuple[int, str]]:
-        if not hasattr(self, "_files"):
-            self._files: dict[str, tuple[int, str]] = {}
-        return self._files
+        self._files.update({p: tuple(v) for p, v in record["files"].items()})
 
     def _finish_scan(self, sw: ScanWriter) -> None:
         if not sw._frames:
@@ -345,11 +342,10 @@ class DatasetWriter:
         files: dict[str, tuple[int, str]] = {}
         for f in sw._frames:
             for rel in (f["color_path"], f["depth_path"]):
-                p = self.tmp / rel
-                files[rel] = (p.stat().st_size, sha256_file(p))
+                files[rel] = self._written.pop(rel)
         self._scans[sw.scan_id] = scan
         self._frames[sw.scan_id] = sw._frames
-        self._file_cache.update(files)
+        self._files.update(files)
         marker = self.tmp / "images" / sw.scan_id / _SCAN_DONE
         marker.write_text(json.dumps({"scan": scan, "frames": sw._frames,
                                       "files": {k: list(v) for k, v in files.items()}}))
@@ -357,9 +353,14 @@ class DatasetWriter:
     # -- image encoding (run in the thread pool) ---------------------------------------------
     def _write_bytes(self, rel: str, data: bytes) -> None:
         path = self.tmp / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb") as fh:
+        try:
+            fh = open(path, "wb")
+        except FileNotFoundError:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fh = open(path, "wb")
+        with fh:
             fh.write(data)
+        self._written[rel] = (len(data), hashlib.sha256(data).hexdigest())
 
     def _encode_color(self, rel: str, rgb: NDArray[np.uint8]) -> None:
         import cv2
@@ -393,7 +394,7 @@ class DatasetWriter:
         path = self.tmp / table_path(name)
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, path, compression="zstd")
-        self._file_cache[table_path(name)] = (path.stat().st_size, sha256_file(path))
+        self._files[table_path(name)] = (path.stat().st_size, sha256_file(path))
 
     def close(self) -> Path:
         """Write tables, checksums and manifest; rename into place. Returns the dataset path."""
@@ -416,7 +417,7 @@ class DatasetWriter:
             self._write_table(name, table)
         for marker in (self.tmp / "images").glob(f"*/{_SCAN_DONE}"):
             marker.unlink()
-        files = sorted(self._file_cache.items())
+        files = sorted(self._files.items())
         files_table = to_arrow("files", [{"path": p, "size_bytes": n, "sha256": s} for p, (n, s) in files])
         fpath = self.tmp / table_path("files")
         pq.write_table(files_table, fpath, compression="zstd")

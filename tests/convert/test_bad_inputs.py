@@ -88,7 +88,7 @@ def test_tf_tree_without_path(tmp_path: Path) -> None:
 def test_missing_tf_static_supplied_in_config(tmp_path: Path) -> None:
     from psg_data.convert._scan import make_static
     from psg_data.synth._raw_export import R_CAMERA_LINK_OPTICAL, STATIC_BASE_CAMERA_LINK
-    from conftest import pose
+    from .conftest import pose
 
     bag = write_bag(tmp_path / "a", "ros2-sqlite3", tf_static=False)
     cl = np.eye(4)

@@ -112,7 +112,7 @@ def test_interpolated_poses_between_samples(tmp_path: Path, tiny_dataset: Path) 
     """Frames between two TF samples get the slerp/lerp pose (checked against scipy)."""
     from scipy.spatial.transform import Rotation, Slerp
 
-    from conftest import pose, write_bag
+    from .conftest import pose, write_bag
 
     bag = write_bag(tmp_path / "a.bag", n=3)
     # move every colour/depth stamp by +30 ms: poses are then interpolated between TF samples
@@ -167,7 +167,7 @@ def test_keyframes_by_motion(tmp_path: Path, tiny_dataset: Path) -> None:
 
 
 def test_split_long_recording_by_gap_and_slot(tmp_path: Path) -> None:
-    from conftest import write_bag
+    from .conftest import write_bag
 
     bag = tmp_path / "long.bag"
     write_bag(bag, n=6, period_ns=100_000_000)

@@ -1,0 +1,85 @@
+"""Persistence estimators: the plugin interface, the registry and the built-ins.
+
+Built-ins (``list_estimators()``): ``perpetua_star`` (FreMEn switching prior; ``prior=`` selects
+"fremen", "oracle", "schedule" or "none"), ``perpetua_star_schedule``, ``perpetua_star_oracle``,
+``perpetua``, ``persistence_filter``, ``fremen``, ``last_seen``, ``always_present``,
+``time_of_week_frequency``. Plugins register in the entry-point group ``psg_data.estimators``.
+
+Example::
+
+    from psg_data.estimators import get_estimator
+    est = get_estimator("perpetua_star").fit(train_streams, val_streams=val_streams, timezone=tz)
+    f = est.make_filter(("redmug", "kitchen_table"))
+    f.update_many(t_s, y)
+    p = f.predict(query_times_s)
+"""
+
+from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream, PersistenceEstimator
+from psg_data.estimators._check import check_estimator, conformance_streams
+from psg_data.estimators._fremen import FremenComponents, FremenModel, LocalClock, fourier_sums
+from psg_data.estimators._fremen_estimator import FremenEstimator
+from psg_data.estimators._mixture import MixtureFilter
+from psg_data.estimators._multi import joint_log_belief, map_receptacle, receptacle_belief
+from psg_data.estimators._perpetua import PerpetuaEstimator
+from psg_data.estimators._perpetua_star import (
+    PerpetuaStarEstimator,
+    PerpetuaStarOracleEstimator,
+    PerpetuaStarScheduleEstimator,
+)
+from psg_data.estimators._priors import (
+    ConstantPrior,
+    FremenPrior,
+    OraclePrior,
+    SchedulePrior,
+    parse_llm_schedule,
+    render_llm_prompt,
+)
+from psg_data.estimators._registry import ENTRY_POINT_GROUP, get_estimator, list_estimators, register_estimator
+from psg_data.estimators._simple import (
+    AlwaysPresentEstimator,
+    LastSeenEstimator,
+    PersistenceFilterEstimator,
+    TimeOfWeekFrequencyEstimator,
+)
+from psg_data.estimators._survival import SURVIVAL_FAMILIES, SurvivalMixture
+from psg_data.estimators._training import fit_lognormal_mixture, segment_stream
+
+__all__ = [
+    "EdgeKey",
+    "EdgeStream",
+    "EdgeFilter",
+    "PersistenceEstimator",
+    "get_estimator",
+    "list_estimators",
+    "register_estimator",
+    "ENTRY_POINT_GROUP",
+    "check_estimator",
+    "conformance_streams",
+    "PerpetuaStarEstimator",
+    "PerpetuaStarScheduleEstimator",
+    "PerpetuaStarOracleEstimator",
+    "PerpetuaEstimator",
+    "PersistenceFilterEstimator",
+    "FremenEstimator",
+    "LastSeenEstimator",
+    "AlwaysPresentEstimator",
+    "TimeOfWeekFrequencyEstimator",
+    "MixtureFilter",
+    "SurvivalMixture",
+    "SURVIVAL_FAMILIES",
+    "FremenModel",
+    "FremenComponents",
+    "LocalClock",
+    "fourier_sums",
+    "ConstantPrior",
+    "FremenPrior",
+    "SchedulePrior",
+    "OraclePrior",
+    "parse_llm_schedule",
+    "render_llm_prompt",
+    "receptacle_belief",
+    "map_receptacle",
+    "joint_log_belief",
+    "fit_lognormal_mixture",
+    "segment_stream",
+]

@@ -1,0 +1,161 @@
+"""Perpetua*: model selection equations, forgetting, annealing, priors, multi-receptacle belief."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from psg_data.errors import EstimatorError
+from psg_data.estimators import (
+    ConstantPrior,
+    EdgeStream,
+    SchedulePrior,
+    SurvivalMixture,
+    conformance_streams,
+    get_estimator,
+    map_receptacle,
+    parse_llm_schedule,
+    receptacle_belief,
+    render_llm_prompt,
+)
+from psg_data.estimators._mixture import MixtureFilter
+from psg_data.estimators._perpetua_star import PerpetuaStarFilter, discounted_cumsum
+
+PER = SurvivalMixture("lognormal", np.array([0.5, 0.5]), np.log([3600.0, 8 * 3600.0]), np.array([0.3, 0.5]))
+EMG = SurvivalMixture.lognormal_median(4 * 3600.0, 0.6)
+
+
+def _filter(prior=ConstantPrior(0.5), gamma=0.99, alpha0=0.01 / 60) -> PerpetuaStarFilter:
+    return PerpetuaStarFilter(("o", "r"), PER, EMG, 0.1, 0.1, prior, gamma=gamma, alpha0_per_s=alpha0,
+                              prior_floor=1e-3)
+
+
+@settings(max_examples=30, deadline=None)
+@given(inc=st.lists(st.floats(-20, 5), min_size=1, max_size=200), gamma=st.sampled_from([0.0, 0.5, 0.9, 0.99, 1.0]),
+       l0=st.floats(-50, 0))
+def test_discounted_cumsum_matches_loop(inc, gamma, l0) -> None:
+    inc = np.array(inc)
+    want, cur = [], l0
+    for v in inc:
+        cur = gamma * cur + v
+        want.append(cur)
+    np.testing.assert_allclose(discounted_cumsum(l0, inc, gamma), want, rtol=1e-9, atol=1e-9)
+
+
+def test_gamma_one_without_changes_gives_the_mixture_evidences() -> None:
+    rng = np.random.default_rng(0)
+    t = 1.7e9 + np.cumsum(rng.uniform(300, 900, 40))
+    y = np.ones(40, dtype=np.int8)
+    y[1] = 0  # one false negative, not enough to change the filtered state
+    f = _filter(gamma=1.0)
+    f.update_many(t, y)
+    assert f.n_restarts == 0 and f.phase == 1
+    per = MixtureFilter(PER, 0.1, 0.1)
+    emg = MixtureFilter(EMG, 0.1, 0.1, emergence=True)
+    per.update_many(t, y)
+    emg.update_many(t, y)
+    np.testing.assert_allclose(f.L, [per.log_evidence(), emg.log_evidence()], rtol=1e-10)
+    # eq. 13-14 at t_N (alpha = 1) with a flat prior
+    w = 1 / (1 + np.exp(per.log_evidence() - emg.log_evidence()))
+    want = w * emg.predict(t[-1:]) + (1 - w) * per.predict(t[-1:])
+    np.testing.assert_allclose(f.predict(t[-1:]), want, rtol=1e-10)
+
+
+def test_annealing_defers_to_the_prior() -> None:
+    t = 1.7e9 + np.arange(30) * 600.0
+    f = _filter(prior=ConstantPrior(0.8))
+    f.update_many(t, np.ones(30, dtype=np.int8))
+    w_now = f.model_posterior(t[-1:])[0]
+    w_far = f.model_posterior(t[-1:] + 10 * 86400)[0]
+    assert w_far == pytest.approx(0.8, abs=1e-9)  # alpha ~ 0: the switching prior alone
+    assert abs(w_now - 0.8) > 1e-3
+    # far from the data: persistence -> 0, emergence -> 1, so the prediction is the prior
+    assert f.predict(t[-1:] + 30 * 86400)[0] == pytest.approx(0.8, abs=1e-3)
+
+
+def test_adapts_to_a_change_and_restarts_clocks() -> None:
+    t = 1.7e9 + np.arange(60) * 900.0
+    y = np.concatenate([np.ones(30), np.zeros(30)]).astype(np.int8)
+    f = _filter()
+    f.update_many(t[:30], y[:30])
+    assert f.predict(t[29:30])[0] > 0.9
+    f.update_many(t[30:], y[30:])
+    assert f.phase == 0 and f.n_restarts >= 1
+    assert f.emg.origin is not None and f.emg.origin > t[29]  # emergence clock restarted at the disappearance
+    assert f.predict(t[-1:])[0] < 0.1
+
+
+def test_batch_equals_one_at_a_time_with_many_changes() -> None:
+    rng = np.random.default_rng(1)
+    t = 1.7e9 + np.cumsum(rng.uniform(60, 3600, 3000))
+    x = (np.mod(t, 86400) < 40000).astype(np.int8)
+    y = np.where(rng.random(t.size) < 0.1, 1 - x, x).astype(np.int8)
+    a, b = _filter(), _filter()
+    a.update_many(t, y)
+    for ti, yi in zip(t, y):
+        b.update(float(ti), int(yi))
+    assert a.n_restarts == b.n_restarts > 10
+    q = t[-1] + np.linspace(0, 3 * 86400, 50)
+    np.testing.assert_allclose(a.predict(q), b.predict(q), atol=1e-9)
+    c = PerpetuaStarFilter.from_state(json.loads(json.dumps(a.get_state())))
+    np.testing.assert_array_equal(c.predict(q), a.predict(q))
+
+
+def test_predictions_in_range_for_extreme_streams() -> None:
+    for y in (np.zeros(5000), np.ones(5000), np.arange(5000) % 2):
+        f = _filter(gamma=0.99)
+        f.update_many(1.7e9 + np.arange(5000) * 30.0, y.astype(np.int8))
+        p = f.predict(1.7e9 + 5000 * 30.0 + np.logspace(0, 8, 40))
+        assert np.all(np.isfinite(p)) and p.min() >= 0 and p.max() <= 1
+
+
+def test_llm_schedule_parse_and_prompt() -> None:
+    text = "Schedule: ['Mon: 19:00 - Mon: 19:30', 'Sun: 23:00 - Mon: 01:00', 'Fri: 08:00 - Fri: 24:00']"
+    iv = parse_llm_schedule(text)
+    assert iv == ((19 * 3600.0, 19.5 * 3600.0), (6 * 86400 + 23 * 3600.0, 3600.0), (4 * 86400 + 8 * 3600.0, 5 * 86400.0))
+    prior = SchedulePrior(iv, 1.0, 0.0, "America/Toronto")
+    mon = 1_704_085_200.0  # Monday 00:00 local
+    got = prior(np.array([mon + 19.25 * 3600, mon + 20 * 3600, mon + 0.5 * 3600, mon + 6 * 86400 + 23.5 * 3600,
+                          mon + 4 * 86400 + 12 * 3600]))
+    np.testing.assert_array_equal(got, [1, 0, 1, 1, 1])
+    for bad in ("no list here", "['Mon 19:00 - Mon: 19:30']", "['Mon: 25:00 - Mon: 19:30']", "[1, 2]"):
+        with pytest.raises(EstimatorError, match="LLM schedule"):
+            parse_llm_schedule(bad)
+    p = render_llm_prompt("Keys", "On Hallway Hook", "Storage Location")
+    assert "Object: Keys" in p and "Location: On Hallway Hook" in p and "['Day: HH:MM - Day: HH:MM'" in p
+    assert "{" not in p
+
+
+def test_multi_receptacle_map_and_absence() -> None:
+    streams = conformance_streams(days=4)
+    est = get_estimator("perpetua_star", n_periods=50).fit(streams, timezone="America/Toronto")
+    filters = {}
+    for s in streams:
+        f = est.make_filter(s.edge)
+        f.update_many(s.t_s, s.y)
+        filters[s.edge[1]] = f
+    t = float(max(s.t_s[-1] for s in streams))
+    b = receptacle_belief(filters, t)
+    assert set(b) == {"rec_1", "rec_2"}
+    best = max(b, key=lambda k: float(b[k]))
+    assert map_receptacle({k: float(v) for k, v in b.items()}, delta=0.0) == best
+    assert map_receptacle({"a": 0.1, "b": 0.15}, delta=0.2) is None
+    assert map_receptacle({"a": 0.1, "b": 0.65, "c": 0.3}) == "b"
+
+
+def test_oracle_prior_from_ground_truth_meta() -> None:
+    streams = conformance_streams(days=7)
+    est = get_estimator("perpetua_star_oracle").fit(streams, timezone="America/Toronto")
+    f = est.make_filter(("obj_a", "rec_1"))  # present 08:00-18:00 every day
+    f.update_many(streams[0].t_s, streams[0].y)
+    mon = 1_704_085_200.0 + 14 * 86400
+    p = f.predict(np.array([mon + 12 * 3600, mon + 2 * 3600]))
+    assert p[0] > 0.9 and p[1] < 0.1
+    with pytest.raises(EstimatorError, match="earlier than the last"):
+        f.update(float(streams[0].t_s[0]), 1)
+    with pytest.raises(EstimatorError, match="non-decreasing"):
+        EdgeStream(("a", "b"), np.array([2.0, 1.0]), np.array([1, 0]))
