@@ -32,6 +32,14 @@ from psg_data.metrics._classification import (
     trapezoid_weights,
 )
 from psg_data.metrics._navigation import abort_rate, distance_travelled, spl, success_rate
+from psg_data.metrics._dataset_task import DenseGroundTruth, PersistenceTask, persistence_task_from_dataset
+from psg_data.metrics._report import (
+    choose_plot_edges,
+    format_persistence_table,
+    plot_beliefs,
+    plot_metric_bars,
+    write_persistence_results,
+)
 from psg_data.metrics._persistence_task import (
     SAMPLE_METRICS,
     TIME_METRICS,
@@ -39,6 +47,9 @@ from psg_data.metrics._persistence_task import (
     EdgeResult,
     EvaluationIssue,
     PersistenceResult,
+    PredictionTrace,
+    RegistryFactory,
+    merge_results,
     WeekdayResult,
     evaluate_persistence,
 )
@@ -71,5 +82,16 @@ __all__ = [
     "EdgeResult",
     "WeekdayResult",
     "PersistenceResult",
+    "PredictionTrace",
+    "RegistryFactory",
+    "merge_results",
     "evaluate_persistence",
+    "PersistenceTask",
+    "format_persistence_table",
+    "write_persistence_results",
+    "plot_beliefs",
+    "plot_metric_bars",
+    "choose_plot_edges",
+    "persistence_task_from_dataset",
+    "DenseGroundTruth",
 ]

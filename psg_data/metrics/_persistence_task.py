@@ -77,7 +77,10 @@ __all__ = [
     "EdgeResult",
     "WeekdayResult",
     "PersistenceResult",
+    "PredictionTrace",
+    "RegistryFactory",
     "evaluate_persistence",
+    "merge_results",
 ]
 
 logger = logging.getLogger(__name__)
@@ -204,6 +207,28 @@ class WeekdayResult:
         return _clean(d)
 
 
+@dataclass(frozen=True)
+class PredictionTrace:
+    """Beliefs of one (estimator, seed, edge) at its evaluation times (kept for plots).
+
+    Attributes:
+        t_s: (N,) evaluation times, float64 seconds since the Unix epoch (UTC).
+        belief: (N,) predicted P(present).
+        truth: (N,) ground truth (1, 0, or an excluded code -1/-2).
+        obs_t_s: the edge's test observation times (applied only in the adaptive setting).
+        obs_y: the test observations.
+    """
+
+    estimator: str
+    seed: int
+    edge: EdgeKey
+    t_s: NDArray[np.float64]
+    belief: NDArray[np.float64]
+    truth: NDArray[np.int64]
+    obs_t_s: NDArray[np.float64]
+    obs_y: NDArray[np.int8]
+
+
 @dataclass
 class PersistenceResult:
     """Everything :func:`evaluate_persistence` produced.
@@ -221,6 +246,8 @@ class PersistenceResult:
     weekdays: list[WeekdayResult]
     errors: list[EvaluationIssue]
     summary: dict[str, dict[str, Summary]] = field(default_factory=dict)
+    traces: list[PredictionTrace] = field(default_factory=list)
+    """Predictions of the edges requested with ``keep_predictions`` (every seed)."""
 
     @property
     def ok(self) -> bool:
@@ -358,6 +385,7 @@ class _EdgeJob:
     eval_t: NDArray[np.float64]
     eval_y: NDArray[np.int64]
     eval_wd: NDArray[np.int64]
+    keep: bool = False
 
 
 @dataclass(frozen=True)
@@ -402,7 +430,17 @@ class _ShapeError(Exception):
     pass
 
 
-def _run_edge(name: str, seed: int, est: PersistenceEstimator, job: _EdgeJob, cfg: _Config) -> tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue]]:
+def _run_edge(name: str, seed: int, est: PersistenceEstimator, job: _EdgeJob, cfg: _Config
+              ) -> tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue], PredictionTrace | None]:
+    er, wr, iss, p = _run_edge_scores(name, seed, est, job, cfg)
+    trace = None
+    if job.keep and p is not None:
+        trace = PredictionTrace(name, seed, job.edge, job.eval_t, p, job.eval_y, job.test_t, job.test_y)
+    return er, wr, iss, trace
+
+
+def _run_edge_scores(name: str, seed: int, est: PersistenceEstimator, job: _EdgeJob, cfg: _Config
+                     ) -> tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue], NDArray[np.float64] | None]:
     obj, rec = str(job.edge[0]), str(job.edge[1])
 
     def issue(stage: str, t: float | None, msg: str, n: int = 1) -> EvaluationIssue:
@@ -421,7 +459,7 @@ def _run_edge(name: str, seed: int, est: PersistenceEstimator, job: _EdgeJob, cf
             f.update_many(job.hist_t, job.hist_y)
     except Exception as e:  # noqa: BLE001 - plugin failures are reported, not raised
         t0 = float(job.hist_t[0]) if job.hist_t.size else None
-        return result("error"), [], [issue("history", t0, f"filter creation/update with the training history raised {type(e).__name__}: {e}")]
+        return result("error"), [], [issue("history", t0, f"filter creation/update with the training history raised {type(e).__name__}: {e}")], None
 
     p = np.full(n, np.nan)
     stage, t_fail = "predict", None
@@ -445,20 +483,20 @@ def _run_edge(name: str, seed: int, est: PersistenceEstimator, job: _EdgeJob, cf
                 p[pos:] = _predict_checked(f, job.eval_t[pos:])
     except Exception as e:  # noqa: BLE001
         what = "update with a test observation" if stage == "update" else "predict"
-        return result("error"), [], [issue(stage, t_fail, f"{what} raised {type(e).__name__}: {e}")]
+        return result("error"), [], [issue(stage, t_fail, f"{what} raised {type(e).__name__}: {e}")], None
 
     bad = ~np.isfinite(p) | (p < 0.0) | (p > 1.0)
     if np.any(bad):
         i = int(np.argmax(bad))
         kind = "NaN" if np.isnan(p[i]) else f"{float(p[i])!r} outside [0, 1]"
         more = f" ({int(bad.sum())} of {n} evaluation times invalid)"
-        return result("error"), [], [issue("prediction", float(job.eval_t[i]), f"prediction is {kind}{more}", int(bad.sum()))]
+        return result("error"), [], [issue("prediction", float(job.eval_t[i]), f"prediction is {kind}{more}", int(bad.sum()))], None
 
     valid = mask_codes(job.eval_y, cfg.codes)
     w = trapezoid_weights(job.eval_t, valid)
     yv, pv, wv, wdv = job.eval_y[valid], p[valid], w[valid], job.eval_wd[valid]
     if yv.size == 0:
-        return result("unscored"), [], []
+        return result("unscored"), [], [], p
     metrics = _score(yv, pv, wv, cfg)
     span = float(np.sum(wv))
     weekday_rows = []
@@ -467,7 +505,7 @@ def _run_edge(name: str, seed: int, est: PersistenceEstimator, job: _EdgeJob, cf
         weekday_rows.append(WeekdayResult(name, seed, obj, rec, int(d), float(np.sum(wv[m])), int(m.sum()),
                                           _score(yv[m], pv[m], wv[m], cfg)))
     status = "ok" if span > 0 else "unscored"
-    return result(status, int(yv.size), span, metrics), weekday_rows, []
+    return result(status, int(yv.size), span, metrics), weekday_rows, [], p
 
 
 def _fit(name: str, factory: EstimatorFactory, seed: int, train: Sequence[EdgeStream],
@@ -480,7 +518,8 @@ def _fit(name: str, factory: EstimatorFactory, seed: int, train: Sequence[EdgeSt
         return None, f"{type(e).__name__}: {e}"
 
 
-def _run_chunk(name: str, seed: int, est: PersistenceEstimator, jobs: Sequence[_EdgeJob], cfg: _Config) -> list[tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue]]]:
+def _run_chunk(name: str, seed: int, est: PersistenceEstimator, jobs: Sequence[_EdgeJob], cfg: _Config
+               ) -> list[tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue], PredictionTrace | None]]:
     return [_run_edge(name, seed, est, j, cfg) for j in jobs]
 
 
@@ -563,17 +602,23 @@ def _weekdays(t_s: NDArray[np.float64], timezone: str) -> NDArray[np.int64]:
 
 
 @dataclass(frozen=True)
-class _RegistryFactory:
-    """Builds a registry estimator; passes ``random_state`` only if its settings have one."""
+class RegistryFactory:
+    """Picklable factory of a registry estimator with fixed settings.
+
+    ``factory(random_state=seed)`` passes the seed only if the estimator has a ``random_state``
+    setting (deterministic estimators then repeat the same run for every seed).
+    """
 
     name: str
+    settings: tuple[tuple[str, Any], ...] = ()
 
     def __call__(self, *, random_state: int) -> PersistenceEstimator:
         from psg_data.estimators import get_estimator  # type: ignore[attr-defined]
 
-        est = get_estimator(self.name)
-        if "random_state" in est.get_params():
-            est = get_estimator(self.name, random_state=random_state)
+        settings = dict(self.settings)
+        est = get_estimator(self.name, **settings)
+        if "random_state" in est.get_params() and "random_state" not in settings:
+            est = get_estimator(self.name, **settings, random_state=random_state)
         return est
 
 
@@ -591,7 +636,7 @@ def _resolve_estimators(estimators: Any) -> dict[str, EstimatorFactory]:
                 from psg_data.estimators import get_estimator  # type: ignore[attr-defined]
             except ImportError as e:
                 raise EvaluationError(f"estimator {name!r}: the estimator registry is not available ({e})") from None
-            out[str(name)] = _RegistryFactory(spec)
+            out[str(name)] = RegistryFactory(spec)
         elif callable(spec):
             out[str(name)] = spec
         else:
@@ -622,6 +667,7 @@ def evaluate_persistence(
     codes: Sequence[int] = PRIVILEGED_CODES,
     jobs: int = 1,
     progress: ProgressCallback | None = None,
+    keep_predictions: Sequence[EdgeKey] = (),
 ) -> PersistenceResult:
     """Evaluate persistence estimators on a test window against dense ground truth.
 
@@ -652,6 +698,8 @@ def evaluate_persistence(
         jobs: worker processes; 1 runs inline, -1 uses every CPU.
         progress: called as ``progress(done, total)`` with counts of (estimator, seed, edge)
             units after each finishes.
+        keep_predictions: edges whose beliefs at every evaluation time are kept in
+            ``result.traces`` (for plots).
 
     Returns:
         A :class:`PersistenceResult`; check ``result.ok`` / ``result.errors``.
@@ -702,6 +750,7 @@ def evaluate_persistence(
         logger.warning("%d test edges have no ground truth and are not scored, e.g. %s", len(unscored), unscored[0])
 
     cfg = _Config(setting, float(threshold), convention, sample_convention, tuple(int(c) for c in codes))
+    keep = {(str(k[0]), str(k[1])) for k in keep_predictions}
     edge_jobs: list[_EdgeJob] = []
     empty_t, empty_y = np.zeros(0, dtype=np.float64), np.zeros(0, dtype=np.int8)
     for key, (gt_t, gt_y) in gt.items():
@@ -728,13 +777,13 @@ def evaluate_persistence(
             ey = gt_y[np.searchsorted(gt_t, et, side="right") - 1]
         else:
             ey = np.zeros(0, dtype=np.int64)
-        edge_jobs.append(_EdgeJob(key, hist_t, hist_y, test_t, test_y, et, ey, _weekdays(et, timezone)))
+        edge_jobs.append(_EdgeJob(key, hist_t, hist_y, test_t, test_y, et, ey, _weekdays(et, timezone), key in keep))
 
     names = list(factories)
     total = len(names) * len(seeds) * len(edge_jobs)
     done = 0
     fitted: dict[tuple[str, int], PersistenceEstimator | None] = {}
-    outcomes: dict[tuple[str, int, int], tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue]]] = {}
+    outcomes: dict[tuple[str, int, int], tuple[EdgeResult, list[WeekdayResult], list[EvaluationIssue], PredictionTrace | None]] = {}
     fit_issues: dict[tuple[str, int], EvaluationIssue] = {}
     train_list, val_list = list(train.values()), (list(val.values()) if val_streams is not None else None)
 
@@ -745,7 +794,7 @@ def evaluate_persistence(
         for i, j in enumerate(edge_jobs):
             outcomes[(name, seed, i)] = (
                 EdgeResult(name, seed, j.edge[0], j.edge[1], "error", 0, 0.0, int(j.hist_t.size), int(j.test_t.size), _nan_metrics()),
-                [], [],
+                [], [], None,
             )
         done += len(edge_jobs)
         if progress is not None:
@@ -812,15 +861,18 @@ def evaluate_persistence(
     edges: list[EdgeResult] = []
     weekdays: list[WeekdayResult] = []
     errors: list[EvaluationIssue] = []
+    traces: list[PredictionTrace] = []
     for name in names:
         for seed in seeds:
             if (name, seed) in fit_issues:
                 errors.append(fit_issues[(name, seed)])
             for i in range(len(edge_jobs)):
-                er, wr, iss = outcomes[(name, seed, i)]
+                er, wr, iss, tr = outcomes[(name, seed, i)]
                 edges.append(er)
                 weekdays.extend(wr)
                 errors.extend(iss)
+                if tr is not None:
+                    traces.append(tr)
     for e in errors:
         logger.error("%s", e.message)
 
@@ -851,10 +903,49 @@ def evaluate_persistence(
         "edge_weighting": "time-integrated metrics: scored span; sample metrics: scored points",
         "std_ddof": 1,
     })
-    result = PersistenceResult(config=config, edges=edges, weekdays=weekdays, errors=errors)
-    seed_scores = result.seed_scores()
-    for name in names:
-        result.summary[name] = {
-            m: summarize([seed_scores[name][s][m] for s in seeds]) for m in (*TIME_METRICS, *SAMPLE_METRICS)
-        }
+    result = PersistenceResult(config=config, edges=edges, weekdays=weekdays, errors=errors, traces=traces)
+    _fill_summary(result)
     return result
+
+
+def _fill_summary(result: PersistenceResult) -> None:
+    seed_scores = result.seed_scores()
+    for name in result.estimators:
+        result.summary[name] = {
+            m: summarize([seed_scores[name][s][m] for s in result.config["seeds"]])
+            for m in (*TIME_METRICS, *SAMPLE_METRICS)
+        }
+
+
+def merge_results(results: Sequence[PersistenceResult]) -> PersistenceResult:
+    """Merge runs that differ only in their seeds (e.g. one dataset draw per seed) into one result.
+
+    The configuration of the first run is kept, with ``seeds`` the union of all seeds and per-run
+    settings that differ (such as edge counts) recorded under ``per_run``.
+
+    Raises:
+        EvaluationError: no results, different estimators or settings, or a seed used twice.
+    """
+    if not results:
+        raise EvaluationError("merge_results: nothing to merge")
+    first = results[0]
+    seeds: list[int] = []
+    for r in results:
+        if r.estimators != first.estimators or r.config.get("setting") != first.config.get("setting"):
+            raise EvaluationError("merge_results: runs differ in estimators or setting; merge only runs of one configuration")
+        for s in r.config["seeds"]:
+            if s in seeds:
+                raise EvaluationError(f"merge_results: seed {s} appears in two runs")
+            seeds.append(s)
+    config = dict(first.config)
+    config["seeds"] = seeds
+    config["per_run"] = [{k: r.config.get(k) for k in ("seeds", "n_edges", "n_test_observations")} for r in results]
+    merged = PersistenceResult(
+        config=config,
+        edges=[e for r in results for e in r.edges],
+        weekdays=[w for r in results for w in r.weekdays],
+        errors=[e for r in results for e in r.errors],
+        traces=[t for r in results for t in r.traces],
+    )
+    _fill_summary(merged)
+    return merged

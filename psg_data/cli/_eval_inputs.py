@@ -1,0 +1,157 @@
+"""Inputs of ``psg-eval``: which dataset, which estimators (with settings), which tasks per seed."""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psg_data.errors import EstimatorError, EvaluationError
+
+__all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "DatasetChoice", "resolve_dataset",
+           "persistence_tasks"]
+
+BENCHMARK = "persistence-benchmark"
+DEMO = "demo"
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """``NAME`` or ``NAME:key=value,key=value`` (values are Python literals, else strings)."""
+
+    label: str
+    name: str
+    settings: tuple[tuple[str, Any], ...] = ()
+
+
+def _literal(text: str) -> Any:
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
+def parse_estimator_spec(text: str) -> EstimatorSpec:
+    name, _, rest = text.partition(":")
+    settings = []
+    for part in filter(None, (p.strip() for p in rest.split(","))):
+        key, eq, value = part.partition("=")
+        if not eq or not key.strip().isidentifier():
+            raise EstimatorError(f"--estimator {text!r}: expected NAME or NAME:key=value[,key=value], got {part!r}")
+        settings.append((key.strip(), _literal(value.strip())))
+    return EstimatorSpec(text, name.strip(), tuple(settings))
+
+
+def check_estimators(specs: list[EstimatorSpec]) -> None:
+    """Build every estimator once so that unknown names and bad settings fail before any work."""
+    from psg_data.estimators import get_estimator
+
+    for spec in specs:
+        try:
+            get_estimator(spec.name, **dict(spec.settings))
+        except EstimatorError:
+            raise
+        except TypeError as exc:
+            raise EstimatorError(f"--estimator {spec.label!r}: bad settings ({exc})") from None
+
+
+@dataclass(frozen=True)
+class DatasetChoice:
+    kind: str  # "benchmark" or "dataset"
+    path: Path | None
+    label: str
+
+
+def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
+    """``demo`` (default: the built-in lab, built once into the cache), ``persistence-benchmark``
+    (the paper's Sec. V-A streams) or a dataset directory."""
+    if value in (None, DEMO):
+        from psg_data.datasets import demo
+
+        return DatasetChoice("dataset", Path(demo()), "demo lab")
+    if value == BENCHMARK:
+        return DatasetChoice("benchmark", None, BENCHMARK)
+    path = Path(value)
+    if not path.is_dir():
+        raise EvaluationError(f"--dataset {value!r}: not a directory; expected a psg-dataset path, "
+                              f"'{DEMO}' or '{BENCHMARK}'")
+    return DatasetChoice("dataset", path, str(path))
+
+
+def _synth_dense_ground_truth(ds: Any, step_s: float) -> Any:
+    """Dense ground truth of a synthetic lab, restricted to the daily scanning hours."""
+    from zoneinfo import ZoneInfo
+
+    import pandas as pd
+
+    from psg_data.synth import LabModel
+
+    lab = LabModel.from_dataset(ds)
+    hours = list(ds.info.extra.get("scan_hours") or [9, 11, 13, 15])
+    first_h, last_h = min(hours), max(hours) + 2
+
+    def dense(start_ns: int, end_ns: int) -> tuple[np.ndarray, dict]:
+        d = lab.schedule.dense(step_s, start_ns, end_ns)
+        local = pd.to_datetime(d.stamps_ns, utc=True).tz_convert(ZoneInfo(ds.info.timezone))
+        hod = local.hour.to_numpy() + local.minute.to_numpy() / 60.0
+        keep = (hod >= first_h) & (hod <= last_h)
+        stamps = d.stamps_ns[keep]
+        objs = d.objects[keep]
+        states = {}
+        for j, o in enumerate(d.object_ids):
+            for i, r in enumerate(d.receptacle_ids):
+                states[(o, r)] = (objs[:, j] == i).astype(np.int64)
+        return stamps, states
+
+    return dense
+
+
+def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], quiet: bool) -> tuple[list[Any], dict]:
+    """One :class:`~psg_data.metrics.PersistenceTask` per seed (benchmark: one draw per seed;
+    datasets: the same task, seeds vary the estimators) and a description for results.json."""
+    from psg_data.metrics import PersistenceTask, persistence_task_from_dataset
+
+    if choice.kind == "benchmark":
+        from psg_data.synth import make_persistence_benchmark
+
+        if labels != "gt":
+            raise EvaluationError(f"--labels {labels}: the persistence benchmark has its own noisy observations "
+                                  "(P_M = P_F = 0.1); use --labels gt (the default)")
+        tasks = []
+        for s in seeds:
+            bm = make_persistence_benchmark(seed=s)
+            tasks.append(PersistenceTask(
+                name=BENCHMARK, train_streams=bm.train_streams, test_streams=bm.test_streams,
+                ground_truth=dict(bm.test_truth), timezone=bm.timezone, val_streams=bm.val_streams,
+                info={"dataset": BENCHMARK, "seed": s, "p_m": bm.p_m, "p_f": bm.p_f, "shift": bm.shift,
+                      "edges": len(bm.edges), "ground_truth": "dense 60 s grid over the test week",
+                      "split": "week 0 validation, weeks 1-4 train, week 5 test"}))
+        return tasks, {"dataset": BENCHMARK, "per_seed_draws": True, **{k: v for k, v in tasks[0].info.items()
+                                                                         if k not in ("seed",)}}
+    from psg_data.loaders import open_dataset
+
+    ds = open_dataset(choice.path)
+    if labels != "gt" and choice.label == "demo lab":
+        _label_demo_if_needed(ds, labels, quiet)
+    dense = None
+    if ds.info.extra.get("generator") == "psg_data.synth":
+        dense = _synth_dense_ground_truth(ds, step_s=900.0)
+    task = persistence_task_from_dataset(ds, labels=labels, dense_ground_truth=dense)
+    return [task], {**task.info, "per_seed_draws": False}
+
+
+def _label_demo_if_needed(ds: Any, labels: str, quiet: bool) -> None:
+    """The cached demo lab is ours: label it on first use instead of asking the user to."""
+    from psg_data.labeling import label_dataset, parse_source
+
+    name = parse_source(labels).name
+    if ds.has_table("labels") and name in set(ds.table("labels").column("source").to_pylist()):
+        return
+    import logging
+
+    logging.getLogger(__name__).info("labelling the demo lab with source %s (once)", labels)
+    label_dataset(ds.root, labels)
+    ds._arrow.clear()

@@ -1,0 +1,276 @@
+"""``psg-eval``: score persistence estimators (and navigation with them) on a dataset.
+
+Exit codes: 0 success; 1 bad input, or an estimator returned invalid predictions (the run still
+completes for the others and the problems are listed); 2 bad command line.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from psg_data import __version__
+from psg_data.cli._common import EXIT_PROBLEMS, Progress, handle_errors, quiet_option, setup_logging
+
+__all__ = ["main"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ESTIMATOR = "perpetua_star"
+REFERENCE_ESTIMATORS = ("perpetua", "fremen")
+
+
+def _git_revision() -> str | None:
+    here = Path(__file__).resolve().parents[2]
+    try:
+        out = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def _out_dir(out: Path | None, overwrite: bool) -> Path:
+    from psg_data.errors import EvaluationError
+
+    if out is None:
+        return Path("psg-eval-out") / time.strftime("%Y%m%d-%H%M%S")
+    if out.exists() and not overwrite:
+        raise EvaluationError(f"{out}: output exists; pass --overwrite to replace it (or choose another --out)")
+    return out
+
+
+def _finish_dir(tmp: Path, out: Path) -> None:
+    """Move the completed results from ``tmp`` into ``out`` (replacing it) in one rename."""
+    if out.exists():
+        old = out.with_name(out.name + ".old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(out, old)
+        os.replace(tmp, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(tmp, out)
+
+
+@click.group(invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--dataset", "dataset", default=None, metavar="PATH|demo|persistence-benchmark",
+              help="Dataset to evaluate on (default: demo, the built-in synthetic lab).")
+@click.option("--estimator", "-e", "estimators", multiple=True, metavar="NAME[:key=value,...]",
+              help=f"Estimator to score (repeatable; default {DEFAULT_ESTIMATOR}). Settings after ':'.")
+@click.option("--references/--no-references", default=True, show_default=True,
+              help=f"Also score the reference methods ({', '.join(REFERENCE_ESTIMATORS)}) for the paper's table.")
+@click.option("--task", type=click.Choice(["persistence", "navigation"]), default="persistence", show_default=True)
+@click.option("--setting", type=click.Choice(["predictive", "adaptive"]), default="adaptive", show_default=True,
+              help="adaptive: test observations update the estimators online; predictive: they do not.")
+@click.option("--labels", default="gt", show_default=True, metavar="gt|privileged|noisy:P|detections:FILE",
+              help="Observation source (non-gt sources are read from the dataset's label tables).")
+@click.option("--seeds", type=click.IntRange(1, 100), default=3, show_default=True,
+              help="Seeds 0..N-1 (benchmark: one draw per seed; datasets: estimator seeds / query sets).")
+@click.option("--queries", type=click.IntRange(1), default=250, show_default=True, help="Navigation queries per seed.")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output directory (default: psg-eval-out/<timestamp>).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --out directory.")
+@click.option("--jobs", "-j", type=int, default=1, show_default=True, help="Worker processes (-1: all CPUs).")
+@click.option("--list-estimators", is_flag=True, help="List registered estimators (built-ins and plugins) and exit.")
+@click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@quiet_option
+@click.version_option(__version__, prog_name="psg-eval")
+@click.pass_context
+@handle_errors
+def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
+         setting: str, labels: str, seeds: int, queries: int, out: Path | None, overwrite: bool, jobs: int,
+         list_estimators: bool, no_plots: bool, quiet: bool) -> None:
+    """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1, mean +- std over seeds).
+
+    Writes results.json, results.csv, summary.csv, breakdowns per object / receptacle / weekday and
+    PNG plots (belief vs ground truth over the test window, per-estimator bars).
+
+    \b
+    Examples:
+      psg-eval --estimator perpetua_star                       # the built-in lab
+      psg-eval --dataset persistence-benchmark -e perpetua_star -e perpetua_star_oracle
+      psg-eval --dataset /data/lab --labels privileged -e my_plugin:alpha=0.3 --out res/
+      psg-eval --task navigation -e perpetua_star -e fremen    # SR / SPL / AR / DIST
+      psg-eval compare res/a res/b                             # tabulate earlier runs
+    """
+    if ctx.invoked_subcommand is not None:
+        return
+    setup_logging(quiet)
+    from psg_data.cli._eval_inputs import check_estimators, parse_estimator_spec
+
+    if list_estimators:
+        from psg_data.estimators import list_estimators as _list
+
+        for name in _list():
+            click.echo(name)
+        return
+    specs = [parse_estimator_spec(e) for e in (estimators or (DEFAULT_ESTIMATOR,))]
+    if references:
+        have = {s.name for s in specs}
+        specs += [parse_estimator_spec(r) for r in REFERENCE_ESTIMATORS if r not in have]
+    check_estimators(specs)
+    out_dir = _out_dir(out, overwrite)
+    tmp = out_dir.with_name(out_dir.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        if task == "persistence":
+            ok = _run_persistence(specs, dataset, setting, labels, list(range(seeds)), jobs, tmp, no_plots, quiet)
+        else:
+            ok = _run_navigation(specs, dataset, setting, labels, list(range(seeds)), queries, tmp, no_plots, quiet)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _finish_dir(tmp, out_dir)
+    click.echo(f"results written to {out_dir}/")
+    if not ok:
+        sys.exit(EXIT_PROBLEMS)
+
+
+def _provenance(extra: dict[str, Any]) -> dict[str, Any]:
+    from psg_data.schemas import FORMAT_VERSION
+
+    return {"psg_data_version": __version__, "git_revision": _git_revision(), "format_version": FORMAT_VERSION,
+            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            **extra}
+
+
+def _run_persistence(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int], jobs: int,
+                     out: Path, no_plots: bool, quiet: bool) -> bool:
+    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset
+    from psg_data.metrics import (
+        RegistryFactory,
+        choose_plot_edges,
+        evaluate_persistence,
+        format_persistence_table,
+        merge_results,
+        plot_beliefs,
+        plot_metric_bars,
+        write_persistence_results,
+    )
+
+    choice = resolve_dataset(dataset, quiet=quiet)
+    tasks, info = persistence_tasks(choice, labels=labels, seeds=seeds, quiet=quiet)
+    factories = {s.label: RegistryFactory(s.name, s.settings) for s in specs}
+    n_edges = len(tasks[0].ground_truth)
+    prog = Progress("evaluating", total=len(factories) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
+    offset = 0
+    results = []
+    plot_edges = choose_plot_edges(tasks[0].ground_truth, k=4)
+    run_seeds = [[s] for s in seeds] if len(tasks) > 1 else [seeds]
+    for task, task_seeds in zip(tasks, run_seeds):
+        def progress(done: int, total: int, base: int = offset) -> None:
+            prog.done = base + done
+            prog.update(0)
+
+        results.append(evaluate_persistence(
+            factories, task.train_streams, task.test_streams, task.ground_truth, val_streams=task.val_streams,
+            setting=setting, timezone=task.timezone, seeds=task_seeds, jobs=jobs, progress=progress,
+            keep_predictions=plot_edges if task is tasks[0] else ()))
+        offset += len(factories) * len(task_seeds) * len(task.ground_truth)
+    prog.close()
+    result = results[0] if len(results) == 1 else merge_results(results)
+    info = _provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **info,
+                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
+    write_persistence_results(result, out, info=info)
+    if not no_plots:
+        plot_beliefs(result.traces, out / "belief.png", timezone=tasks[0].timezone)
+        plot_metric_bars(result, out / "bars.png")
+    click.echo(f"\nPersistence estimation on {choice.label} ({info.get('edges')} edges, labels {labels}, "
+               f"{setting}, seeds {seeds[0]}..{seeds[-1]})")
+    click.echo(format_persistence_table(result))
+    if result.errors:
+        click.echo(f"\n{len(result.errors)} problem(s) (see results.json 'errors'):", err=True)
+        for e in result.errors[:20]:
+            click.echo(f"error: {e.message}", err=True)
+    return result.ok
+
+
+def _run_navigation(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int],
+                    n_queries: int, out: Path, no_plots: bool, quiet: bool) -> bool:
+    from psg_data.cli._eval_inputs import resolve_dataset
+    from psg_data.errors import EvaluationError
+    from psg_data.navigation import run_navigation
+
+    choice = resolve_dataset(dataset, quiet=quiet)
+    if choice.kind != "dataset":
+        raise EvaluationError("--task navigation needs a dataset with rooms, doors and receptacles (not the "
+                              "persistence benchmark); use --dataset demo or a dataset path")
+    if labels != "gt":
+        raise EvaluationError("--task navigation: the map observations come from the dataset's schedule table; "
+                              "--labels other than gt is not supported yet")
+    methods = {"oracle": "oracle", "last_seen_map": "last_seen_map"}
+    settings = {}
+    for s in specs:
+        methods[s.label] = s.name
+        if s.settings:
+            settings[s.label] = dict(s.settings)
+    t0 = time.perf_counter()
+    res = run_navigation(choice.path, methods, seed=seeds, n_queries=n_queries, setting=setting, out_dir=out,
+                         estimator_settings=settings or None)
+    res.save(out)
+    info = _provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path),
+                        "seconds": round(time.perf_counter() - t0, 2), **res.config})
+    (out / "results.json").write_text(json.dumps({"info": info, "summary": json.loads(res.summary.to_json(
+        orient="records"))}, indent=1) + "\n", encoding="utf-8")
+    res.summary.to_csv(out / "results.csv", index=False)
+    if not no_plots and res.env is not None:
+        from psg_data.navigation import plot_query
+
+        q = res.queries[seeds[0]][0]
+        for label in methods:
+            key = (label, seeds[0], q.query_id)
+            plot_query(res.env, q, out / f"map_{label}.png", beliefs=res.beliefs.get(key), trail=res.trails.get(key),
+                       cache=res.cache, title=f"{label}: {q.object_id} at query {q.query_id}")
+    click.echo(f"\nObject navigation on {choice.label} ({n_queries} queries per seed, {setting})")
+    click.echo(res.format_table())
+    return True
+
+
+@main.command("compare")
+@click.argument("dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@handle_errors
+def compare_cmd(dirs: tuple[Path, ...]) -> None:
+    """Tabulate earlier psg-eval runs side by side (reads each DIR/results.json).
+
+    \b
+    Example:
+      psg-eval compare psg-eval-out/run1 psg-eval-out/run2
+    """
+    from psg_data.errors import EvaluationError
+
+    rows = []
+    for d in dirs:
+        p = d / "results.json"
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise EvaluationError(f"{p}: missing; expected a psg-eval output directory") from None
+        except json.JSONDecodeError as exc:
+            raise EvaluationError(f"{p}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        info = data.get("info", {})
+        if info.get("task", "persistence") != "persistence" or "summary" not in data:
+            raise EvaluationError(f"{p}: not a persistence result (compare tabulates persistence runs)")
+        for name, metrics in data["summary"].items():
+            def cell(m: str) -> str:
+                s = metrics.get(m) or {}
+                mu, sd = s.get("mean"), s.get("std")
+                return "-" if mu is None else f"{mu:.3f} +- {0.0 if sd is None else sd:.3f}"
+            rows.append([d.name, name, str(info.get("dataset_label", "?")), str(data["config"].get("setting")),
+                         str(info.get("labels", "?")), cell("mae"), cell("balanced_accuracy"), cell("f1"),
+                         str((metrics.get("mae") or {}).get("n", "?"))])
+    header = ["run", "method", "dataset", "setting", "labels", "MAE", "B-Acc", "F1", "seeds"]
+    w = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    click.echo("  ".join(h.ljust(w[i]) for i, h in enumerate(header)))
+    click.echo("  ".join("-" * x for x in w))
+    for r in rows:
+        click.echo("  ".join(c.ljust(w[i]) for i, c in enumerate(r)))
