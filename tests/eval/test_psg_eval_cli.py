@@ -1,0 +1,188 @@
+"""psg-eval end to end on small generated data: table, result files, plots, bad inputs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from psg_data.cli.psg_eval_cmd import main
+from psg_data.estimators import register_estimator
+from psg_data.estimators._simple import LastSeenEstimator
+from psg_data.synth import LabConfig, build_lab
+from psg_data.writers import sha256_file
+
+SMALL = LabConfig(seed=5, days=4, train_days=3, frames_per_scan=1, width=40, height=30)
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_lab(tmp_path_factory.mktemp("eval") / "lab", SMALL)
+
+
+def run(*args: str) -> Any:
+    return CliRunner().invoke(main, list(args))
+
+
+def _assert_png(path: Path) -> None:
+    img = cv2.imread(str(path))
+    assert img is not None, f"{path} is not a readable image"
+    assert img.shape[0] > 100 and img.shape[1] > 100
+    assert img.std() > 5, f"{path} looks blank"
+
+
+def test_persistence_on_dataset_writes_table_files_and_plots(lab: Path, tmp_path: Path) -> None:
+    out = tmp_path / "res"
+    res = run("--dataset", str(lab), "-e", "last_seen", "-e", "always_present", "--no-references",
+              "--seeds", "2", "--out", str(out), "--quiet")
+    assert res.exit_code == 0, res.output + str(res.exception)
+    assert "Method" in res.stdout and "last_seen" in res.stdout and "always_present" in res.stdout
+    assert "MAE" in res.stdout and "B-Acc" in res.stdout and "F1" in res.stdout
+    data = json.loads((out / "results.json").read_text())
+    assert data["config"]["seeds"] == [0, 1]
+    assert data["info"]["psg_data_version"] and data["info"]["format_version"] == "1.0"
+    assert data["info"]["labels"] == "gt" and "dense schedule" in data["info"]["ground_truth"]
+    assert set(data["summary"]) == {"last_seen", "always_present"}
+    csv = pd.read_csv(out / "results.csv")
+    n_edges = data["config"]["n_edges"]
+    assert len(csv) == 2 * 2 * n_edges
+    # always_present predicts 1: its time-integrated MAE equals the absent share of the ground truth
+    ap = csv[(csv.estimator == "always_present") & (csv.status == "ok")]
+    assert ap["mae"].between(0, 1).all()
+    for name in ("belief.png", "bars.png"):
+        _assert_png(out / name)
+    for name in ("by_object.csv", "by_receptacle.csv", "by_weekday.csv", "summary.csv", "table.txt"):
+        assert (out / name).stat().st_size > 0
+    assert not out.with_name("res.partial").exists()
+
+
+def test_always_present_mae_matches_independent_computation(lab: Path, tmp_path: Path) -> None:
+    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset
+
+    out = tmp_path / "res"
+    assert run("--dataset", str(lab), "-e", "always_present", "--no-references", "--seeds", "1", "--out", str(out),
+               "--quiet", "--no-plots").exit_code == 0
+    task = persistence_tasks(resolve_dataset(str(lab), quiet=True), labels="gt", seeds=[0], quiet=True)[0][0]
+    num = den = 0.0
+    for t, y in task.ground_truth.values():  # span-weighted trapezoid of |1 - y|
+        if t.size < 2:
+            continue
+        err = 1.0 - y.astype(float)
+        num += float(np.sum((err[1:] + err[:-1]) / 2 * np.diff(t)))
+        den += float(t[-1] - t[0])
+    data = json.loads((out / "results.json").read_text())
+    assert data["summary"]["always_present"]["mae"]["mean"] == pytest.approx(num / den, rel=1e-9)
+
+
+def test_benchmark_and_compare(tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert run("--dataset", "persistence-benchmark", "-e", "always_present", "--no-references", "--seeds", "2",
+               "--out", str(a), "--quiet", "--no-plots").exit_code == 0
+    assert run("--dataset", "persistence-benchmark", "-e", "time_of_week_frequency", "--no-references",
+               "--seeds", "1", "--out", str(b), "--quiet", "--no-plots", "--setting", "predictive").exit_code == 0
+    data = json.loads((a / "results.json").read_text())
+    assert data["config"]["seeds"] == [0, 1] and data["info"]["per_seed_draws"] is True
+    res = run("compare", str(a), str(b))
+    assert res.exit_code == 0
+    lines = res.stdout.splitlines()
+    assert any(ln.startswith("a ") and "always_present" in ln and "adaptive" in ln for ln in lines)
+    assert any(ln.startswith("b ") and "time_of_week_frequency" in ln and "predictive" in ln for ln in lines)
+
+
+def test_unknown_estimator_lists_valid_names(tmp_path: Path) -> None:
+    res = run("--dataset", "persistence-benchmark", "-e", "perpetua_starr", "--out", str(tmp_path / "x"))
+    assert res.exit_code == 1
+    assert "unknown estimator 'perpetua_starr'" in res.stderr and "perpetua_star" in res.stderr
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_list_estimators() -> None:
+    res = run("--list-estimators")
+    assert res.exit_code == 0
+    names = res.stdout.split()
+    assert {"perpetua_star", "perpetua", "fremen", "persistence_filter", "last_seen"} <= set(names)
+
+
+def test_dataset_without_labels_says_which_label_command(lab: Path, tmp_path: Path) -> None:
+    res = run("--dataset", str(lab), "--labels", "privileged", "-e", "last_seen", "--no-references",
+              "--out", str(tmp_path / "x"))
+    assert res.exit_code == 1
+    assert f"run `psg-data label {lab} --source privileged` first" in res.stderr
+
+
+def test_empty_test_split(lab: Path, tmp_path: Path) -> None:
+    import shutil
+
+    root = tmp_path / "lab"
+    shutil.copytree(lab, root)
+    p = root / "tables/scans.parquet"
+    t = pq.read_table(p)
+    t = t.set_column(t.column_names.index("split"), t.schema.field("split"), pa.array(["train"] * t.num_rows))
+    pq.write_table(t, p)
+    res = run("--dataset", str(root), "-e", "last_seen", "--no-references", "--out", str(tmp_path / "x"))
+    assert res.exit_code == 1
+    assert "test split is empty" in res.stderr
+
+
+class _NaNOnOneEdge(LastSeenEstimator):
+    """A broken plugin: NaN beliefs on the first edge it is asked about."""
+
+    def make_filter(self, edge: Any) -> Any:
+        f = super().make_filter(edge)
+        if edge == ("keys", "hallway_hook"):
+            inner = f.predict
+            f.predict = lambda t: np.where(np.asarray(t) > -1, np.nan, inner(t))  # type: ignore[method-assign]
+        return f
+
+
+def test_plugin_returning_nan_is_reported_and_others_scored(tmp_path: Path) -> None:
+    register_estimator("nan_plugin_for_test", _NaNOnOneEdge, overwrite=True)
+    out = tmp_path / "res"
+    res = run("--dataset", "persistence-benchmark", "-e", "nan_plugin_for_test", "-e", "always_present",
+              "--no-references", "--seeds", "1", "--out", str(out), "--no-plots", "--quiet")
+    assert res.exit_code == 1
+    assert "estimator 'nan_plugin_for_test' seed 0 edge ('keys', 'hallway_hook'): prediction is NaN" in res.stderr
+    assert "at t_s=" in res.stderr
+    data = json.loads((out / "results.json").read_text())
+    assert data["ok"] is False and len(data["errors"]) == 1
+    csv = pd.read_csv(out / "results.csv")
+    assert (csv[csv.estimator == "always_present"].status == "ok").all()
+    plugin = csv[csv.estimator == "nan_plugin_for_test"]
+    assert (plugin.status == "error").sum() == 1 and (plugin.status == "ok").sum() == len(plugin) - 1
+
+
+def test_existing_output_needs_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "res"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    res = run("--dataset", "persistence-benchmark", "-e", "always_present", "--no-references", "--out", str(out))
+    assert res.exit_code == 1 and "output exists; pass --overwrite" in res.stderr
+    assert (out / "keep.txt").read_text() == "mine"
+
+
+def test_navigation_task(lab: Path, tmp_path: Path) -> None:
+    out = tmp_path / "nav"
+    res = run("--task", "navigation", "--dataset", str(lab), "-e", "last_seen", "--no-references", "--seeds", "1",
+              "--queries", "12", "--out", str(out), "--quiet")
+    assert res.exit_code == 0, res.output + str(res.exception)
+    assert "Static presence" in res.stdout and "oracle" in res.stdout
+    data = json.loads((out / "results.json").read_text())
+    rows = {r["method"]: r for r in data["summary"]}
+    assert {"oracle", "last_seen_map", "last_seen"} <= set(rows)
+    _assert_png(out / "map_oracle.png")
+
+
+def test_dataset_files_untouched_by_eval(lab: Path, tmp_path: Path) -> None:
+    before = sha256_file(lab / "tables/files.parquet")
+    assert run("--dataset", str(lab), "-e", "last_seen", "--no-references", "--seeds", "1", "--out",
+               str(tmp_path / "r"), "--quiet", "--no-plots").exit_code == 0
+    assert sha256_file(lab / "tables/files.parquet") == before
