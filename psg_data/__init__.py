@@ -31,7 +31,15 @@ if TYPE_CHECKING:  # pragma: no cover
     from psg_data.writers import DatasetWriter
 
 
+_SUBPACKAGES = frozenset({"datasets", "schemas", "loaders", "writers", "labeling", "estimators", "metrics", "synth",
+                          "navigation", "convert"})
+
+
 def __getattr__(name: str) -> Any:
+    if name in _SUBPACKAGES:
+        import importlib
+
+        return importlib.import_module(f"psg_data.{name}")
     if name in _LAZY:
         import importlib
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from psg_data.errors import EstimatorError, EvaluationError
 
-__all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "DatasetChoice", "resolve_dataset",
+__all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice", "resolve_dataset",
            "persistence_tasks"]
 
 BENCHMARK = "persistence-benchmark"
@@ -43,6 +43,18 @@ def parse_estimator_spec(text: str) -> EstimatorSpec:
             raise EstimatorError(f"--estimator {text!r}: expected NAME or NAME:key=value[,key=value], got {part!r}")
         settings.append((key.strip(), _literal(value.strip())))
     return EstimatorSpec(text, name.strip(), tuple(settings))
+
+
+def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
+    """``spec`` plus the task's hints that the estimator accepts and the user did not set."""
+    from psg_data.estimators import get_estimator
+
+    if not hints:
+        return spec
+    params = get_estimator(spec.name, **dict(spec.settings)).get_params()
+    given = dict(spec.settings)
+    extra = [(k, v) for k, v in hints.items() if k in params and k not in given and params[k] is None]
+    return EstimatorSpec(spec.label, spec.name, spec.settings + tuple(extra)) if extra else spec
 
 
 def check_estimators(specs: list[EstimatorSpec]) -> None:
@@ -128,7 +140,8 @@ def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], q
                 ground_truth=dict(bm.test_truth), timezone=bm.timezone, val_streams=bm.val_streams,
                 info={"dataset": BENCHMARK, "seed": s, "p_m": bm.p_m, "p_f": bm.p_f, "shift": bm.shift,
                       "edges": len(bm.edges), "ground_truth": "dense 60 s grid over the test week",
-                      "split": "week 0 validation, weeks 1-4 train, week 5 test"}))
+                      "split": "week 0 validation, weeks 1-4 train, week 5 test"},
+                estimator_hints={"schedules": bm.schedules}))
         return tasks, {"dataset": BENCHMARK, "per_seed_draws": True, **{k: v for k, v in tasks[0].info.items()
                                                                          if k not in ("seed",)}}
     from psg_data.loaders import open_dataset

@@ -12,7 +12,8 @@ __all__ = ["label_cmd"]
 @click.command("label")
 @click.argument("path", type=click.Path(exists=True, file_okay=False))
 @click.option("--source", "-s", required=True, metavar="SOURCE",
-              help="gt | privileged | noisy:P[,P_F] | detections:FILE (.parquet or .json).")
+              help="gt | privileged | noisy:P[,P_F] | observed (door states read from the depth) | "
+                   "detections:FILE (.parquet or .json).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the noise (noisy sources).")
 @click.option("--valid", "valid_file", type=click.Path(exists=True, dir_okay=False), default=None,
               help="JSON {object_id: [receptacle_id, ...]} of valid receptacles (default: the schedule's support).")
@@ -22,21 +23,25 @@ __all__ = ["label_cmd"]
               help="detections: minimum 3D IoU to match a receptacle node to an annotated box.")
 @click.option("--margin", "margin_m", type=float, default=0.10, show_default=True,
               help="detections: footprint margin of the on-top association, metres.")
+@click.option("--doors/--no-doors", default=True, show_default=True,
+              help="Also write door-state rows (door_id, 'open'/'closed') and door visibility (datasets with doors).")
 @click.option("--overwrite", is_flag=True, help="Replace labels of this source and recompute visibility.")
 @quiet_option
 @handle_errors
 def label_cmd(path: str, source: str, seed: int, valid_file: str | None, observed: str, min_iou: float,
-              margin_m: float, overwrite: bool, quiet: bool) -> None:
+              margin_m: float, doors: bool, overwrite: bool, quiet: bool) -> None:
     """Label a dataset: write tables/labels.parquet (and tables/visibility.parquet).
 
     Codes per (scan, object, receptacle): 1 present, 0 absent, -1 not observed, -2 receptacle not
-    valid for the object. Prints edges, observations per edge, code counts and the estimated
+    valid for the object. Doors are objects whose receptacles are their states ('open', 'closed').
+    Prints edges, observations per edge, code counts and the estimated
     P_M / P_F against the ground-truth schedule (95% Wilson intervals).
 
     \b
     Examples:
       psg-data label /tmp/lab --source privileged
       psg-data label /tmp/lab --source noisy:0.1 --seed 3
+      psg-data label /tmp/lab --source observed
       psg-data label /tmp/lab --source detections:/tmp/lab_detections.parquet
     """
     setup_logging(quiet)
@@ -49,7 +54,7 @@ def label_cmd(path: str, source: str, seed: int, valid_file: str | None, observe
     assoc = AssociationParams(min_iou=min_iou, margin_m=margin_m, observed=observed)
     prog = Progress("visibility", total=len(ds.scan_ids), unit="scans", quiet=quiet)
     summary = label_dataset(path, source, seed=seed, overwrite=overwrite, progress=prog, valid=valid,
-                            association=assoc)
+                            association=assoc, doors=doors)
     if prog.done:
         prog.close()
     for line in summary.lines():

@@ -146,7 +146,7 @@ def _provenance(extra: dict[str, Any]) -> dict[str, Any]:
 
 def _run_persistence(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int], jobs: int,
                      out: Path, no_plots: bool, quiet: bool) -> bool:
-    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset
+    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset, with_hints
     from psg_data.metrics import (
         RegistryFactory,
         choose_plot_edges,
@@ -160,14 +160,15 @@ def _run_persistence(specs: list[Any], dataset: str | None, setting: str, labels
 
     choice = resolve_dataset(dataset, quiet=quiet)
     tasks, info = persistence_tasks(choice, labels=labels, seeds=seeds, quiet=quiet)
-    factories = {s.label: RegistryFactory(s.name, s.settings) for s in specs}
     n_edges = len(tasks[0].ground_truth)
-    prog = Progress("evaluating", total=len(factories) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
+    prog = Progress("evaluating", total=len(specs) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
     offset = 0
     results = []
     plot_edges = choose_plot_edges(tasks[0].ground_truth, k=4)
     run_seeds = [[s] for s in seeds] if len(tasks) > 1 else [seeds]
     for task, task_seeds in zip(tasks, run_seeds):
+        factories = {s.label: RegistryFactory(s.name, with_hints(s, task.estimator_hints).settings) for s in specs}
+
         def progress(done: int, total: int, base: int = offset) -> None:
             prog.done = base + done
             prog.update(0)
@@ -176,7 +177,7 @@ def _run_persistence(specs: list[Any], dataset: str | None, setting: str, labels
             factories, task.train_streams, task.test_streams, task.ground_truth, val_streams=task.val_streams,
             setting=setting, timezone=task.timezone, seeds=task_seeds, jobs=jobs, progress=progress,
             keep_predictions=plot_edges if task is tasks[0] else ()))
-        offset += len(factories) * len(task_seeds) * len(task.ground_truth)
+        offset += len(specs) * len(task_seeds) * len(task.ground_truth)
     prog.close()
     result = results[0] if len(results) == 1 else merge_results(results)
     info = _provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **info,

@@ -46,6 +46,8 @@ class PersistenceTask:
         timezone: IANA site timezone.
         val_streams: held-out observations for model selection (FreMEn order), or None.
         info: provenance (label source, split rule, counts) stored in results.json.
+        estimator_hints: settings an estimator may use if it has them and the user did not set
+            them (e.g. ``schedules`` for the schedule prior on the benchmark).
     """
 
     name: str
@@ -55,6 +57,7 @@ class PersistenceTask:
     timezone: str
     val_streams: list[EdgeStream] | None = None
     info: dict[str, Any] = field(default_factory=dict)
+    estimator_hints: dict[str, Any] = field(default_factory=dict)
 
 
 def _split_masks(ds: Any, stamps_ns: NDArray[np.int64], scan_ids: list[str]) -> tuple[dict[str, NDArray[np.bool_]], str]:
