@@ -35,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
@@ -87,6 +87,23 @@ def _sigmoid(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.5 * (1.0 + np.tanh(0.5 * x))
 
 
+_SCALAR_MAX = 6  # batches up to this size take the scalar path
+_STEPS_AFTER_RESTART = 4  # scalar steps of a model right after it restarts
+_FIRST_CHUNK = 128  # rows of a model's first scan (after its scalar steps)
+_GROWTH = 4  # a model's next scan is this many times longer than its previous one
+_MAX_CHUNK = 512  # rows per scan (short scans waste less work when the model restarts)
+
+
+class _Track:
+    """One model's scanned rows [a, h) of the current batch and its state after row h - 1."""
+
+    __slots__ = ("a", "h", "res", "L", "p", "n0", "c")
+
+    def __init__(self, a: int, h: int, res: ScanResult, L: NDArray[np.float64], p: NDArray[np.float64], n0: int,
+                 c: int) -> None:
+        self.a, self.h, self.res, self.L, self.p, self.n0, self.c = a, h, res, L, p, n0, c
+
+
 class PerpetuaStarFilter(BaseFilter):
     """One edge of Perpetua*. See the module docstring for the equations."""
 
@@ -101,61 +118,197 @@ class PerpetuaStarFilter(BaseFilter):
         self.alpha0_per_s = float(alpha0_per_s)
         self.prior_floor = float(prior_floor)
         self._name = name
-        self.L = np.zeros(2)  # discounted log evidence [per, emg]
-        self.E = np.zeros(2)  # current mixture log evidence [per, emg]
+        self._Ls = [0.0, 0.0]  # discounted log evidence [per, emg]
+        self._Es = [0.0, 0.0]  # current mixture log evidence [per, emg]
         self.phase = -1  # filtered state after the last observation (-1: none yet)
         self.n_restarts = 0
+        self._const_logit: float | None = None
+        if isinstance(prior, ConstantPrior):
+            f = min(max(float(np.clip(prior.value, 0.0, 1.0)), self.prior_floor), 1.0 - self.prior_floor)
+            self._const_logit = math.log(f) - math.log1p(-f)
+
+    @property
+    def L(self) -> NDArray[np.float64]:
+        """Discounted model log likelihoods [persistence, emergence]."""
+        return np.array(self._Ls)
+
+    @L.setter
+    def L(self, v: ArrayLike) -> None:
+        self._Ls = [float(x) for x in np.asarray(v, dtype=np.float64).reshape(2)]
+
+    @property
+    def E(self) -> NDArray[np.float64]:
+        """Current mixture log evidences [persistence, emergence]."""
+        return np.array(self._Es)
+
+    @E.setter
+    def E(self, v: ArrayLike) -> None:
+        self._Es = [float(x) for x in np.asarray(v, dtype=np.float64).reshape(2)]
 
     # ------------------------------------------------------------------ update
     def _prior_logit(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self._const_logit is not None:
+            return np.full(t.shape, self._const_logit)
         f = np.clip(self.prior(t), self.prior_floor, 1.0 - self.prior_floor)
         return _logit(f)
 
+    def _prior_logit_one(self, t: float) -> float:
+        if self._const_logit is not None:
+            return self._const_logit
+        return float(self._prior_logit(np.array([t]))[0])
+
+    def update(self, t_s: float, y: int) -> None:
+        """One observation through the scalar path (same equations as :meth:`update_many`)."""
+        t = float(t_s)
+        if not math.isfinite(t):
+            raise EstimatorError(f"edge {self.edge}: observation times must be finite")
+        if y not in (0, 1):
+            raise EstimatorError(f"edge {self.edge}: observations must be 0 or 1")
+        if self._last_t is not None and t < self._last_t:
+            raise EstimatorError(f"edge {self.edge}: observation at t={t} is earlier than the last one at t={self._last_t}")
+        self._step(t, int(y))
+        self._last_t = t
+
+    def _step(self, t: float, y: int) -> None:
+        e_p, pp = self.per.step(t, y)
+        e_e, po = self.emg.step(t, y)
+        g = self.gamma
+        lp = g * self._Ls[0] + (e_p - self._Es[0])
+        le = g * self._Ls[1] + (e_e - self._Es[1])
+        self._Ls = [lp, le]
+        self._Es = [e_p, e_e]
+        w = 0.5 * (1.0 + math.tanh(0.5 * ((le - lp) + self._prior_logit_one(t))))
+        s = int(w * (1.0 - po) + (1.0 - w) * pp >= 0.5)
+        if self.phase < 0:
+            self.phase = s
+        elif s != self.phase:
+            self.phase = s
+            j = 0 if s == 1 else 1
+            m = self.per if j == 0 else self.emg
+            m.reset(t)
+            self._Es[j] = m.step(t, y)[0]
+            self.n_restarts += 1
+
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
+        """Batch update, equal to one :meth:`_step` per observation (up to rounding).
+
+        Each model is either *scanned* (vectorised rows ahead of the current position, computed
+        from its own state only: they stay valid until that model restarts) or *stepped* (scalar,
+        :meth:`MixtureFilter.step`). Where both are scanned, the filtered state s_i is evaluated
+        over all the rows both cover at once and its first change located. A restarted model is
+        stepped for the next few observations (the filtered state often flips straight back after
+        an isolated outlier) and then scanned again with geometrically growing lookahead; the
+        other model's rows are reused. Each restart therefore costs O(1) scalar work plus, for
+        the restarts that stick, one short scan.
+        """
         n = t.size
+        if n <= _SCALAR_MAX:
+            for ti, yv in zip(t.tolist(), y.tolist()):
+                self._step(ti, yv)
+            return
+        yi = y.astype(np.intp)
+        plogit = self._prior_logit(t)
+        models = (self.per, self.emg)
+        cmax = min(_MAX_CHUNK, _chunk_limit(self.gamma))
+        gamma = self.gamma
+        Ls, Es = self._Ls, self._Es
+
+        def scan(j: int, a: int, c: int, st: tuple[Any, ...]) -> _Track:
+            origin, tau0, l0, ly0, lsf0, e0, l_0, n0 = st
+            b = min(n, a + c)
+            origin = float(t[a]) if origin is None else origin
+            res = models[j].scan_from(origin, tau0, l0, ly0, lsf0, t[a:b], yi[a:b])
+            ev = res.log_evidence
+            inc = np.empty(b - a)
+            inc[0] = ev[0] - e0
+            np.subtract(ev[1:], ev[:-1], out=inc[1:])
+            L = discounted_cumsum(l_0, inc, gamma)
+            p = res.p_own if j == 0 else 1.0 - res.p_own
+            return _Track(a, b, res, L, p, n0, min(cmax, c * _GROWTH))
+
+        def live(j: int) -> tuple[Any, ...]:
+            m = models[j]
+            return (m.origin, m.tau, m.l, m.ly, m.lsf, Es[j], Ls[j], m.n)
+
+        def last_state(tr: _Track) -> tuple[Any, ...]:
+            r, i = tr.res, tr.h - tr.a - 1
+            return (r.origin, float(r.tau[i]), float(r.l[i]), r.ly[:, i], r.lsf[:, i], float(r.log_evidence[i]),
+                    float(tr.L[i]), tr.n0 + i + 1)
+
+        c0 = min(cmax, _FIRST_CHUNK)
+        tracks: list[_Track | None] = [scan(0, 0, c0, live(0)), scan(1, 0, c0, live(1))]
+        left = [0, 0]  # scalar steps left before a stepped model is scanned again
         pos = 0
-        cmax = _chunk_limit(self.gamma)
-        c = min(256, cmax)
+        phase = self.phase
         while pos < n:
-            j = min(n, pos + c)
-            tt, yy = t[pos:j], y[pos:j]
-            rp = self.per.scan(tt, yy)
-            re = self.emg.scan(tt, yy)
-            inc_p = np.diff(rp.log_evidence, prepend=self.E[0])
-            inc_e = np.diff(re.log_evidence, prepend=self.E[1])
-            lp = discounted_cumsum(self.L[0], inc_p, self.gamma)
-            le = discounted_cumsum(self.L[1], inc_e, self.gamma)
-            w = _sigmoid((le - lp) + self._prior_logit(tt))
-            p = w * (1.0 - re.p_own) + (1.0 - w) * rp.p_own
-            s = (p >= 0.5).astype(np.int8)
-            if self.phase < 0:
-                self.phase = int(s[0])
-            prev = np.concatenate([[self.phase], s[:-1]])
-            ch = np.flatnonzero(s != prev)
-            k = (j - pos - 1) if ch.size == 0 else int(ch[0])
-            self._commit(rp, re, lp, le, k)
-            if ch.size:
-                self.phase = int(s[k])
-                self._restart(1 if self.phase == 1 else 0, float(tt[k]), int(yy[k]))
-                c = max(16, min(cmax, 2 * (k + 1)))
-            else:
-                self.phase = int(s[-1])
-                c = min(cmax, 2 * c)
-            pos += k + 1
-
-    def _commit(self, rp: ScanResult, re: ScanResult, lp: NDArray[np.float64], le: NDArray[np.float64], k: int) -> None:
-        self.per.commit(rp, k)
-        self.emg.commit(re, k)
-        self.L[:] = (lp[k], le[k])
-        self.E[:] = (rp.log_evidence[k], re.log_evidence[k])
-
-    def _restart(self, model_per: int, t: float, y: int) -> None:
-        """Restart the persistence (model_per=1) or emergence (0) mixture at t with observation y."""
-        m = self.per if model_per else self.emg
-        m.reset(t)
-        m.update_many(np.array([t]), np.array([y]))
-        self.E[0 if model_per else 1] = m.log_evidence()
-        self.n_restarts += 1
+            for j in (0, 1):
+                tr = tracks[j]
+                if tr is None:
+                    if left[j] <= 0:
+                        tracks[j] = scan(j, pos, _FIRST_CHUNK, live(j))
+                elif tr.h <= pos:
+                    tracks[j] = scan(j, pos, tr.c, last_state(tr))
+            tp, te = tracks
+            if tp is not None and te is not None:
+                h = min(tp.h, te.h)
+                ip, ie = pos - tp.a, pos - te.a
+                m = h - pos
+                z = te.L[ie:ie + m] - tp.L[ip:ip + m]
+                z += plogit[pos:h]
+                w = _sigmoid(z)
+                s = (w * te.p[ie:ie + m] + (1.0 - w) * tp.p[ip:ip + m]) >= 0.5
+                if phase < 0:
+                    phase = int(s[0])
+                ch = s != bool(phase)
+                if not ch.any():
+                    pos = h
+                    continue
+                k = pos + int(np.argmax(ch))
+            else:  # one observation, stepping the models without rows
+                k = pos
+                tk, yk = float(t[k]), int(yi[k])
+                lv, pv = [0.0, 0.0], [0.0, 0.0]
+                for j in (0, 1):
+                    tr = tracks[j]
+                    if tr is None:
+                        e, po = models[j].step(tk, yk)
+                        Ls[j] = gamma * Ls[j] + (e - Es[j])
+                        Es[j] = e
+                        left[j] -= 1
+                        lv[j], pv[j] = Ls[j], (po if j == 0 else 1.0 - po)
+                    else:
+                        r = k - tr.a
+                        lv[j], pv[j] = float(tr.L[r]), float(tr.p[r])
+                w1 = 0.5 * (1.0 + math.tanh(0.5 * ((lv[1] - lv[0]) + float(plogit[k]))))
+                s1 = int(w1 * pv[1] + (1.0 - w1) * pv[0] >= 0.5)
+                pos = k + 1
+                if phase < 0:
+                    phase = s1
+                if s1 == phase:
+                    continue
+            # the filtered state changes at k: the model of the new state restarts at t_k
+            phase = 1 - phase
+            j = 0 if phase == 1 else 1
+            tr = tracks[j]
+            if tr is not None:
+                r = k - tr.a
+                Ls[j] = float(tr.L[r])
+                tracks[j] = None
+            mj = models[j]
+            mj.reset(float(t[k]))
+            Es[j] = mj.step(float(t[k]), int(yi[k]))[0]
+            left[j] = _STEPS_AFTER_RESTART
+            self.n_restarts += 1
+            pos = k + 1
+        self.phase = phase
+        for j, mj in enumerate(models):
+            tr = tracks[j]
+            if tr is not None:
+                i = n - 1 - tr.a
+                mj.commit(tr.res, i)
+                mj.n = tr.n0 + i + 1
+                Es[j] = float(tr.res.log_evidence[i])
+                Ls[j] = float(tr.L[i])
 
     # ------------------------------------------------------------------ predict
     def model_posterior(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -188,8 +341,8 @@ class PerpetuaStarFilter(BaseFilter):
                 gamma=s["gamma"], alpha0_per_s=s["alpha0_per_s"], prior_floor=s["prior_floor"], name=s["estimator"])
         f.per.set_state(s["per"])
         f.emg.set_state(s["emg"])
-        f.L = np.asarray(s["L"], dtype=np.float64)
-        f.E = np.asarray(s["E"], dtype=np.float64)
+        f.L = s["L"]
+        f.E = s["E"]
         f.phase = int(s["phase"])
         f.n_restarts = int(s["n_restarts"])
         f._last_t = s["last_t_s"]

@@ -7,6 +7,7 @@ All functions take durations ``t`` in seconds measured from the filter's start (
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,7 +16,27 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError
 
-__all__ = ["SurvivalMixture", "SURVIVAL_FAMILIES", "log1mexp", "log_sub_exp"]
+__all__ = ["SurvivalMixture", "SURVIVAL_FAMILIES", "log1mexp", "log_sub_exp", "log_ndtr_scalar"]
+
+_SQRT1_2 = 0.7071067811865476
+_LOG_2SQRTPI = math.log(2.0 * math.sqrt(math.pi))
+
+
+def log_ndtr_scalar(x: float) -> float:
+    """``log Phi(x)`` for one float with the math module (matches ``scipy.special.log_ndtr`` to ~1e-14).
+
+    Same split as scipy: ``log1p(-erfc(x/sqrt2)/2)`` for x >= -1, ``log(erfc(-x/sqrt2)/2)`` below,
+    and the asymptotic series of erfcx once erfc would underflow (x < -37).
+    """
+    t = x * _SQRT1_2
+    if x >= -1.0:
+        return math.log1p(-0.5 * math.erfc(t))
+    if x > -37.0:
+        return math.log(0.5 * math.erfc(-t))
+    u2 = t * t
+    r = 1.0 / u2
+    s = 1.0 + r * (-0.5 + r * (0.75 + r * (-1.875 + r * (6.5625 - r * 29.53125))))
+    return -u2 - math.log(-t) - _LOG_2SQRTPI + math.log(s)
 
 SURVIVAL_FAMILIES = ("exponential", "lognormal", "weibull", "loglogistic")
 """Families and their two parameters ``(p1, p2)``:
@@ -113,6 +134,54 @@ class SurvivalMixture:
         # log-logistic: S = 1 / (1 + (t/alpha)^beta)
         z = self.p1 * (lt - np.log(self.p2))
         return -np.logaddexp(0.0, z)
+
+    def log_sf_rows(self, tau: NDArray[np.float64]) -> NDArray[np.float64]:
+        """log S_l(tau) as a (K, n) array for (n,) durations ``tau >= 0`` (s); the filters' batch layout."""
+        f = self.family
+        if f == "exponential":
+            return -self.p1[:, None] * tau
+        with np.errstate(divide="ignore"):
+            lt = np.log(tau)
+        if f == "lognormal":
+            from scipy.special import log_ndtr
+
+            return log_ndtr((self.p1[:, None] - lt) / self.p2[:, None])
+        z = self.p1[:, None] * (lt - np.log(self.p2)[:, None])
+        if f == "weibull":
+            return -np.exp(z)
+        return -np.logaddexp(0.0, z)
+
+    def log_sf_scalar(self, tau: float) -> list[float]:
+        """log S_l(tau) for one duration ``tau`` (s) as a list of K floats (math module, no numpy).
+
+        Equals :meth:`log_sf_rows` up to rounding (~1e-14 relative); used by the filters' one-at-a-time
+        fast path, where numpy's per-call overhead dominates for a handful of components.
+        """
+        p1, p2 = self._scalar_params()
+        f = self.family
+        if f == "exponential":
+            return [-a * tau for a in p1]
+        if tau <= 0.0:
+            return [0.0] * len(p1)
+        lt = math.log(tau)
+        if f == "lognormal":
+            return [log_ndtr_scalar((a - lt) / b) for a, b in zip(p1, p2)]
+        out = []
+        for a, lb in zip(p1, p2):  # p2 holds log(scale) here
+            z = a * (lt - lb)
+            if f == "weibull":
+                out.append(-math.exp(z) if z < 709.0 else -math.inf)
+            else:
+                out.append(-(z + math.log1p(math.exp(-z))) if z > 0 else -math.log1p(math.exp(z)))
+        return out
+
+    def _scalar_params(self) -> tuple[list[float], list[float]]:
+        cached = self.__dict__.get("_scalar_cache")
+        if cached is None:
+            p2 = self.p2.tolist() if self.family in ("exponential", "lognormal") else np.log(self.p2).tolist()
+            cached = (self.p1.tolist(), p2)
+            object.__setattr__(self, "_scalar_cache", cached)
+        return cached
 
     def log_sf_one(self, t: ArrayLike, k: ArrayLike) -> NDArray[np.float64]:
         """log S_k(t) for component index ``k`` (broadcast with ``t``)."""

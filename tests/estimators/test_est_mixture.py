@@ -152,3 +152,29 @@ def test_survival_validation() -> None:
         SurvivalMixture.single("gamma", 1.0)
     with pytest.raises(EstimatorError, match="p_m must be in"):
         MixtureFilter(FAMILIES["exponential"], 0.7, 0.1)
+
+
+@pytest.mark.parametrize("family", list(FAMILIES))
+@pytest.mark.parametrize("emergence", [False, True])
+def test_scalar_step_equals_vectorised_scan(family: str, emergence: bool) -> None:
+    rng = np.random.default_rng(3)
+    t = 1.7e9 + np.cumsum(rng.uniform(10, 900, 400))
+    y = (rng.random(400) < 0.6).astype(np.int8)
+    a = MixtureFilter(FAMILIES[family], 0.1, 0.2, emergence=emergence)
+    b = MixtureFilter(FAMILIES[family], 0.1, 0.2, emergence=emergence)
+    a.update_many(t, y)
+    ev = [b.step(float(ti), int(yi))[0] for ti, yi in zip(t, y)]
+    assert ev[-1] == pytest.approx(a.log_evidence(), rel=1e-9, abs=1e-9)
+    np.testing.assert_allclose(b.component_log_evidence(), a.component_log_evidence(), rtol=1e-9, atol=1e-9)
+    q = t[-1] + np.linspace(0, 20000, 30)
+    np.testing.assert_allclose(b.predict(q), a.predict(q), atol=1e-10)
+
+
+def test_scalar_log_ndtr_matches_scipy() -> None:
+    from scipy.special import log_ndtr
+
+    from psg_data.estimators._survival import log_ndtr_scalar
+
+    x = np.concatenate([np.linspace(-200, 40, 2001), [-37.0, -36.999, -1.0, -0.999]])
+    got = np.array([log_ndtr_scalar(float(v)) for v in x])
+    np.testing.assert_allclose(got, log_ndtr(x), rtol=1e-12, atol=1e-300)

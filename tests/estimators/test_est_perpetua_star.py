@@ -159,3 +159,24 @@ def test_oracle_prior_from_ground_truth_meta() -> None:
         f.update(float(streams[0].t_s[0]), 1)
     with pytest.raises(EstimatorError, match="non-decreasing"):
         EdgeStream(("a", "b"), np.array([2.0, 1.0]), np.array([1, 0]))
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 1500), flip=st.floats(0.0, 0.4),
+       gamma=st.sampled_from([0.9, 0.99, 1.0]), cuts=st.lists(st.integers(0, 1500), max_size=6))
+def test_chunked_batches_equal_one_at_a_time(seed, n, flip, gamma, cuts) -> None:
+    """Any split of a noisy stream into update_many batches gives the scalar path's state."""
+    rng = np.random.default_rng(seed)
+    t = 1.7e9 + np.cumsum(rng.uniform(1, 7200, n))
+    x = (np.mod(t, 86400) < rng.uniform(20000, 60000)).astype(np.int8)
+    y = np.where(rng.random(n) < flip, 1 - x, x).astype(np.int8)
+    a, b = _filter(gamma=gamma), _filter(gamma=gamma)
+    edges = [0, *sorted(c for c in cuts if 0 < c < n), n]
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        if hi > lo:
+            a.update_many(t[lo:hi], y[lo:hi])
+    for ti, yi in zip(t.tolist(), y.tolist()):
+        b.update(ti, yi)
+    assert a.n_restarts == b.n_restarts and a.phase == b.phase
+    q = t[-1] + np.linspace(0, 2 * 86400, 20)
+    np.testing.assert_allclose(a.predict(q), b.predict(q), atol=1e-7)
