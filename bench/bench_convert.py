@@ -2,31 +2,46 @@
 
 Usage::
 
-    python bench/bench_convert.py                 # small (~60 MB of recordings)
-    python bench/bench_convert.py --size-mb 1000  # full run (640x480 frames)
+    python bench/bench_convert.py                          # small and fast (~60 MB, 320x240)
+    python bench/bench_convert.py --size-mb 1000           # full comparison (640x480, 8 recordings)
+    python bench/bench_convert.py --size-mb 1000 --out-dir /dev/shm   # outputs on tmpfs
+    python bench/bench_convert.py --memory-mb 2000         # peak RSS converting one 2 GB recording
 
-Rows (ratios are throughput in MB/s of input, higher is better):
-  compressed: convert (JPEG colour + compressedDepth passed through) vs iterating the raw messages
-  raw:        convert (rgb8 + 16UC1, PNG level 1) vs a minimal read/decode/encode/write loop
-  jobs:       --jobs 2 vs --jobs 1 on the raw recordings
-  memory:     peak RSS of a conversion subprocess (resource.getrusage RUSAGE_CHILDREN)
+Rows (ratios are throughput in MB/s of input, higher is better; each repeat measures the baseline
+and the conversion back to back, so they share the machine's conditions):
+  compressed vs iterate:  convert (JPEG colour + compressedDepth passed through) vs iterating all
+                          raw messages of the same recordings with rosbags (no output)
+  compressed vs write:    the same conversion vs a minimal pass-through loop (iterate, write each
+                          image payload to its own file and SHA-256 it; 2 writer threads): the floor
+                          set by the output file system
+  raw vs minimal loop:    convert (rgb8 + 16UC1, PNG level 1) vs a minimal read/encode/write loop
+  raw --jobs 2 vs 1:      the same conversion with two worker processes vs one process
+  memory:                 peak RSS of a conversion in a fresh subprocess (ru_maxrss, workers included)
+
+Recordings are ROS 1 bags exported from one synthetic canonical scan and hard-linked ``--recordings``
+times (each recording is a separate scan of the output). They are built in ``--tmp`` and deleted.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
-import resource
+import os
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+COLOR_TOPICS = ("/camera/color/image_raw", "/camera/aligned_depth_to_color/image_raw")
 
 
 def make_canonical(root: Path, n_scans: int, n_frames: int, w: int, h: int) -> Path:
@@ -55,7 +70,36 @@ def dir_size(p: Path) -> int:
     return sum(f.stat().st_size for f in p.rglob("*") if f.is_file() and f.suffix in (".bag", ".db3", ".mcap"))
 
 
+def build_recordings(tmp: Path, name: str, n_rec: int, n_frames: int, w: int, h: int, images: str) -> Path:
+    """``n_rec`` hard links of one exported recording of ``n_frames`` frames, alone in a directory."""
+    from psg_data.synth._raw_export import export_raw
+
+    canon = make_canonical(tmp / f"canon_{name}", 1, n_frames, w, h)
+    exported = export_raw(canon, tmp / f"export_{name}", "ros1", images=images)
+    shutil.rmtree(canon)
+    out = tmp / name
+    out.mkdir()
+    bag = exported / "scan_000.bag"
+    for k in range(n_rec):
+        os.link(bag, out / f"rec_{k:02d}.bag")
+    shutil.rmtree(exported)
+    return out
+
+
+def bytes_per_frame(tmp: Path, w: int, h: int) -> dict[str, float]:
+    """Recording bytes per frame for compressed and raw images, from a short probe export."""
+    from psg_data.synth._raw_export import export_raw
+
+    n = 8
+    canon = make_canonical(tmp / "probe", 1, n, w, h)
+    out = {k: dir_size(export_raw(canon, tmp / f"probe_{k}", "ros1", images=k)) / n for k in ("compressed", "raw")}
+    for d in ("probe", "probe_compressed", "probe_raw"):
+        shutil.rmtree(tmp / d)
+    return out
+
+
 def iterate_raw(rec_dir: Path) -> float:
+    """Iterate every raw message of every recording with rosbags (no deserialisation, no output)."""
     from rosbags.highlevel import AnyReader
 
     t = time.perf_counter()
@@ -64,6 +108,42 @@ def iterate_raw(rec_dir: Path) -> float:
         with AnyReader([bag]) as r:
             for _, _, raw in r.messages():
                 n += len(raw)
+    return time.perf_counter() - t
+
+
+def passthrough_floor(rec_dir: Path, out: Path) -> float:
+    """Iterate the image topics and write each payload to its own file (+ SHA-256), 2 writer threads.
+
+    What any per-image-file output costs on this file system; the payload is the serialized message
+    tail (same size as the image to within a few bytes), no parsing.
+    """
+    from rosbags.highlevel import AnyReader
+
+    def write(path: Path, data: bytes) -> str:
+        with open(path, "wb") as fh:
+            fh.write(data)
+        return hashlib.sha256(data).hexdigest()
+
+    t = time.perf_counter()
+    pool = ThreadPoolExecutor(max_workers=2)
+    pending: list[Future[str]] = []
+    for k, bag in enumerate(sorted(rec_dir.glob("*.bag"))):
+        dirs = {sub: out / "images" / f"rec_{k:02d}" / sub for sub in ("color", "depth")}
+        for d in dirs.values():
+            d.mkdir(parents=True)
+        counts = {"color": 0, "depth": 0}
+        with AnyReader([bag]) as r:
+            conns = [c for c in r.connections if c.msgtype == "sensor_msgs/msg/CompressedImage"]
+            for c, _, raw in r.messages(connections=conns):
+                sub = "depth" if "depth" in c.topic.lower() else "color"
+                path = dirs[sub] / f"{counts[sub]:06d}.{'png' if sub == 'depth' else 'jpg'}"
+                counts[sub] += 1
+                pending.append(pool.submit(write, path, bytes(memoryview(raw)[64:])))
+                if len(pending) > 8:
+                    pending.pop(0).result()
+    for f in pending:
+        f.result()
+    pool.shutdown()
     return time.perf_counter() - t
 
 
@@ -79,8 +159,7 @@ def minimal_raw_loop(rec_dir: Path, out: Path) -> float:
     k = 0
     for bag in sorted(rec_dir.glob("*.bag")):
         with AnyReader([bag]) as r:
-            conns = [c for c in r.connections if c.topic in ("/camera/color/image_raw",
-                                                              "/camera/aligned_depth_to_color/image_raw")]
+            conns = [c for c in r.connections if c.topic in COLOR_TOPICS]
             for c, _, raw in r.messages(connections=conns):
                 m = r.deserialize(raw, c.msgtype)
                 if m.encoding == "rgb8":
@@ -101,50 +180,119 @@ def timed_convert(src: Path, out: Path, jobs: int) -> float:
     return time.perf_counter() - t
 
 
-def peak_rss_convert(src: Path, out: Path) -> float:
-    code = ("import sys; sys.path.insert(0, %r); from psg_data.convert import convert; convert(%r, %r)"
-            % (str(Path(__file__).resolve().parents[1]), str(src), str(out)))
-    subprocess.run([sys.executable, "-c", code], check=True)
-    return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0  # MiB (Linux: KiB)
+_RSS_CODE = """
+import json, resource, sys, time
+sys.path.insert(0, {root!r})
+from psg_data.convert import convert
+t = time.perf_counter()
+convert({src!r}, {out!r}, jobs={jobs})
+print(json.dumps({{"seconds": time.perf_counter() - t,
+                  "self_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+                  "children_kib": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}}))
+"""
+
+
+def peak_rss_convert(src: Path, out: Path, jobs: int = 1) -> dict[str, float]:
+    """Peak RSS (MiB) of a conversion run in a fresh interpreter (largest of parent and workers)."""
+    code = _RSS_CODE.format(root=str(ROOT), src=str(src), out=str(out), jobs=jobs)
+    res = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    r = json.loads(res.stdout.strip().splitlines()[-1])
+    return {"seconds": r["seconds"], "peak_rss_mib": max(r["self_kib"], r["children_kib"]) / 1024.0}
+
+
+def _rm(*paths: Path) -> None:
+    for p in paths:
+        shutil.rmtree(p, ignore_errors=True)
+        shutil.rmtree(p.with_name(p.name + ".partial"), ignore_errors=True)
+
+
+def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat: int) -> dict[str, object]:
+    w, h = (640, 480) if size_mb >= 500 else (320, 240)
+    per = bytes_per_frame(tmp, w, h)
+    n_cmp = max(4, round(size_mb * 1e6 / per["compressed"] / n_rec))
+    n_raw = max(4, round(size_mb * 1e6 / per["raw"] / n_rec))
+    print(f"building {n_rec} recordings x {n_cmp} frames (compressed) and x {n_raw} frames (raw), {w}x{h}, "
+          f"in {tmp} ...", file=sys.stderr)
+    rec_cmp = build_recordings(tmp, "rec_cmp", n_rec, n_cmp, w, h, "compressed")
+    rec_raw = build_recordings(tmp, "rec_raw", n_rec, n_raw, w, h, "raw")
+    mb_cmp, mb_raw = dir_size(rec_cmp) / 1e6, dir_size(rec_raw) / 1e6
+    o = out_dir
+    reps: list[dict[str, float]] = []
+    for k in range(repeat):
+        r: dict[str, float] = {}
+        r["iterate"] = iterate_raw(rec_cmp)
+        r["convert_cmp"] = timed_convert(rec_cmp, o / "out_cmp", 1)
+        _rm(o / "out_cmp")
+        r["floor_write"] = passthrough_floor(rec_cmp, o / "floor")
+        _rm(o / "floor")
+        r["minimal_raw"] = minimal_raw_loop(rec_raw, o / "minimal")
+        _rm(o / "minimal")
+        r["convert_raw_j1"] = timed_convert(rec_raw, o / "out_raw1", 1)
+        _rm(o / "out_raw1")
+        r["convert_raw_j2"] = timed_convert(rec_raw, o / "out_raw2", 2)
+        _rm(o / "out_raw2")
+        reps.append(r)
+        print(f"repeat {k + 1}/{repeat}: " + ", ".join(f"{n} {v:.2f}s" for n, v in r.items()), file=sys.stderr)
+    rows = []
+    for name, mb, conv, base, tgt in (
+        ("compressed: convert vs iterate raw msgs", mb_cmp, "convert_cmp", "iterate", 0.5),
+        ("compressed: convert vs pass-through write", mb_cmp, "convert_cmp", "floor_write", None),
+        ("raw: convert vs minimal loop", mb_raw, "convert_raw_j1", "minimal_raw", 0.7),
+        ("raw: --jobs 2 vs --jobs 1", mb_raw, "convert_raw_j2", "convert_raw_j1", 1.6),
+    ):
+        ratios = [r[base] / r[conv] for r in reps]
+        rows.append({"case": name, "mb": mb, "convert_s": [r[conv] for r in reps], "base_s": [r[base] for r in reps],
+                     "ratios": ratios, "target": tgt})
+    print(f"\ninput: compressed {mb_cmp:.0f} MB ({n_rec} x {n_cmp} frames), raw {mb_raw:.0f} MB "
+          f"({n_rec} x {n_raw} frames), {w}x{h}; outputs in {out_dir}; {os.cpu_count()} CPUs, "
+          f"load average {os.getloadavg()[0]:.2f}")
+    print(f"{'case':44s} {'MB/s':>8s} {'base MB/s':>10s} {'ratio (median, each repeat)':>30s} {'target':>7s}")
+    for row in rows:
+        c, b = float(np.median(row["convert_s"])), float(np.median(row["base_s"]))
+        each = " ".join(f"{x:.2f}" for x in row["ratios"])
+        tgt = f">={row['target']}" if row["target"] else "-"
+        print(f"{row['case']:44s} {row['mb'] / c:8.1f} {row['mb'] / b:10.1f} "
+              f"{float(np.median(row['ratios'])):7.2f} ({each}) {tgt:>7s}")
+    return {"size": {"mb_cmp": mb_cmp, "mb_raw": mb_raw, "recordings": n_rec, "frames_cmp": n_cmp,
+                     "frames_raw": n_raw, "width": w, "height": h}, "repeats": reps, "rows": rows}
+
+
+def run_memory(tmp: Path, out_dir: Path, memory_mb: float, jobs: int) -> dict[str, object]:
+    w, h = 640, 480
+    per = bytes_per_frame(tmp, w, h)["raw"]
+    n = max(4, round(memory_mb * 1e6 / per))
+    print(f"building one raw recording of {n} frames {w}x{h} in {tmp} ...", file=sys.stderr)
+    rec = build_recordings(tmp, "rec_mem", 1, n, w, h, "raw")
+    mb = dir_size(rec) / 1e6
+    r = peak_rss_convert(rec / "rec_00.bag", out_dir / "out_mem", jobs)
+    _rm(out_dir / "out_mem")
+    print(f"\nmemory: converting one {mb:.0f} MB raw recording ({n} frames {w}x{h}, --jobs {jobs}) took "
+          f"{r['seconds']:.1f} s; peak RSS {r['peak_rss_mib']:.0f} MiB (target <= 1024 MiB)")
+    return {"mb": mb, "frames": n, **r}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--size-mb", type=float, default=60.0, help="target size of the raw recordings")
-    ap.add_argument("--scans", type=int, default=4)
-    ap.add_argument("--tmp", type=Path, default=None)
+    ap.add_argument("--size-mb", type=float, default=60.0, help="total size of each set of recordings")
+    ap.add_argument("--recordings", type=int, default=8, help="recordings per set")
+    ap.add_argument("--repeat", type=int, default=None, help="repeats of each comparison (default 1 small, 2 full)")
+    ap.add_argument("--memory-mb", type=float, default=None, help="run only the memory test on a recording this big")
+    ap.add_argument("--jobs", type=int, default=1, help="--jobs of the memory test")
+    ap.add_argument("--tmp", type=Path, default=None, help="where to build the recordings (default: system tmp)")
+    ap.add_argument("--out-dir", type=Path, default=None, help="where conversions write (default: beside inputs)")
     args = ap.parse_args()
-    from psg_data.synth._raw_export import export_raw
-
-    w, h = (640, 480) if args.size_mb >= 500 else (320, 240)
-    per_frame = w * h * 5 * 1.02  # rgb8 + 16UC1 message bytes
-    n_frames = max(4, int(args.size_mb * 1e6 / per_frame / args.scans))
-    tmp = Path(tempfile.mkdtemp(dir=args.tmp))
+    tmp = Path(tempfile.mkdtemp(prefix="psg_bench_convert_", dir=args.tmp))
+    out_dir = Path(tempfile.mkdtemp(prefix="psg_bench_out_", dir=args.out_dir)) if args.out_dir else tmp
     try:
-        print(f"building {args.scans} scans x {n_frames} frames of {w}x{h} in {tmp} ...", file=sys.stderr)
-        canon = make_canonical(tmp / "canon", args.scans, n_frames, w, h)
-        rec_raw = export_raw(canon, tmp / "rec_raw", "ros1", images="raw")
-        rec_cmp = export_raw(canon, tmp / "rec_cmp", "ros1", images="compressed")
-        mb_raw, mb_cmp = dir_size(rec_raw) / 1e6, dir_size(rec_cmp) / 1e6
-        rows = []
-        t_it = iterate_raw(rec_cmp)
-        t_cv = timed_convert(rec_cmp, tmp / "out_cmp", 1)
-        rows.append(("compressed: convert vs iterate raw msgs", mb_cmp / t_cv, mb_cmp / t_it, t_it / t_cv, 0.5))
-        t_min = minimal_raw_loop(rec_raw, tmp / "minimal")
-        t_cr = timed_convert(rec_raw, tmp / "out_raw1", 1)
-        rows.append(("raw: convert vs minimal loop", mb_raw / t_cr, mb_raw / t_min, t_min / t_cr, 0.7))
-        t_j2 = timed_convert(rec_raw, tmp / "out_raw2", 2)
-        rows.append(("raw: --jobs 2 vs --jobs 1", mb_raw / t_j2, mb_raw / t_cr, t_cr / t_j2, 1.6))
-        shutil.rmtree(tmp / "out_raw2")
-        rss = peak_rss_convert(rec_raw, tmp / "out_mem")
-        print(f"\ninput: raw {mb_raw:.0f} MB, compressed {mb_cmp:.0f} MB, {args.scans * n_frames} frames {w}x{h}")
-        print(f"{'case':42s} {'MB/s':>8s} {'base MB/s':>10s} {'ratio':>7s} {'target':>7s}")
-        for name, a, b, r, tgt in rows:
-            print(f"{name:42s} {a:8.1f} {b:10.1f} {r:7.2f} {'>=' + str(tgt):>7s}")
-        print(f"{'peak RSS converting ' + f'{mb_raw:.0f} MB (MiB)':42s} {rss:8.0f}")
-        print(json.dumps({"rows": rows, "peak_rss_mib": rss, "mb_raw": mb_raw, "mb_cmp": mb_cmp}))
+        if args.memory_mb:
+            res = run_memory(tmp, out_dir, args.memory_mb, args.jobs)
+        else:
+            repeat = args.repeat or (2 if args.size_mb >= 500 else 1)
+            res = run_comparison(tmp, out_dir, args.size_mb, args.recordings, repeat)
+        print(json.dumps(res))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(out_dir, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -141,13 +141,24 @@ def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None
     return read_side_files(d), d
 
 
+def _init_worker() -> None:
+    """Worker set-up: one OpenCV thread per worker (the workers already use the cores; OpenCV's own
+    thread pool on top would oversubscribe them), and the heavy imports done once, up front."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    import rosbags.highlevel  # noqa: F401
+
+    import psg_data.writers  # noqa: F401
+
+
 def _run_parallel(tasks: list[ScanTask], jobs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
     import multiprocessing
     from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 
     results: list[ScanResult] = []
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx, initializer=_init_worker) as pool:
         futs = {pool.submit(run_task, t): t for t in tasks}
         pending = set(futs)
         while pending:
@@ -253,13 +264,14 @@ def convert(
             results = _run_parallel(tasks, jobs, progress)
         else:
             results = [r for t in tasks for r in run_task(t, progress)]
-        # scans written now or by an interrupted run: records from the writer, cameras from our state
-        completed = writer.completed_scans()
+        # scans written now or by an interrupted run: records from the writer, cameras from our state.
+        # Scans written now were checksummed from memory and resumed ones verified above: no re-read.
+        new_ids = {r.scan_id for r in results}
+        completed = writer.completed_scans(trusted=new_ids | set(completed))
         by_scan: dict[str, ScanResult] = {}
         for f in (tmp / STATE_DIR).glob("*.json"):
             if f.name != _STATE_FILE:
                 by_scan[f.stem] = ScanResult(**json.loads(f.read_text()))
-        new_ids = {r.scan_id for r in results}
         cameras: dict[str, dict[str, Any]] = {}
         skipped: Counter[str] = Counter()
         passthrough: Counter[str] = Counter()

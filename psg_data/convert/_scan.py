@@ -27,6 +27,7 @@ from psg_data.convert._config import ConvertConfig, parse_keyframes, parse_pose_
 from psg_data.errors import ConversionError
 from psg_data.loaders.raw._folders import FolderRecording, read_scannet_folder, read_tum_folder, read_tum_poses
 from psg_data.loaders.raw._images import (
+    EncodedInfo,
     compressed_depth_png,
     decode_color_image,
     decode_compressed_color,
@@ -305,10 +306,8 @@ class _PoseSource:
         return T
 
 
-def _png_or_jpeg_passthrough(data: bytes, encoding: str) -> bool:
-    info = inspect_encoded(data)
-    if info is None:
-        return False
+def _passthrough_ok(info: EncodedInfo, encoding: str) -> bool:
+    """Whether an encoded colour image can be stored as is in a dataset of ``encoding``."""
     if encoding == "jpeg":
         return info.kind == "jpeg" and info.channels == 3 and info.bit_depth == 8
     return info.kind == "png" and info.channels == 3 and info.bit_depth == 8
@@ -329,9 +328,8 @@ class _FrameWriter:
             arr = decode_color_image(p.obj, where)
             return None, arr, (arr.shape[1], arr.shape[0])
         data = bytes(memoryview(p.obj)) if p.kind == "bytes" else Path(p.obj).read_bytes()
-        if _png_or_jpeg_passthrough(data, self.encoding):
-            info = inspect_encoded(data)
-            assert info is not None
+        info = inspect_encoded(data)
+        if info is not None and _passthrough_ok(info, self.encoding):
             self.passthrough["color"] += 1
             return data, None, (info.width, info.height)
         arr = decode_compressed_color(data, p.fmt or "file", where)
@@ -558,20 +556,26 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
             for conn, log_t, raw in rec.raw_messages(wanted):
                 topic = conn.topic
                 pending_bytes += len(raw)
+                if topic == color_t or topic == depth_t:
+                    if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
+                        ci = rec.compressed_image(raw, topic)
+                        stamp, frame_id, payload = ci.stamp_ns, ci.frame_id, _Payload("bytes", ci.data, ci.format)
+                    else:
+                        msg = rec.deserialize(raw, conn.msgtype, topic)
+                        stamp, frame_id, payload = _stamp(msg.header), str(msg.header.frame_id), _Payload("msg", msg)
+                    if topic == color_t:
+                        asm.add_color(stamp, payload)
+                        if not poses.optical:
+                            poses.optical = cfg.camera_frame or frame_id.lstrip("/")
+                    else:
+                        asm.add_depth(stamp, payload)
+                    emit(log_t - window)
+                    continue
+                if topic == info_t and sink.camera is not None:  # intrinsics come from the first CameraInfo
+                    emit(log_t - window)
+                    continue
                 msg = rec.deserialize(raw, conn.msgtype, topic)
-                if topic == color_t:
-                    if conn.msgtype == _COMPRESSED:
-                        asm.add_color(_stamp(msg.header), _Payload("bytes", msg.data, msg.format))
-                    else:
-                        asm.add_color(_stamp(msg.header), _Payload("msg", msg))
-                    if not poses.optical:
-                        poses.optical = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
-                elif topic == depth_t:
-                    if conn.msgtype == _COMPRESSED:
-                        asm.add_depth(_stamp(msg.header), _Payload("bytes", msg.data, msg.format))
-                    else:
-                        asm.add_depth(_stamp(msg.header), _Payload("msg", msg))
-                elif topic == info_t:
+                if topic == info_t:
                     if sink.camera is None:
                         frame_id = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
                         cid = task.camera_ids.get(frame_id) or cfg.camera_id or "camera"

@@ -12,11 +12,12 @@ import sqlite3
 import struct
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from psg_data.errors import ConversionError
 
-__all__ = ["RosRecording", "recording_format", "find_recordings", "RECORDING_FORMATS"]
+__all__ = ["RosRecording", "recording_format", "find_recordings", "RECORDING_FORMATS", "CompressedFields",
+           "parse_compressed_image"]
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,74 @@ def find_recordings(directory: str | Path) -> list[tuple[Path, str]]:
         raise ConversionError(f"{d}: directory mixes recording formats ({counts}); expected one format per "
                               f"directory")
     return found
+
+
+class CompressedFields(NamedTuple):
+    """The fields of a ``sensor_msgs/CompressedImage`` the converter needs."""
+
+    stamp_ns: int
+    """``header.stamp`` as int64 nanoseconds."""
+    frame_id: str
+    format: str
+    data: memoryview
+    """The encoded image: a zero-copy view of the serialized message."""
+
+
+_U32 = struct.Struct("<I")
+_STAMP = struct.Struct("<iI")
+
+
+def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFields | None:
+    """Read header stamp, frame id, format and data of a serialized ``CompressedImage`` directly.
+
+    Skips the generic deserialiser (which builds the whole message object); the image bytes stay a
+    view of ``raw``. Returns None whenever the bytes do not follow the expected layout exactly (the
+    caller then falls back to the full deserialiser, which reports errors).
+
+    Args:
+        raw: one serialized message: ROS 1 (``cdr=False``) or little-endian CDR with its 4-byte
+            encapsulation header (``cdr=True``).
+        cdr: serialization of ``raw``.
+    """
+    mv = memoryview(raw)
+    n = len(mv)
+    try:
+        if cdr:
+            if n < 4 or mv[0] != 0 or mv[1] != 1:  # CDR_LE / PL_CDR_LE only
+                return None
+            b = mv[4:]
+            n -= 4
+            sec, nsec = _STAMP.unpack_from(b, 0)
+            (ln,) = _U32.unpack_from(b, 8)
+            if ln < 1 or 12 + ln > n:
+                return None
+            frame_id = bytes(b[12:12 + ln - 1]).decode()
+            o = (12 + ln + 3) & ~3
+            (ln,) = _U32.unpack_from(b, o)
+            if ln < 1 or o + 4 + ln > n:
+                return None
+            fmt = bytes(b[o + 4:o + 3 + ln]).decode()
+            o = (o + 4 + ln + 3) & ~3
+        else:
+            b = mv
+            _, sec, nsec = struct.unpack_from("<III", b, 0)
+            (ln,) = _U32.unpack_from(b, 12)
+            if 16 + ln > n:
+                return None
+            frame_id = bytes(b[16:16 + ln]).decode()
+            o = 16 + ln
+            (ln,) = _U32.unpack_from(b, o)
+            if o + 4 + ln > n:
+                return None
+            fmt = bytes(b[o + 4:o + 4 + ln]).decode()
+            o += 4 + ln
+        (ln,) = _U32.unpack_from(b, o)
+        end = o + 4 + ln
+        if end > n or n - end > 3:  # CDR may pad the end to 4 bytes; nothing else may follow
+            return None
+        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), frame_id, fmt, b[o + 4:end])
+    except (struct.error, UnicodeDecodeError):
+        return None
 
 
 def _wrap(path: Path, exc: BaseException) -> ConversionError:
@@ -151,6 +220,19 @@ class RosRecording:
             return self._reader.deserialize(raw, msgtype)
         except Exception as exc:
             raise ConversionError(f"{self.path}: {topic}: cannot deserialize a {msgtype} message ({exc})") from exc
+
+    def compressed_image(self, raw: bytes, topic: str) -> CompressedFields:
+        """Stamp, frame id, format and data of a serialized ``sensor_msgs/CompressedImage``.
+
+        Uses :func:`parse_compressed_image` and falls back to the full deserialiser.
+        """
+        fields = parse_compressed_image(raw, self._reader.is2)
+        if fields is not None:
+            return fields
+        msg = self.deserialize(raw, "sensor_msgs/msg/CompressedImage", topic)
+        h = msg.header
+        return CompressedFields(int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec), str(h.frame_id),
+                                str(msg.format), memoryview(msg.data))
 
     def messages(self, topics: Collection[str] = ()) -> Iterator[tuple[str, str, int, Any]]:
         """``(topic, msgtype, log_time_ns, message)`` in log-time order."""
