@@ -5,6 +5,7 @@ Main entry points:
     compute_labels(ds, source)               the same without writing (returns a LabelGrid)
     label_streams(ds, source) / load_label_streams(ds)   EdgeStream objects for estimators
     compute_visibility(ds)                   what each scan saw of every receptacle top surface
+    observe_doors(ds)                        door visibility and open/closed state read from the depth
     error_rates(labels, gt)                  P_M / P_F with confidence intervals
 """
 
@@ -28,6 +29,18 @@ from psg_data.labeling._codes import (
     valid_mask,
 )
 from psg_data.labeling._detections import DETECTION_COLUMNS, Detections, read_detections
+from psg_data.labeling._doors import (
+    DOOR_EDGE_STATES,
+    DoorObservations,
+    DoorParams,
+    DoorwaySamples,
+    door_ground_truth,
+    door_label_grid,
+    door_visibility_from_table,
+    doorway_samples,
+    is_door_row,
+    observe_doors,
+)
 from psg_data.labeling._geometry import (
     SurfaceSamples,
     box_iou,
@@ -64,6 +77,8 @@ __all__ = [
     "ErrorRates", "LabelGrid", "binomial_interval", "error_rates", "ground_truth", "inject_noise", "privileged_codes",
     "schedule_support", "valid_mask",
     "DETECTION_COLUMNS", "Detections", "read_detections",
+    "DOOR_EDGE_STATES", "DoorObservations", "DoorParams", "DoorwaySamples", "door_ground_truth", "door_label_grid",
+    "door_visibility_from_table", "doorway_samples", "is_door_row", "observe_doors",
     "SurfaceSamples", "box_iou", "box_iou_matrix", "box_surface_samples", "convex_polygon_intersection",
     "is_yaw_only", "polygon_area", "top_face_samples",
     "LabelResult", "LabelSummary", "SourceSpec", "compute_labels", "grid_streams", "label_dataset", "label_streams",

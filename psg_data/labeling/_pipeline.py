@@ -7,6 +7,16 @@ Sources (``source`` strings, also the ``--source`` of ``psg-data label``):
 * ``noisy:P`` or ``noisy:P_M,P_F``: privileged codes with observed codes flipped (present -> absent
   with P_M, absent -> present with P_F), seeded.
 * ``detections:FILE``: the perception path from a detections file (Parquet or JSON).
+* ``observed``: door states read from the depth images only (no object rows; see
+  :mod:`psg_data.labeling._doors`).
+
+Doors (datasets with a ``doors`` table): a door is a semi-static "object" whose "receptacles" are
+its states, so ``gt``, ``privileged``, ``noisy`` and ``observed`` also produce door-state rows
+(``object_id`` = door_id, ``receptacle_id`` = 'open' / 'closed', same codes) in the same source,
+and the ``visibility`` table gets rows of kind 'door'. ``gt`` needs the ``door_states`` table;
+``privileged`` / ``noisy`` use the door visibility; ``observed`` reads the state from the depth.
+Pass ``doors=False`` to leave doors out. :func:`load_label_streams` / :func:`label_streams`
+return object streams by default, door streams with ``doors="only"`` and both with ``doors=True``.
 
 The ``labels`` table can hold several sources side by side (its ``source`` column); labelling with
 a source already in the table needs ``overwrite``. The ``visibility`` table is computed once and
@@ -30,6 +40,14 @@ from psg_data.estimators._base import EdgeStream
 from psg_data.labeling._association import AssociationParams, PerceptionInfo, perception_labels
 from psg_data.labeling._codes import ErrorRates, LabelGrid, error_rates, ground_truth, inject_noise, privileged_codes
 from psg_data.labeling._detections import read_detections
+from psg_data.labeling._doors import (
+    DoorObservations,
+    DoorParams,
+    door_label_grid,
+    door_visibility_from_table,
+    is_door_row,
+    observe_doors,
+)
 from psg_data.schemas._tables import CODE_ABSENT, CODE_PRESENT, TABLES
 from psg_data.labeling._visibility import VisibilityParams, compute_visibility, visibility_matrix
 from psg_data.schemas._records import Box
@@ -72,7 +90,7 @@ def parse_source(source: str) -> SourceSpec:
         LabelingError: anything else.
     """
     s = str(source).strip()
-    if s in ("gt", "privileged"):
+    if s in ("gt", "privileged", "observed"):
         return SourceSpec(s)
     if s.startswith("noisy:"):
         parts = s[len("noisy:"):].split(",")
@@ -85,7 +103,7 @@ def parse_source(source: str) -> SourceSpec:
         return SourceSpec("noisy", vals[0], vals[-1])
     if s.startswith("detections:") and len(s) > len("detections:"):
         return SourceSpec("detections", path=s[len("detections:"):])
-    raise LabelingError(f"source {s!r}: expected gt, privileged, noisy:P[,P_F] or detections:FILE")
+    raise LabelingError(f"source {s!r}: expected gt, privileged, noisy:P[,P_F], observed or detections:FILE")
 
 
 @dataclass
@@ -98,7 +116,12 @@ class LabelResult:
         visibility: visibility table (None if the source did not need it).
         perception: diagnostics of the perception path.
         timings: seconds per stage.
-        visibility_reused: the visibility table came from the dataset.
+        visibility_reused: the visibility table came from the dataset (unchanged).
+        doors: door-state label grid of the source (None without doors or with ``doors=False``).
+        door_gt: door ground truth (None without a door_states table).
+        door_observations: door observations when they were computed.
+        door_visibility: visibility rows of kind 'door' computed in this run and not yet in
+            ``visibility`` (:func:`label_dataset` appends them to the stored table).
     """
 
     labels: LabelGrid
@@ -107,6 +130,10 @@ class LabelResult:
     perception: PerceptionInfo | None = None
     timings: dict[str, float] = field(default_factory=dict)
     visibility_reused: bool = False
+    doors: LabelGrid | None = None
+    door_gt: LabelGrid | None = None
+    door_observations: DoorObservations | None = None
+    door_visibility: Any = None
 
 
 def _open(dataset: Any) -> Any:
@@ -121,7 +148,8 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
                    valid: Mapping[str, Sequence[str]] | None = None,
                    object_boxes: Mapping[str, Mapping[str, Box]] | None = None,
                    visibility: Any = None, reuse_visibility: bool = True,
-                   progress: Callable[..., Any] | None = None) -> LabelResult:
+                   progress: Callable[..., Any] | None = None, doors: bool = True,
+                   door_params: DoorParams | None = None) -> LabelResult:
     """Compute the label grid of one source (nothing is written).
 
     Args:
@@ -136,6 +164,8 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
         reuse_visibility: use the dataset's ``visibility`` table if it exists (and no
             ``object_boxes`` are given).
         progress: called as ``progress(1)`` per scan of the visibility pass.
+        doors: also label the doors (datasets with a doors table; module docstring).
+        door_params: thresholds of the door observation.
     """
     ds = _open(dataset)
     spec = parse_source(source) if isinstance(source, str) else source
@@ -143,11 +173,14 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
     t0 = time.perf_counter()
     gt = None
     has_schedule = ds.has_table("schedule") and ds.table("schedule").num_rows > 0
+    has_doors = ds.has_table("doors") and ds.table("doors").num_rows > 0
+    if spec.kind == "observed" and not has_doors:
+        raise LabelingError(f"source 'observed': {ds.root}/tables/doors.parquet has no doors to observe")
     if spec.kind in ("gt", "privileged", "noisy") or has_schedule:
         gt = ground_truth(ds, valid)
     timings["ground_truth"] = time.perf_counter() - t0
     assoc = association or AssociationParams()
-    need_vis = spec.kind in ("privileged", "noisy") or (spec.kind == "detections" and assoc.observed != "matched")
+    need_vis = spec.kind in ("privileged", "noisy", "observed") or (spec.kind == "detections" and assoc.observed != "matched")
     reused = False
     if need_vis and visibility is None:
         if reuse_visibility and object_boxes is None and ds.has_table("visibility"):
@@ -164,6 +197,9 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
     if spec.kind == "gt":
         assert gt is not None
         labels = gt
+    elif spec.kind == "observed":  # doors only: an object grid without objects
+        labels = LabelGrid(scan_ids, [], rec_ids, np.array([ds.scan(s).start_stamp_ns for s in scan_ids], np.int64),
+                           np.zeros((len(scan_ids), 0, len(rec_ids)), np.int8), "observed")
     elif spec.kind in ("privileged", "noisy"):
         assert gt is not None and rec_vis is not None
         obj_vis = None
@@ -181,7 +217,40 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
         labels, perception = perception_labels(ds, det, assoc, receptacle_visible=rec_vis, source=spec.name)
         labels.meta["file"] = str(spec.path)
     timings["codes"] = time.perf_counter() - t1
-    return LabelResult(labels, gt, visibility, perception, timings, reused)
+    res = LabelResult(labels, gt, visibility, perception, timings, reused)
+    if doors and has_doors and spec.kind != "detections":
+        _label_doors(ds, spec, res, seed, door_params, progress)
+    return res
+
+
+def _label_doors(ds: Any, spec: SourceSpec, res: LabelResult, seed: int, params: DoorParams | None,
+                 progress: Callable[..., Any] | None) -> None:
+    """Fill ``res.doors`` / ``res.door_gt`` (and door rows of ``res.visibility``) for ``spec``."""
+    t0 = time.perf_counter()
+    has_states = ds.has_table("door_states") and ds.table("door_states").num_rows > 0
+    if spec.kind in ("gt", "privileged", "noisy") and not has_states:
+        log.warning("%s/tables/door_states.parquet: missing or empty; no door labels for source %s", ds.root, spec.name)
+        return
+    door_ids, scan_ids = list(ds.doors), list(ds.scan_ids)
+    if has_states:
+        res.door_gt = door_label_grid(ds, "gt")
+    if spec.kind == "gt":
+        res.doors = door_label_grid(ds, "gt")
+        return
+    vis = door_visibility_from_table(res.visibility, scan_ids, door_ids) if res.visibility is not None else None
+    obs = None
+    if vis is None or spec.kind == "observed":
+        obs = observe_doors(ds, params)
+        res.door_observations = obs
+        vis = obs.visible
+        if res.visibility is None or door_visibility_from_table(res.visibility, scan_ids, door_ids) is None:
+            res.door_visibility = obs.visibility_table()
+    if spec.kind == "observed":
+        res.doors = door_label_grid(ds, "observed", observations=obs)
+    else:
+        res.doors = door_label_grid(ds, spec.kind, source=spec.name, visible=vis, p_m=spec.p_m, p_f=spec.p_f,
+                                    seed=seed)
+    res.timings["doors"] = time.perf_counter() - t0
 
 
 # -- streams -------------------------------------------------------------------------------------
@@ -203,21 +272,46 @@ def grid_streams(grid: LabelGrid) -> list[EdgeStream]:
     return out
 
 
-def label_streams(dataset: Any, source: str = "privileged", **kwargs: Any) -> list[EdgeStream]:
-    """Edge streams of a label source computed on the fly (nothing written; see :func:`compute_labels`)."""
-    return grid_streams(compute_labels(dataset, source, **kwargs).labels)
+_DOOR_OPTIONS = (False, True, "only")
 
 
-def load_label_streams(dataset: Any, source: str | None = None) -> list[EdgeStream]:
+def _check_doors_option(doors: Any) -> None:
+    if not any(doors is o or (isinstance(o, str) and doors == o) for o in _DOOR_OPTIONS):
+        raise LabelingError(f"doors={doors!r}: expected False (objects), True (objects and doors) or 'only'")
+
+
+def label_streams(dataset: Any, source: str = "privileged", *, doors: bool | str = False,
+                  **kwargs: Any) -> list[EdgeStream]:
+    """Edge streams of a label source computed on the fly (nothing written; see :func:`compute_labels`).
+
+    Args:
+        dataset: a dataset or its path.
+        source: label source.
+        doors: False: object edges; True: object then door edges; ``"only"``: door edges
+            ``(door_id, 'open')`` and ``(door_id, 'closed')``.
+        **kwargs: passed to :func:`compute_labels`.
+    """
+    _check_doors_option(doors)
+    res = compute_labels(dataset, source, doors=doors is not False, **kwargs)
+    out = [] if doors == "only" else grid_streams(res.labels)
+    if doors is not False and res.doors is not None:
+        out += grid_streams(res.doors)
+    return out
+
+
+def load_label_streams(dataset: Any, source: str | None = None, *, doors: bool | str = False) -> list[EdgeStream]:
     """Edge streams from the dataset's ``labels`` table.
 
     Args:
         dataset: a :class:`~psg_data.loaders.Dataset` or its path.
         source: the ``source`` value to read; may be omitted when the table holds one source.
+        doors: False: object edges only (door-state rows are left out); True: object then door
+            edges; ``"only"``: door edges ``(door_id, 'open')`` and ``(door_id, 'closed')``.
 
     Raises:
         LabelingError: no labels table, or ``source`` missing / ambiguous.
     """
+    _check_doors_option(doors)
     ds = _open(dataset)
     if not ds.has_table("labels"):
         raise LabelingError(f"{ds.root}/tables/labels.parquet: missing; run `psg-data label {ds.root} --source ...` "
@@ -228,7 +322,27 @@ def load_label_streams(dataset: Any, source: str | None = None) -> list[EdgeStre
         if len(sources) != 1:
             raise LabelingError(f"{ds.root}/tables/labels.parquet: holds sources {sources}; choose one with source=")
         source = sources[0]
-    return grid_streams(LabelGrid.from_table(t, source))
+    import pyarrow.compute as pc
+
+    t = t.filter(pc.equal(t.column("source"), source))
+    if t.num_rows == 0:
+        raise LabelingError(f"labels: no rows of source {source!r}; sources present: {sources or 'none'}")
+    door_ids = set(ds.doors) if ds.has_table("doors") else set()
+    is_door = is_door_row(t.column("object_id").to_pylist(), t.column("receptacle_id").to_pylist(), door_ids)
+    out: list[EdgeStream] = []
+    obj_rows = t.filter(_pa_mask(~is_door))
+    if doors != "only" and obj_rows.num_rows:
+        out += grid_streams(LabelGrid.from_table(obj_rows, source))
+    door_rows = t.filter(_pa_mask(is_door))
+    if doors is not False and door_rows.num_rows:
+        out += grid_streams(LabelGrid.from_table(door_rows, source))
+    return out
+
+
+def _pa_mask(mask: Any) -> Any:
+    import pyarrow as pa
+
+    return pa.array(np.asarray(mask, bool), pa.bool_())
 
 
 # -- summary -------------------------------------------------------------------------------------
@@ -274,13 +388,22 @@ def summarize(res: LabelResult) -> LabelSummary:
     g = res.labels
     valid = g.valid
     n_obs = g.observed.sum(axis=0)[valid]
-    rates = error_rates(g, res.gt) if res.gt is not None and g.source != "gt" else None
+    rates = error_rates(g, res.gt) if res.gt is not None and g.source not in ("gt", "observed") else None
     extra: dict[str, Any] = {}
     if res.visibility is not None:
         d = res.visibility.to_pydict()
         vis = [v for k, v in zip(d["kind"], d["visible"]) if k == "receptacle"]
         extra["receptacles visible"] = f"{sum(vis)} of {len(vis)} (scan, receptacle) pairs" + (
             " (reused tables/visibility.parquet)" if res.visibility_reused else "")
+    if res.doors is not None:
+        dg = res.doors
+        obs = dg.codes[:, :, 0] >= 0
+        line = f"{int(obs.sum())} of {obs.size} (scan, door) pairs observed"
+        if res.door_gt is not None and dg.source != "gt":
+            ref = res.door_gt.aligned(dg)[:, :, 0]
+            both = obs & (ref >= 0)
+            line += f", state agrees with door_states in {int((dg.codes[:, :, 0] == ref)[both].sum())} of {int(both.sum())}"
+        extra["doors"] = line
     if res.perception is not None:
         p = res.perception
         extra["perception"] = (f"{int(p.matched.sum())} receptacle matches (mean IoU {p.mean_iou:.2f}), "
@@ -327,6 +450,8 @@ def label_dataset(root: str | Path, source: str, *, seed: int = 0, overwrite: bo
     res = compute_labels(ds, spec, seed=seed, reuse_visibility=not overwrite, progress=progress, **kwargs)
     t0 = time.perf_counter()
     new = res.labels.to_table()
+    if res.doors is not None:
+        new = pa.concat_tables([new, res.doors.to_table()])
     meta: dict[str, Any] = {}
     if old is not None:
         raw = (old.schema.metadata or {}).get(b"psg_label_sources")
@@ -334,6 +459,8 @@ def label_dataset(root: str | Path, source: str, *, seed: int = 0, overwrite: bo
         keep = old.filter(pc.not_equal(old.column("source"), spec.name))
         new = pa.concat_tables([keep.select(new.schema.names).cast(new.schema), new])
     meta[spec.name] = {**res.labels.meta, "seed": seed, "source": str(source)}
+    if res.doors is not None:
+        meta[spec.name]["doors"] = {"n_doors": len(res.doors.object_ids), **res.doors.meta}
     if res.visibility is not None and not res.visibility_reused:
         vm = (res.visibility.schema.metadata or {}).get(b"psg_visibility_params")
         if vm:
@@ -341,8 +468,12 @@ def label_dataset(root: str | Path, source: str, *, seed: int = 0, overwrite: bo
     new = new.replace_schema_metadata({**(TABLES["labels"].schema.metadata or {}),
                                        b"psg_label_sources": json.dumps(meta, sort_keys=True, default=str).encode()})
     out = {"labels": new}
-    if res.visibility is not None and not res.visibility_reused:
-        out["visibility"] = res.visibility
+    if res.visibility is not None and (not res.visibility_reused or res.door_visibility is not None):
+        vis = res.visibility
+        if res.door_visibility is not None:
+            vis = pa.concat_tables([vis, res.door_visibility.cast(vis.schema)]).replace_schema_metadata(
+                vis.schema.metadata)
+        out["visibility"] = vis
     written = add_tables(ds.root, out, overwrite=True)
     summary = summarize(res)
     summary.timings["write"] = time.perf_counter() - t0

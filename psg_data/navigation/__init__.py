@@ -15,12 +15,31 @@
 - Harness (:mod:`._runner`): :func:`run_navigation` -> :class:`NavigationResult` (per-query
   records and the paper-shaped table), baselines 'oracle' and 'last_seen_map'.
 - Plots (:mod:`._plots`): :func:`plot_query`.
+- Doors (:mod:`._doors`): door estimators' P(open) (:func:`fit_door_filters`,
+  :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
+  (:func:`run_door_episode`), :func:`run_door_navigation` (blocked first plans, extra distance,
+  SR, SPL per estimator vs. the all-doors-open planner), :func:`door_loop_world` and
+  :func:`plot_door_query`.
 """
 
 from __future__ import annotations
 
 from psg_data.navigation._agent import OUTCOMES, SETTINGS, AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import LastSeenFilter, OracleFilter, last_seen_filters, oracle_filters
+from psg_data.navigation._doors import (
+    DOOR_BASELINES,
+    DoorEpisode,
+    DoorNavigationResult,
+    DoorQuery,
+    DoorWorld,
+    door_loop_world,
+    door_open_probabilities,
+    fit_door_filters,
+    make_door_queries,
+    plot_door_query,
+    run_door_episode,
+    run_door_navigation,
+)
 from psg_data.navigation._env import WEEK_S, NavigationEnv, streams_from_states
 from psg_data.navigation._grid import (
     OccupancyGrid,
@@ -101,4 +120,16 @@ __all__ = [
     "METRICS",
     "ABSENT_RULES",
     "plot_query",
+    "DOOR_BASELINES",
+    "DoorWorld",
+    "DoorQuery",
+    "DoorEpisode",
+    "DoorNavigationResult",
+    "fit_door_filters",
+    "door_open_probabilities",
+    "run_door_episode",
+    "make_door_queries",
+    "run_door_navigation",
+    "door_loop_world",
+    "plot_door_query",
 ]

@@ -243,7 +243,7 @@ _add(TableSpec(
         _f("receptacle_id", pa.string(), "receptacle (or door state 'open'/'closed', for door-state edges)"),
         _f("stamp_ns", pa.int64(), "observation time: the scan's start_stamp_ns, int64 UTC nanoseconds"),
         _f("code", pa.int8(), "1 present, 0 absent, -1 not observed, -2 receptacle not valid for the object"),
-        _f("source", pa.string(), "label source: 'gt', 'privileged', 'noisy:P_M,P_F' or 'detections:FILE'"),
+        _f("source", pa.string(), "label source: 'gt', 'privileged', 'noisy:P_M,P_F', 'observed' or 'detections:FILE'"),
     ]),
     "Observation codes of every (scan, object, receptacle) per label source.",
     key=("source", "scan_id", "object_id", "receptacle_id"),

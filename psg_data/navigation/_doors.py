@@ -1,0 +1,603 @@
+"""Door-aware navigation: plan with predicted door states, replan at closed doors, report the cost.
+
+A door is a semi-static "object" whose "receptacles" are its states; an estimator fitted on the
+door streams (the ``(door_id, 'open')`` edges, :func:`psg_data.labeling.load_label_streams` with
+``doors="only"``) predicts ``P(open)`` per door at the query time (:func:`door_open_probabilities`).
+
+Episode (:func:`run_door_episode`): the robot plans a shortest path to the goal receptacle's
+approach set with every door whose ``P(open) < threshold`` closed (default 0.5). If that leaves no
+path, it falls back to assuming the doors it has not seen closed are open (optimistic fallback).
+It walks the plan; when the next cell is blocked in reality (a closed door), it stops in front of
+it, marks that door closed and replans from there (the walked distance counts). The *first plan*
+is *blocked* when it runs into a door that is closed at the query time. Success: the robot
+reaches the goal's approach set. Extra distance: walked minus the shortest path under the true
+door states (successful episodes).
+
+:func:`run_door_navigation` runs every method on the same queries and returns the table
+(estimator, queries, blocked_first_plans, blocked_rate, mean_extra_distance_m, SR, SPL); the
+methods are registry estimators plus the baselines ``all_open`` (assume every door open) and
+``oracle`` (the true door states). :func:`door_loop_world` builds the evaluation world: two rooms
+joined by a direct door (short route) and by a hallway (long route, always open), with the direct
+door following the synthetic lab's weekly door schedule. :func:`plot_door_query` draws the paper's
+"Predictive Navigation" figure.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.errors import EvaluationError, PsgDataError
+from psg_data.estimators._base import EdgeFilter, EdgeStream
+from psg_data.navigation._grid import OccupancyGrid, grid_from_geometry
+from psg_data.navigation._planner import PlanningCache
+
+__all__ = ["DOOR_BASELINES", "DoorWorld", "DoorQuery", "DoorEpisode", "DoorNavigationResult", "fit_door_filters",
+           "door_open_probabilities", "run_door_episode", "make_door_queries", "run_door_navigation",
+           "door_loop_world", "plot_door_query"]
+
+log = logging.getLogger(__name__)
+
+DOOR_BASELINES = ("all_open", "oracle")
+TABLE_COLUMNS = ("estimator", "queries", "blocked_first_plans", "blocked_rate", "mean_extra_distance_m", "SR", "SPL")
+
+
+@dataclass
+class DoorWorld:
+    """A navigation world with doors whose states change over time.
+
+    Attributes:
+        grid: occupancy grid (doorways switchable).
+        doors_at: ``t_s -> {door_id: is_open}``, the true door states (t_s: Unix seconds UTC).
+        train_streams: door observations up to ``t_train_end_s`` (``(door_id, 'open')`` edges;
+            ``'closed'`` edges are ignored).
+        t_train_end_s: end of the training window (queries come after it), Unix seconds.
+        t_end_s: end of the query window, Unix seconds.
+        timezone: IANA site timezone.
+        start_cells: room name -> (N, 2) candidate start cells (row, col).
+        goals: room name -> receptacle ids in that room (query goals).
+        name: label of the world.
+    """
+
+    grid: OccupancyGrid
+    doors_at: Callable[[float], dict[str, bool]]
+    train_streams: list[EdgeStream]
+    t_train_end_s: float
+    t_end_s: float
+    timezone: str
+    start_cells: dict[str, NDArray[np.int64]]
+    goals: dict[str, list[str]]
+    name: str = "doors"
+    _cache: PlanningCache | None = field(default=None, repr=False)
+
+    @property
+    def cache(self) -> PlanningCache:
+        if self._cache is None:
+            self._cache = PlanningCache(self.grid)
+        return self._cache
+
+    @property
+    def door_ids(self) -> tuple[str, ...]:
+        return self.grid.door_ids
+
+
+@dataclass(frozen=True)
+class DoorQuery:
+    """One query: walk from ``start_cell`` to ``goal`` (a receptacle's approach set) at ``t_s``."""
+
+    query_id: int
+    t_s: float
+    start_cell: tuple[int, int]
+    goal: str
+    doors_open: dict[str, bool]
+
+
+@dataclass
+class DoorEpisode:
+    """Outcome of one query for one method; lengths in metres (``shortest_m`` NaN when unreachable)."""
+
+    query_id: int
+    method: str
+    success: bool
+    first_plan_blocked: bool
+    walked_m: float
+    shortest_m: float
+    n_replans: int
+    fallback: bool
+    p_open: dict[str, float]
+    doors_discovered: list[str]
+    first_plan: NDArray[np.int64] = field(repr=False)
+    trail: NDArray[np.int64] = field(repr=False)
+
+    @property
+    def extra_m(self) -> float:
+        if not (self.success and math.isfinite(self.shortest_m)):
+            return float("nan")
+        d = self.walked_m - self.shortest_m
+        return 0.0 if abs(d) < 1e-6 else d  # float round-off of two sums of the same steps
+
+
+class _ConstantFilter:
+    """A door belief that does not depend on time (baselines and never-seen doors)."""
+
+    def __init__(self, p: float) -> None:
+        self.p = float(p)
+        self._last: float | None = None
+
+    @property
+    def last_t_s(self) -> float | None:
+        return self._last
+
+    def update(self, t_s: float, y: int) -> None:
+        self._last = float(t_s)
+
+    def update_many(self, t_s: Any, y: Any) -> None:
+        t = np.asarray(t_s, float).reshape(-1)
+        if t.size:
+            self._last = float(t[-1])
+
+    def predict(self, t_s: Any) -> NDArray[np.float64]:
+        return np.full(np.shape(np.asarray(t_s, float)), self.p)
+
+    def get_state(self) -> dict[str, Any]:
+        return {"p": self.p}
+
+
+def _open_streams(streams: Sequence[EdgeStream]) -> dict[str, EdgeStream]:
+    out: dict[str, EdgeStream] = {}
+    for s in streams:
+        if s.edge[1] == "open":
+            out[s.edge[0]] = s
+        elif s.edge[1] != "closed":
+            raise EvaluationError(f"door stream {s.edge}: state must be 'open' or 'closed'")
+    return out
+
+
+def fit_door_filters(estimator: Any, streams: Sequence[EdgeStream], door_ids: Sequence[str], *,
+                     timezone: str = "UTC", unseen_prior: float = 0.5, settings: Mapping[str, Any] | None = None
+                     ) -> tuple[dict[str, EdgeFilter], dict[str, str]]:
+    """One P(open) filter per door from the door streams.
+
+    The estimator (registry name or instance) is fitted on the ``(door_id, 'open')`` streams with
+    observations; each such door's filter is updated with its history. A door without observations
+    gets the constant ``unseen_prior`` (reported as ``"prior"`` in the second return value).
+
+    Returns:
+        (door_id -> filter, door_id -> ``"estimator"`` or ``"prior"``).
+
+    Raises:
+        EvaluationError: unknown estimator or failed fit.
+    """
+    if not 0.0 <= unseen_prior <= 1.0:
+        raise EvaluationError(f"unseen_prior: {unseen_prior}, expected a probability in [0, 1]")
+    by_door = _open_streams(streams)
+    seen = [by_door[d] for d in door_ids if d in by_door and len(by_door[d]) > 0]
+    filters: dict[str, EdgeFilter] = {}
+    kind: dict[str, str] = {}
+    est = estimator
+    if seen:
+        if isinstance(est, str):
+            from psg_data.estimators._registry import get_estimator
+
+            try:
+                est = get_estimator(est, **dict(settings or {}))
+            except PsgDataError as exc:
+                raise EvaluationError(f"estimator {estimator!r}: {exc}") from exc
+        try:
+            est.fit(seen, timezone=timezone)
+        except PsgDataError as exc:
+            raise EvaluationError(f"{type(est).__name__}: fit on the door streams failed ({exc})") from exc
+    for d in door_ids:
+        s = by_door.get(d)
+        if s is None or len(s) == 0:
+            filters[d], kind[d] = _ConstantFilter(unseen_prior), "prior"
+            continue
+        f = est.make_filter(s.edge)
+        f.update_many(s.t_s, s.y)
+        filters[d], kind[d] = f, "estimator"
+    return filters, kind
+
+
+def door_open_probabilities(filters: Mapping[str, EdgeFilter], t_s: float, door_ids: Sequence[str], *,
+                            prior: float = 0.5) -> dict[str, float]:
+    """P(open) per door at ``t_s`` (clipped to [0, 1]); doors without a filter or with a non-finite
+    prediction get ``prior`` (a warning is logged for the latter)."""
+    out = {}
+    for d in door_ids:
+        f = filters.get(d)
+        if f is None:
+            out[d] = float(prior)
+            continue
+        v = float(np.asarray(f.predict(np.array([t_s], np.float64))).reshape(-1)[0])
+        if not math.isfinite(v):
+            log.warning("door %s: filter predicted %s at t=%s; using the prior %s", d, v, t_s, prior)
+            v = float(prior)
+        out[d] = min(max(v, 0.0), 1.0)
+    return out
+
+
+def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str, float], *,
+                     threshold: float = 0.5, method: str = "") -> DoorEpisode:
+    """Run one door-aware query (module docstring).
+
+    Args:
+        cache: planning cache of the grid.
+        query: the query (its ``doors_open`` is the truth).
+        p_open: door_id -> predicted P(open) (missing doors count as open, P = 1).
+        threshold: doors with ``P(open) < threshold`` are planned as closed.
+        method: label stored in the episode.
+    """
+    grid = cache.grid
+    W = grid.shape[1]
+    doors = grid.door_ids
+    truth = {d: bool(query.doors_open.get(d, True)) for d in doors}
+    cfg_true = cache.key(truth)
+    free_true = cache.free_flat(cfg_true)
+    start = int(query.start_cell[0] * W + query.start_cell[1])
+    shortest = cache.distance(query.goal, cfg_true, start)
+    shortest = shortest if math.isfinite(shortest) else float("nan")
+    known_closed: set[str] = set()
+    cur, walked, n_replans = start, 0.0, 0
+    trail: list[NDArray[np.int64]] = [np.array([cur], np.int64)]
+    first_plan: NDArray[np.int64] | None = None
+    first_blocked = False
+    fallback_used = False
+    success = False
+    for _ in range(len(doors) + 1):
+        belief = {d: (float(p_open.get(d, 1.0)) >= threshold) and d not in known_closed for d in doors}
+        path = cache.path(query.goal, cache.key(belief), cur)
+        if path is None:
+            optimistic = {d: d not in known_closed for d in doors}
+            path = cache.path(query.goal, cache.key(optimistic), cur)
+            fallback_used = fallback_used or path is not None
+            belief = optimistic
+        if path is None:
+            break
+        blocked = np.flatnonzero(~free_true[path])
+        if first_plan is None:
+            first_plan = path
+            first_blocked = bool(blocked.size)
+        if not blocked.size:
+            walked += float(cache.step_lengths(path)[-1])
+            trail.append(path[1:])
+            cur = int(path[-1])
+            success = True
+            break
+        kb = int(blocked[0])
+        seg = path[:kb]
+        walked += float(cache.step_lengths(seg)[-1]) if seg.size else 0.0
+        trail.append(seg[1:])
+        cur = int(seg[-1]) if seg.size else cur
+        cell = int(path[kb])
+        culprits = [d for d in doors if belief[d] and not truth[d]
+                    and not cache.free_flat(cache.key({**belief, d: False}))[cell]]
+        if not culprits:
+            culprits = [d for d in doors if belief[d] and not truth[d]]
+        if not culprits:
+            raise EvaluationError(f"door query {query.query_id}: path blocked by a non-door cell {cell}")
+        known_closed.update(culprits)
+        n_replans += 1
+    return DoorEpisode(query.query_id, method, success, first_blocked, walked, shortest, n_replans, fallback_used,
+                       {d: float(p_open.get(d, 1.0)) for d in doors}, sorted(known_closed),
+                       first_plan if first_plan is not None else np.zeros(0, np.int64), np.concatenate(trail))
+
+
+def make_door_queries(world: DoorWorld, n: int, *, seed: int = 0, hours: tuple[float, float] | None = (9.0, 16.0)
+                      ) -> list[DoorQuery]:
+    """Seeded queries after the training window: a start cell in one room, a goal in another room.
+
+    Args:
+        world: the world.
+        n: number of queries.
+        seed: random seed.
+        hours: local hours ``[lo, hi)`` of the query times (the robot's operating hours; the
+            training scans' hours by default); None = any time of day.
+    """
+    import datetime as dt
+    from zoneinfo import ZoneInfo
+
+    rng = np.random.default_rng([int(seed), 4242])
+    tz = ZoneInfo(world.timezone)
+    rooms = sorted(r for r in world.start_cells if len(world.start_cells[r]))
+    goal_rooms = sorted(r for r in world.goals if world.goals[r])
+    if len(rooms) < 1 or len(set(rooms) | set(goal_rooms)) < 2:
+        raise EvaluationError("make_door_queries: the world needs start cells and goals in two rooms")
+    d0 = dt.datetime.fromtimestamp(world.t_train_end_s, tz).date()
+    d1 = dt.datetime.fromtimestamp(world.t_end_s, tz).date()
+    n_days = max((d1 - d0).days, 1)
+    out: list[DoorQuery] = []
+    k = 0
+    while len(out) < n:
+        k += 1
+        if k > 100 * n + 100:
+            raise EvaluationError("make_door_queries: could not sample queries inside the query window")
+        day = d0 + dt.timedelta(days=int(rng.integers(n_days)))
+        h = float(rng.uniform(*hours)) if hours is not None else float(rng.uniform(0.0, 24.0))
+        t = dt.datetime.combine(day, dt.time()).replace(tzinfo=tz) + dt.timedelta(hours=h)
+        t_s = t.timestamp()
+        room = rooms[int(rng.integers(len(rooms)))]
+        others = [r for r in goal_rooms if r != room]
+        if not others or not (world.t_train_end_s <= t_s < world.t_end_s):
+            continue
+        goal_room = others[int(rng.integers(len(others)))]
+        goal = world.goals[goal_room][int(rng.integers(len(world.goals[goal_room])))]
+        cells = world.start_cells[room]
+        c = cells[int(rng.integers(len(cells)))]
+        out.append(DoorQuery(len(out), float(t_s), (int(c[0]), int(c[1])), goal, dict(world.doors_at(t_s))))
+    return out
+
+
+@dataclass
+class DoorNavigationResult:
+    """Output of :func:`run_door_navigation`.
+
+    Attributes:
+        table: one row per method (``TABLE_COLUMNS`` plus ``n_reachable``, ``mean_walked_m``,
+            ``unseen_doors``); rates are fractions in [0, 1].
+        records: one row per (method, query).
+        queries: the queries.
+        episodes: method -> episodes (same order as ``queries``).
+        p_open: method -> per-query P(open) dicts.
+    """
+
+    table: Any
+    records: Any
+    queries: list[DoorQuery]
+    episodes: dict[str, list[DoorEpisode]]
+    p_open: dict[str, list[dict[str, float]]]
+
+    def format_table(self) -> str:
+        t = self.table.copy()
+        for c in ("blocked_rate", "SR", "SPL"):
+            t[c] = (100 * t[c]).round(1)
+        t["mean_extra_distance_m"] = t["mean_extra_distance_m"].round(2)
+        return t[list(TABLE_COLUMNS)].to_string(index=False)
+
+
+def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua_star", "time_of_week_frequency"),
+                        *, n_queries: int = 200, seed: int = 0, threshold: float = 0.5,
+                        hours: tuple[float, float] | None = (9.0, 16.0), baselines: Sequence[str] = DOOR_BASELINES,
+                        queries: Sequence[DoorQuery] | None = None, unseen_prior: float = 0.5,
+                        settings: Mapping[str, Mapping[str, Any]] | None = None) -> DoorNavigationResult:
+    """Every method on the same door queries; the small comparison table.
+
+    Args:
+        world: the world (grid, true door states, training streams).
+        estimators: registry names (or ``(label, estimator)`` pairs) predicting P(open) per door.
+        n_queries, seed, hours: query sampling (:func:`make_door_queries`).
+        threshold: doors with predicted ``P(open) < threshold`` are planned closed.
+        baselines: any of ``all_open`` (every door assumed open) and ``oracle`` (true states).
+        queries: fixed queries (overrides the sampling).
+        unseen_prior: P(open) of a door without training observations.
+        settings: estimator name -> keyword settings.
+
+    Returns:
+        :class:`DoorNavigationResult`; table columns estimator, queries, blocked_first_plans,
+        blocked_rate, mean_extra_distance_m (successful episodes), SR, SPL (and n_reachable,
+        mean_walked_m, unseen_doors).
+    """
+    import pandas as pd
+
+    from psg_data.metrics import spl, success_rate
+
+    bad = [b for b in baselines if b not in DOOR_BASELINES]
+    if bad:
+        raise EvaluationError(f"baselines {bad}: expected any of {DOOR_BASELINES}")
+    qs = list(queries) if queries is not None else make_door_queries(world, n_queries, seed=seed, hours=hours)
+    if not qs:
+        raise EvaluationError("run_door_navigation: no queries")
+    doors = world.door_ids
+    methods: list[tuple[str, Callable[[DoorQuery], dict[str, float]], list[str]]] = []
+    for b in baselines:
+        if b == "all_open":
+            methods.append(("all_open", lambda q: {d: 1.0 for d in doors}, []))
+        else:
+            methods.append(("oracle", lambda q: {d: float(q.doors_open.get(d, True)) for d in doors}, []))
+    for e in estimators:
+        label, est = (e if isinstance(e, tuple) else (e if isinstance(e, str) else type(e).__name__, e))
+        filters, kind = fit_door_filters(est, world.train_streams, doors, timezone=world.timezone,
+                                         unseen_prior=unseen_prior, settings=(settings or {}).get(str(label)))
+        unseen = [d for d, k in kind.items() if k == "prior"]
+        if unseen:
+            log.info("%s: doors without training observations use P(open) = %s: %s", label, unseen_prior, unseen)
+
+        def belief(q: DoorQuery, filters: Mapping[str, EdgeFilter] = filters) -> dict[str, float]:
+            return door_open_probabilities(filters, q.t_s, doors, prior=unseen_prior)
+
+        methods.append((str(label), belief, unseen))
+    rows, recs = [], []
+    episodes: dict[str, list[DoorEpisode]] = {}
+    probs: dict[str, list[dict[str, float]]] = {}
+    for label, belief, unseen in methods:
+        eps, ps = [], []
+        for q in qs:
+            p = belief(q)
+            ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label)
+            eps.append(ep)
+            ps.append(p)
+            recs.append({"estimator": label, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
+                         "success": ep.success, "first_plan_blocked": ep.first_plan_blocked, "walked_m": ep.walked_m,
+                         "shortest_m": ep.shortest_m, "extra_m": ep.extra_m, "n_replans": ep.n_replans,
+                         "fallback": ep.fallback, **{f"p_open:{d}": v for d, v in p.items()},
+                         **{f"open:{d}": bool(q.doors_open.get(d, True)) for d in doors}})
+        episodes[label], probs[label] = eps, ps
+        reach = np.array([math.isfinite(e.shortest_m) for e in eps])
+        succ = np.array([e.success for e in eps])[reach]
+        short = np.array([e.shortest_m for e in eps])[reach]
+        walk = np.array([e.walked_m for e in eps])[reach]
+        extra = np.array([e.extra_m for e in eps])
+        extra = extra[np.isfinite(extra)]
+        nb = int(sum(e.first_plan_blocked for e in eps))
+        rows.append({"estimator": label, "queries": len(eps), "blocked_first_plans": nb,
+                     "blocked_rate": nb / len(eps), "mean_extra_distance_m": float(extra.mean()) if extra.size else 0.0,
+                     "SR": success_rate(succ) if succ.size else float("nan"),
+                     "SPL": spl(succ, short, walk) if succ.size else float("nan"),
+                     "n_reachable": int(reach.sum()), "mean_walked_m": float(walk.mean()) if walk.size else 0.0,
+                     "unseen_doors": ",".join(unseen)})
+    return DoorNavigationResult(pd.DataFrame(rows), pd.DataFrame(recs), qs, episodes, probs)
+
+
+# -- the evaluation world ---------------------------------------------------------------------------
+def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, noise: float = 0.0,
+                    scan_hours: tuple[int, ...] = (9, 11, 13, 15), resolution_m: float = 0.1,
+                    robot_radius_m: float = 0.2, train_streams: Sequence[EdgeStream] | None = None,
+                    lab_door: str = "door_ab", pattern: str = "weekly") -> DoorWorld:
+    """Two rooms joined by a direct door and by a hallway: the paper's "Predictive Navigation" setting.
+
+    Layout (metres, world x east, y north): room A ``[0, 6] x [0, 8]``, room B ``[6, 12] x [0, 8]``,
+    hallway ``[0, 12] x [-2.5, 0]``; desks (the goals) at y = 2.5 against the outer walls, starts
+    in the southern half of the rooms (y in [0.8, 4]). ``door_ab`` (x = 6, y = 7) joins A and B
+    directly (the shorter route, at the far end of the rooms); ``door_a_hall`` (x = 1, y = 0) and
+    ``door_b_hall`` (x = 11, y = 0) lead through the hallway (a few metres longer) and are always
+    open. Finding ``door_ab`` closed costs the walk to it and back (about 10 m or more), believing
+    it closed when it is open costs the longer route. ``door_ab``
+    follows door ``lab_door`` of the synthetic lab with ``seed``: ``pattern="lab"`` is the lab's own
+    door schedule (open during working days, closed at night, closed at weekends with probability
+    0.6 a day, sometimes closed during the day); ``pattern="weekly"`` (default) keeps the lab
+    door's working-day pattern on Monday-Friday and closes the door all weekend (a clean weekly
+    pattern).
+
+    Training streams (unless given): the door states at the lab's scan times (``scan_hours`` local,
+    every day of the first ``train_days`` days), each observation flipped with probability
+    ``noise`` (seeded), for all three doors. Queries come from the remaining days.
+    """
+    from psg_data.schemas._records import Box, Door, Receptacle, Room
+    from psg_data.synth import LabConfig, LabModel
+
+    if not 0 < train_days < days:
+        raise EvaluationError(f"train_days: {train_days}, expected 0 < train_days < days ({days})")
+    lab = LabModel(LabConfig(seed=seed, days=days, train_days=train_days, scan_hours=tuple(scan_hours)))
+    sched = lab.schedule
+    if lab_door not in sched.doors:
+        raise EvaluationError(f"lab_door {lab_door!r}: the lab has doors {sorted(sched.doors)}")
+    from psg_data.synth._lab_schedule import DOOR_OPEN
+
+    if pattern == "lab":
+        tl = sched.doors[lab_door]
+    elif pattern == "weekly":
+        from psg_data.synth._schedule import EntityModel, WeekPattern, generate_timeline
+
+        k = sched.door_ids.index(lab_door)
+        base = sched.door_models[lab_door]
+        week = WeekPattern("closed_weekends", ((0.5, 0.5), (0.5, 0.5)), ((0,),) * 5 + ((1,), (1,)))
+        model = EntityModel(lab_door, (base.day_patterns[0], base.day_patterns[1]), (week,))
+        tl = generate_timeline(model, 1000 + k, seed, lab.config.date, days, lab.config.timezone)
+    else:
+        raise EvaluationError(f"pattern {pattern!r}: expected 'lab' or 'weekly'")
+
+    rooms = [Room("room_a", "room A", np.array([[0, 0], [6, 0], [6, 8], [0, 8.0]])),
+             Room("room_b", "room B", np.array([[6, 0], [12, 0], [12, 8], [6, 8.0]])),
+             Room("hall", "hallway", np.array([[0, -2.5], [12, -2.5], [12, 0], [0, 0.0]]))]
+    ext_x = np.array([0.14, 0.9, 2.05])
+    ext_y = np.array([0.9, 0.14, 2.05])
+    doors = [Door("door_ab", "door A-B", "room_a", "room_b", Box(np.array([6.0, 7.0, 1.025]), ext_x)),
+             Door("door_a_hall", "door A-hall", "room_a", "hall", Box(np.array([1.0, 0.0, 1.025]), ext_y)),
+             Door("door_b_hall", "door B-hall", "room_b", "hall", Box(np.array([11.0, 0.0, 1.025]), ext_y))]
+    recs = [Receptacle("a_desk", "desk A", "room_a", Box(np.array([0.5, 2.5, 0.37]), np.array([0.6, 0.8, 0.74])), "desk"),
+            Receptacle("b_desk", "desk B", "room_b", Box(np.array([11.5, 2.5, 0.37]), np.array([0.6, 0.8, 0.74])), "desk")]
+    grid = grid_from_geometry(rooms, recs, doors, resolution_m=resolution_m, robot_radius_m=robot_radius_m)
+
+    def doors_at(t_s: float) -> dict[str, bool]:
+        ns = np.array([int(round(t_s * 1e9))], np.int64)
+        return {"door_ab": bool(int(np.asarray(tl.at(ns)).reshape(-1)[0]) == DOOR_OPEN),
+                "door_a_hall": True, "door_b_hall": True}
+
+    t_train_end_s = float(sched.day_starts_ns[train_days]) / 1e9
+    t_end_s = float(sched.end_ns) / 1e9
+    if train_streams is None:
+        train = [p for p in lab.scans if p.day < train_days]
+        t = np.array([p.start_ns for p in train], np.float64) / 1e9
+        rng = np.random.default_rng([int(seed), 9001])
+        streams = []
+        for d in ("door_ab", "door_a_hall", "door_b_hall"):
+            y = np.array([doors_at(ti)[d] for ti in t], np.int8)
+            flip = rng.random(y.size) < noise
+            y = np.where(flip, 1 - y, y).astype(np.int8)
+            streams.append(EdgeStream((d, "open"), t, y, {"source": f"schedule, noise {noise:g}"}))
+        train_streams = streams
+    free = grid.free(grid.door_config({d.door_id: True for d in doors}))
+    centers = grid.cell_centers()
+    H, W = grid.shape
+    starts = {}
+    for rid, (x0, x1) in (("room_a", (1.0, 5.0)), ("room_b", (7.0, 11.0))):
+        m = (free.ravel() & (centers[:, 0] >= x0) & (centers[:, 0] <= x1) & (centers[:, 1] >= 0.8)
+             & (centers[:, 1] <= 4.0))
+        idx = np.flatnonzero(m)
+        starts[rid] = np.stack(np.divmod(idx, W), axis=1).astype(np.int64)
+    return DoorWorld(grid, doors_at, list(train_streams), t_train_end_s, t_end_s, lab.config.timezone, starts,
+                     {"room_a": ["a_desk"], "room_b": ["b_desk"]}, name=f"door_loop(lab seed {seed}, {lab_door})")
+
+
+# -- the figure -------------------------------------------------------------------------------------
+def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, out_path: str | Path, *,
+                    title: str | None = None, dpi: int = 120) -> Path:
+    """PNG like the paper's "Predictive Navigation" figure.
+
+    Shows the grid (free light, obstacles dark), each door's cells coloured by the predicted
+    P(open) (pink = low, teal = high; label with the value and the true state), the path the
+    method walked (blue, with a red cross where it met a closed door), the shortest path under the
+    true door states (dashed black), the start (blue dot) and the goal receptacle (gold).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LinearSegmentedColormap
+
+    grid = world.grid
+    H, W = grid.shape
+    cmap = LinearSegmentedColormap.from_list("door_p", ["#e75480", "#f2e6c9", "#008080"])
+    fig, ax = plt.subplots(figsize=(8, 5))
+    ext = grid.extent_m
+    img = np.where(grid.static_obstacle, 0.25, 0.97)
+    ax.imshow(img, origin="lower", extent=ext, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    for d in grid.door_ids:
+        m = grid.door_cells[d]
+        p = episode.p_open.get(d, 1.0)
+        rgba = np.zeros((H, W, 4))
+        rgba[m] = cmap(p)
+        ax.imshow(rgba, origin="lower", extent=ext, interpolation="nearest")
+        ii, jj = np.nonzero(m)
+        xy = grid.cell_to_world(np.array([ii.mean(), jj.mean()]))
+        state = "open" if query.doors_open.get(d, True) else "closed"
+        ax.annotate(f"{d}\nP(open)={p:.2f}\n(truly {state})", xy, fontsize=7, ha="center", va="bottom",
+                    xytext=(0, 8), textcoords="offset points")
+    goal = grid.receptacle_cells[query.goal]
+    gi, gj = np.nonzero(goal)
+    gxy = grid.cell_to_world(np.stack([gi, gj], 1))
+    ax.scatter(gxy[:, 0], gxy[:, 1], s=4, c="gold", marker="s", label=f"goal {query.goal}")
+    cache = world.cache
+    cfg_true = cache.key(query.doors_open)
+    start = query.start_cell[0] * W + query.start_cell[1]
+    sp = cache.path(query.goal, cfg_true, start)
+    if sp is not None:
+        xy = grid.cell_to_world(np.stack(np.divmod(sp, W), 1))
+        ax.plot(xy[:, 0], xy[:, 1], "k--", lw=1.2, label="shortest (true doors)")
+    tr = grid.cell_to_world(np.stack(np.divmod(episode.trail, W), 1))
+    ax.plot(tr[:, 0], tr[:, 1], "-", color="#1f4fbf", lw=2.0, alpha=0.8, label=f"walked by {episode.method}")
+    if episode.first_plan_blocked and episode.first_plan.size:
+        free_true = cache.free_flat(cfg_true)
+        kb = int(np.flatnonzero(~free_true[episode.first_plan])[0])
+        bxy = grid.cell_to_world(np.array(divmod(int(episode.first_plan[max(kb - 1, 0)]), W)))
+        ax.plot(bxy[0], bxy[1], "rx", ms=10, mew=2, label="met a closed door")
+    sxy = grid.cell_to_world(np.array(query.start_cell))
+    ax.plot(sxy[0], sxy[1], "o", color="#1f4fbf", ms=8, label="start")
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, 1))
+    fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, label="predicted P(open)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal")
+    ax.legend(loc="lower center", fontsize=7, ncol=3, bbox_to_anchor=(0.5, -0.35))
+    ax.set_title(title or f"query {query.query_id}: walked {episode.walked_m:.1f} m, shortest {episode.shortest_m:.1f} m")
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return out

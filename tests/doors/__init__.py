@@ -1,0 +1,1 @@
+"""Doors as semi-static objects: observation, labels, streams, door-aware navigation."""
