@@ -273,7 +273,8 @@ def run_memory(tmp: Path, out_dir: Path, memory_mb: float, jobs: int) -> dict[st
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--size-mb", type=float, default=60.0, help="total size of each set of recordings")
+    ap.add_argument("--size-mb", type=float, default=None, help="total size of each set of recordings (default 60)")
+    ap.add_argument("--quick", action="store_true", help="smoke run: 20 MB sets (bench/run.py --quick)")
     ap.add_argument("--recordings", type=int, default=8, help="recordings per set")
     ap.add_argument("--repeat", type=int, default=None, help="repeats of each comparison (default 1 small, 2 full)")
     ap.add_argument("--memory-mb", type=float, default=None, help="run only the memory test on a recording this big")
@@ -281,6 +282,8 @@ def main() -> None:
     ap.add_argument("--tmp", type=Path, default=None, help="where to build the recordings (default: system tmp)")
     ap.add_argument("--out-dir", type=Path, default=None, help="where conversions write (default: beside inputs)")
     args = ap.parse_args()
+    if args.size_mb is None:
+        args.size_mb = 20.0 if args.quick else 60.0
     tmp = Path(tempfile.mkdtemp(prefix="psg_bench_convert_", dir=args.tmp))
     out_dir = Path(tempfile.mkdtemp(prefix="psg_bench_out_", dir=args.out_dir)) if args.out_dir else tmp
     try:

@@ -1,6 +1,6 @@
 """Estimator cost benchmark: update / predict cost per observation, FreMEn fit, memory per edge.
 
-Run: /work/venv/bin/python bench/bench_estimators.py [--quick]
+Run: python bench/bench_estimators.py [--quick]
 
 Everything is measured in the same run, side by side with a straightforward per-observation
 Python loop of the same equations (persistence + emergence mixtures with K log-normal components,

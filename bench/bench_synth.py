@@ -1,6 +1,6 @@
 """Benchmark of the synthetic lab: demo build time and renderer throughput.
 
-Run: ``/work/venv/bin/python bench/bench_synth.py`` (from the repository root).
+Run: ``python bench/bench_synth.py`` (from the repository root; ``bench/run.py`` runs it too).
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shutil
 import time
 from collections import Counter
@@ -247,6 +248,8 @@ def convert(
         completed = writer.completed_scans() if resume else {}
         scan_rows = side.scan_rows()
         tasks: list[ScanTask] = []
+        # workers share the machine's cores: jobs x threads beyond the core count only adds contention
+        worker_threads = threads if jobs <= 1 else max(1, min(threads, (os.cpu_count() or 1) // jobs))
         seen_ids: dict[str, Path] = {}
         for path, kind in sources:
             row = scan_rows.get(path.name) or scan_rows.get(path.stem)
@@ -259,7 +262,7 @@ def convert(
             if cfg.split is None and scan_id in completed:
                 continue
             tasks.append(ScanTask(str(path), kind, scan_id, split_label, cfg_dict, str(out), color_encoding,
-                                  dict(side.cameras), sorted(completed), threads))
+                                  dict(side.cameras), sorted(completed), worker_threads))
         if jobs > 1 and len(tasks) > 1:
             results = _run_parallel(tasks, jobs, progress)
         else:
