@@ -77,6 +77,8 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 @click.option("--seeds", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Seeds 0..N-1 (benchmark: one draw per seed; datasets: estimator seeds / query sets).")
 @click.option("--queries", type=click.IntRange(1), default=250, show_default=True, help="Navigation queries per seed.")
+@click.option("--delta", type=click.FloatRange(0.0, 1.0), default=0.2, show_default=True,
+              help="Navigation: abort (declare the object absent) when the best receptacle belief is below this.")
 @click.option("--reachable-only", is_flag=True,
               help="Navigation: redraw queries whose present target is unreachable under the true door states "
                    "(default: keep them and report them as unreachable).")
@@ -91,8 +93,8 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 @click.pass_context
 @handle_errors
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
-         setting: str, labels: str, seeds: int, queries: int, reachable_only: bool, out: Path | None, overwrite: bool,
-         jobs: int,
+         setting: str, labels: str, seeds: int, queries: int, delta: float, reachable_only: bool, out: Path | None,
+         overwrite: bool, jobs: int,
          list_estimators: bool, no_plots: bool, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1, mean +- std over seeds).
 
@@ -135,7 +137,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
             ok = _run_doors(specs, dataset, labels, list(range(seeds)), queries, tmp, no_plots)
         else:
             ok = _run_navigation(specs, dataset, setting, labels, list(range(seeds)), queries, tmp, no_plots, quiet,
-                                 reachable_only)
+                                 reachable_only, delta)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -206,7 +208,8 @@ def _run_persistence(specs: list[Any], dataset: str | None, setting: str, labels
 
 
 def _run_navigation(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int],
-                    n_queries: int, out: Path, no_plots: bool, quiet: bool, reachable_only: bool = False) -> bool:
+                    n_queries: int, out: Path, no_plots: bool, quiet: bool, reachable_only: bool = False,
+                    delta: float = 0.2) -> bool:
     from psg_data.cli._eval_inputs import resolve_dataset
     from psg_data.errors import EvaluationError
     from psg_data.navigation import run_navigation
@@ -226,7 +229,7 @@ def _run_navigation(specs: list[Any], dataset: str | None, setting: str, labels:
             settings[s.label] = dict(s.settings)
     t0 = time.perf_counter()
     res = run_navigation(choice.path, methods, seed=seeds, n_queries=n_queries, setting=setting, out_dir=out,
-                         estimator_settings=settings or None, reachable_only=reachable_only)
+                         estimator_settings=settings or None, reachable_only=reachable_only, delta=delta)
     res.save(out)
     info = _provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path),
                         "seconds": round(time.perf_counter() - t0, 2), **res.config})

@@ -181,10 +181,10 @@ def test_navigation_task(lab: Path, tmp_path: Path) -> None:
     _assert_png(out / "map_oracle.png")
     out2 = tmp_path / "nav_reachable"
     res = run("--task", "navigation", "--dataset", str(lab), "-e", "last_seen", "--no-references", "--seeds", "1",
-              "--queries", "12", "--reachable-only", "--out", str(out2), "--quiet", "--no-plots")
+              "--queries", "12", "--reachable-only", "--delta", "0.1", "--out", str(out2), "--quiet", "--no-plots")
     assert res.exit_code == 0, res.output + str(res.exception)
     data2 = json.loads((out2 / "results.json").read_text())
-    assert data2["info"]["reachable_only"] is True
+    assert data2["info"]["reachable_only"] is True and data2["info"]["delta"] == 0.1
     assert all(r["n_unreachable"] == 0 for r in data2["summary"])
 
 
