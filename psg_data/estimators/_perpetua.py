@@ -158,14 +158,16 @@ class PerpetuaEstimator(BaseEstimator):
         delta_low, delta_high: switching thresholds (0.05, 0.95).
         eps: weight of the initial component prior after a restart (0.1).
         num_steps: simulated sub-steps between observations / query times (1).
-        max_components, p_m, p_f, durations, random_state: training, as for Perpetua*.
+        max_components, p_m, p_f, durations, min_segment, segment_penalty, random_state: training,
+            as for Perpetua*.
     """
 
     name = "perpetua"
 
     def __init__(self, *, delta_low: float = 0.05, delta_high: float = 0.95, eps: float = 0.1, num_steps: int = 1,
                  max_components: int = 5, p_m: float | None = None, p_f: float | None = None,
-                 durations: str = "segments", random_state: int = 0) -> None:
+                 durations: str = "segments", min_segment: int = 5, segment_penalty: float = 3.0,
+                 random_state: int = 0) -> None:
         self.delta_low = delta_low
         self.delta_high = delta_high
         self.eps = eps
@@ -174,6 +176,8 @@ class PerpetuaEstimator(BaseEstimator):
         self.p_m = p_m
         self.p_f = p_f
         self.durations = durations
+        self.min_segment = min_segment
+        self.segment_penalty = segment_penalty
         self.random_state = random_state
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
@@ -183,7 +187,8 @@ class PerpetuaEstimator(BaseEstimator):
                                  f"{self.delta_high}")
         if int(self.num_steps) < 0 or not (0.0 <= float(self.eps) <= 1.0):
             raise EstimatorError(f"{self.name}: num_steps must be >= 0 and eps in [0, 1]")
-        durs, (pm, pf) = collect_durations(list(streams), source=self.durations)
+        durs, (pm, pf) = collect_durations(list(streams), source=self.durations, min_size=int(self.min_segment),
+                                           penalty=float(self.segment_penalty))
         self.p_m_ = float(self.p_m) if self.p_m is not None else pm
         self.p_f_ = float(self.p_f) if self.p_f is not None else pf
         self.survivals_, self.default_survivals_ = fit_survivals(

@@ -373,6 +373,10 @@ class PerpetuaStarEstimator(BaseEstimator):
         p_m, p_f: detector error rates; None estimates them from the training data.
         durations: where training durations come from: "segments" (change points of the
             observations), "ground_truth" or "auto".
+        min_segment, segment_penalty: change-point segmentation of the training streams (PELT with
+            a Bernoulli cost; the reference's 5 observations and 3 nats). With sparse observations
+            (a few scans a day) short visits give fewer than ``min_segment`` observations and are
+            then treated as detector noise: lower both (e.g. 1 and 1) for such data.
         n_periods, max_order, order_tol: FreMEn prior settings (1000 periods, order on validation).
         schedules: for prior="schedule": mapping edge -> LLM answer text (the prompt's list format)
             or list of 'Day: HH:MM - Day: HH:MM' strings; keys (object, receptacle) or 'object/receptacle'.
@@ -387,7 +391,8 @@ class PerpetuaStarEstimator(BaseEstimator):
 
     def __init__(self, *, prior: str = "fremen", gamma: float = 0.99, alpha0: float = 0.01, time_unit_s: float = 60.0,
                  max_components: int = 5, p_m: float | None = None, p_f: float | None = None,
-                 durations: str = "segments", n_periods: int = 1000, max_order: int | None = None,
+                 durations: str = "segments", min_segment: int = 5, segment_penalty: float = 3.0,
+                 n_periods: int = 1000, max_order: int | None = None,
                  order_tol: float = 1e-3, schedules: Mapping[Any, Any] | None = None, schedule_inside: float = 0.9,
                  schedule_outside: float = 0.1, ground_truth: Mapping[Any, Any] | None = None,
                  prior_floor: float = 1e-3, random_state: int = 0) -> None:
@@ -399,6 +404,8 @@ class PerpetuaStarEstimator(BaseEstimator):
         self.p_m = p_m
         self.p_f = p_f
         self.durations = durations
+        self.min_segment = min_segment
+        self.segment_penalty = segment_penalty
         self.n_periods = n_periods
         self.max_order = max_order
         self.order_tol = order_tol
@@ -427,7 +434,8 @@ class PerpetuaStarEstimator(BaseEstimator):
         streams = list(streams)
         tr = streams_by_edge(streams)
         va = streams_by_edge(val_streams)
-        durs, (pm, pf) = collect_durations(streams, source=self.durations)
+        durs, (pm, pf) = collect_durations(streams, source=self.durations, min_size=int(self.min_segment),
+                                           penalty=float(self.segment_penalty))
         self.p_m_ = float(self.p_m) if self.p_m is not None else pm
         self.p_f_ = float(self.p_f) if self.p_f is not None else pf
         self.survivals_, self.default_survivals_ = fit_survivals(

@@ -226,6 +226,8 @@ def collect_durations(streams: Sequence[EdgeStream], *, source: str = "segments"
     """
     if source not in ("segments", "ground_truth", "auto"):
         raise EstimatorError(f"durations source must be 'segments', 'ground_truth' or 'auto', got {source!r}")
+    if int(min_size) < 1 or not float(penalty) >= 0:
+        raise EstimatorError(f"segmentation: min_segment must be >= 1 and segment_penalty >= 0, got {min_size}, {penalty}")
     out: dict[EdgeKey, EdgeDurations] = {}
     ys, labs = [], []
     for s in streams:

@@ -180,3 +180,23 @@ def test_chunked_batches_equal_one_at_a_time(seed, n, flip, gamma, cuts) -> None
     assert a.n_restarts == b.n_restarts and a.phase == b.phase
     q = t[-1] + np.linspace(0, 2 * 86400, 20)
     np.testing.assert_allclose(a.predict(q), b.predict(q), atol=1e-7)
+
+
+def test_segmentation_settings_for_sparse_scans() -> None:
+    """Short visits seen in 1-2 scans: the reference segmentation (5 obs, 3 nats) calls them noise."""
+    rng = np.random.default_rng(4)
+    t = 1.7e9 + np.sort(np.concatenate([d * 86400.0 + np.array([9, 11, 13, 15]) * 3600.0 for d in range(14)]))
+    y = np.zeros(t.size, np.int8)
+    for start in rng.choice(np.arange(2, t.size - 2), 8, replace=False):  # visits of one or two scans
+        y[start:start + int(rng.integers(1, 3))] = 1
+    streams = [EdgeStream(("o", "r"), t, y)]
+    ref = get_estimator("perpetua_star", prior="none").fit(streams)
+    fine = get_estimator("perpetua_star", prior="none", min_segment=1, segment_penalty=1.0).fit(streams)
+    med = lambda m: float(np.exp(np.average(m.p1, weights=m.weights)))  # noqa: E731 (log-normal median)
+    per_ref, emg_ref = ref.survivals_[("o", "r")]
+    per_fine, emg_fine = fine.survivals_[("o", "r")]
+    # the reference falls back to a censored absence run (median >= 1 day); fine segments see the gaps
+    assert med(emg_fine) < med(emg_ref) and med(emg_fine) < 7 * 86400
+    assert fine.p_f_ < ref.p_f_
+    with pytest.raises(EstimatorError, match="min_segment"):
+        get_estimator("perpetua_star", min_segment=0).fit(streams)
