@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import LabelingError
 from psg_data.labeling._codes import LabelGrid
-from psg_data.labeling._geometry import pixel_rays, project_points
+from psg_data.labeling._visibility import SampleAccumulator, check_params, depth_tolerance_m
 from psg_data.schemas._records import Box
 from psg_data.schemas._tables import CODE_ABSENT, CODE_MISSING, CODE_PRESENT
 
@@ -86,20 +86,12 @@ class DoorParams:
     frame_stride: int = 1
 
     def __post_init__(self) -> None:
-        for name in ("spacing_m", "max_range_m"):
-            if not getattr(self, name) > 0:
-                raise LabelingError(f"door parameter {name}: {getattr(self, name)}, expected > 0")
-        for name in ("min_fraction", "min_cos", "open_threshold"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise LabelingError(f"door parameter {name}: {getattr(self, name)}, expected in [0, 1]")
-        if self.inset_m < 0:
-            raise LabelingError(f"door parameter inset_m: {self.inset_m}, expected >= 0")
-        if self.frame_stride < 1:
-            raise LabelingError(f"door parameter frame_stride: {self.frame_stride}, expected >= 1")
+        check_params(self, "door", positive=("spacing_m", "max_range_m"),
+                     unit=("min_fraction", "min_cos", "open_threshold"), non_negative=("inset_m",))
 
     def tolerance_m(self, z_m: NDArray[np.float64]) -> NDArray[np.float64]:
         """Depth tolerance at depth ``z_m``, metres."""
-        return self.tol_m + self.tol_n_sigma * self.tol_k_per_m * np.asarray(z_m, float) ** 2
+        return depth_tolerance_m(self, z_m)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -228,42 +220,27 @@ class DoorObservations:
         return pa.Table.from_pydict(cols, schema=TABLES["visibility"].schema)
 
 
-class _DoorAccumulator:
+class _DoorAccumulator(SampleAccumulator):
+    """Door samples: the visibility bookkeeping of :class:`SampleAccumulator` plus free / blocked votes."""
+
     def __init__(self, s: DoorwaySamples) -> None:
-        self.s = s
-        self.seen = np.zeros(len(s), bool)
-        self.pixels = np.zeros(s.n_owners)
-        self.frames = np.zeros(s.n_owners, np.int64)
+        super().__init__(s)  # type: ignore[arg-type]  # same attributes as SurfaceSamples
         self.free_votes = np.zeros(s.n_owners)
         self.blocked_votes = np.zeros(s.n_owners)
 
-    def add_frame(self, depth_m: NDArray[np.float32], cam: Any, T: NDArray[np.float64], p: DoorParams) -> None:
+    def add_frame(self, depth_m: NDArray[np.float32], cam: Any, T: NDArray[np.float64],  # type: ignore[override]
+                  p: DoorParams) -> None:
         s = self.s
         if len(s) == 0:
             return
-        R = T[:3, :3]
-        pc = (s.points - T[:3, 3]) @ R
-        z = pc[:, 2]
-        nc = s.normals @ R
-        ndotp = np.einsum("ij,ij->i", nc, pc)  # signed distance of the camera to the plane, negated
-        dist = np.linalg.norm(pc, axis=1)
+        pc, z, nc, ndotp, dist = self.to_camera(T)  # ndotp: signed distance of the camera to the plane, negated
         # camera outside the slab (farther from the mid-plane than its half thickness), sample in front
-        cand = ((z > p.min_range_m) & (z < p.max_range_m) & (np.abs(ndotp) > s.half_thickness_m)
+        cand = ((z > p.min_range_m) & (z < p.max_range_m) & (np.abs(ndotp) > s.half_thickness_m)  # type: ignore[attr-defined]
                 & (np.abs(ndotp) >= p.min_cos * dist))
-        idx = np.flatnonzero(cand)
+        idx, ui, vi, nd = self.in_image(pc, nc, cand, depth_m.shape, cam, p.border_px)
         if idx.size == 0:
             return
-        uv = project_points(pc[idx], cam)
-        ui, vi = np.rint(uv[:, 0]), np.rint(uv[:, 1])
-        H, W = depth_m.shape
-        b = p.border_px
-        inside = np.isfinite(ui) & np.isfinite(vi) & (ui >= b) & (ui <= W - 1 - b) & (vi >= b) & (vi <= H - 1 - b)
-        idx, ui, vi = idx[inside], ui[inside].astype(np.int64), vi[inside].astype(np.int64)
-        if idx.size == 0:
-            return
-        ray = pixel_rays(np.column_stack([ui, vi]).astype(float), cam)
-        nd = np.einsum("ij,ij->i", nc[idx], ray)
-        h = s.half_thickness_m[idx]
+        h = s.half_thickness_m[idx]  # type: ignore[attr-defined]
         with np.errstate(divide="ignore", invalid="ignore"):
             z_plane = ndotp[idx] / nd
             za = (ndotp[idx] - h) / nd
@@ -275,24 +252,15 @@ class _DoorAccumulator:
         seen = ok & (d >= z_near - tol)
         free = seen & (d > z_far + tol)
         blocked = seen & ~free
-        hit = idx[seen]
-        if hit.size == 0:
-            return
-        self.seen[hit] = True
-        area_px = s.area_m2[hit] * cam.fx * cam.fy * np.abs(ndotp[hit]) / z[hit] ** 3
-        px = np.bincount(s.owner[hit], weights=area_px, minlength=s.n_owners)
-        np.maximum(self.pixels, px, out=self.pixels)
-        self.frames += np.bincount(s.owner[hit], minlength=s.n_owners) > 0
+        self.mark_seen(idx[seen], ndotp, z, cam)
         self.free_votes += np.bincount(s.owner[idx[free]], minlength=s.n_owners)
         self.blocked_votes += np.bincount(s.owner[idx[blocked]], minlength=s.n_owners)
 
-    def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
-        counts = np.maximum(self.s.counts, 1)
-        frac = np.bincount(self.s.owner, weights=self.seen.astype(float), minlength=self.s.n_owners) / counts
+    def door_result(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
         votes = self.free_votes + self.blocked_votes
         with np.errstate(invalid="ignore", divide="ignore"):
             of = np.where(votes > 0, self.free_votes / np.maximum(votes, 1), np.nan)
-        return frac, self.pixels.copy(), self.frames.copy(), of
+        return self.seen_fraction(), self.pixels.copy(), self.frames.copy(), of
 
 
 def observe_doors(ds: Any, params: DoorParams | None = None, *, progress: Callable[..., Any] | None = None,
@@ -324,7 +292,7 @@ def observe_doors(ds: Any, params: DoorParams | None = None, *, progress: Callab
         it = frames(sid) if frames is not None else scan.frames(color=False, stride=p.frame_stride)
         for fr in it:
             acc.add_frame(fr.depth_m, fr.camera, np.asarray(fr.T_world_camera, float), p)
-        frac[i], px[i], fs[i], of[i] = acc.result()
+        frac[i], px[i], fs[i], of[i] = acc.door_result()
         if progress is not None:
             progress(1)
     visible = (frac >= p.min_fraction) & (px >= p.min_pixels) & (px > 0) & np.isfinite(of)

@@ -186,6 +186,21 @@ def pixel_rays(uv: NDArray[np.float64], cam: CameraIntrinsics) -> NDArray[np.flo
 
 
 # -- oriented box IoU -----------------------------------------------------------------------------
+def pixels_in_image(points_cam: NDArray[np.float64], cam: CameraIntrinsics, shape: tuple[int, ...],
+                    border_px: int = 0) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.int64]]:
+    """Project camera-frame points (OpenCV axes, metres) to their nearest pixel.
+
+    Returns ``(inside, u, v)``: which points land at least ``border_px`` pixels inside an image of
+    ``shape`` (H, W, ...), and the integer column / row of those points.
+    """
+    uv = project_points(points_cam, cam)
+    ui, vi = np.rint(uv[:, 0]), np.rint(uv[:, 1])
+    H, W = shape[:2]
+    b = border_px
+    inside = np.isfinite(ui) & np.isfinite(vi) & (ui >= b) & (ui <= W - 1 - b) & (vi >= b) & (vi <= H - 1 - b)
+    return inside, ui[inside].astype(np.int64), vi[inside].astype(np.int64)
+
+
 def is_yaw_only(R: NDArray[np.float64], tol: float = _YAW_TOL) -> bool:
     """True if rotation ``R`` (3x3, world-from-box) maps the box z axis to +-world z."""
     R = np.asarray(R, float)

@@ -42,12 +42,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import LabelingError
-from psg_data.labeling._geometry import SurfaceSamples, box_surface_samples, pixel_rays, project_points, top_face_samples
+from psg_data.labeling._geometry import SurfaceSamples, box_surface_samples, pixel_rays, pixels_in_image, top_face_samples
 from psg_data.schemas._records import Box, CameraIntrinsics
 
 __all__ = ["VisibilityParams", "SurfaceVisibility", "surface_visibility", "compute_visibility", "visibility_matrix"]
 
 log = logging.getLogger(__name__)
+
+
+def check_params(p: Any, what: str, *, positive: tuple[str, ...] = (), unit: tuple[str, ...] = (),
+                 non_negative: tuple[str, ...] = ()) -> None:
+    """Validate a thresholds dataclass: ``positive`` > 0, ``unit`` in [0, 1], ``non_negative`` >= 0,
+    ``frame_stride`` >= 1. Raises :class:`LabelingError` naming ``what`` and the field."""
+    checks = [(n, "> 0", lambda x: x > 0) for n in positive] + [(n, "in [0, 1]", lambda x: 0 <= x <= 1) for n in unit]
+    checks += [(n, ">= 0", lambda x: x >= 0) for n in non_negative] + [("frame_stride", ">= 1", lambda x: x >= 1)]
+    for name, expected, ok in checks:
+        if not ok(getattr(p, name)):
+            raise LabelingError(f"{what} parameter {name}: {getattr(p, name)}, expected {expected}")
+
+
+def depth_tolerance_m(p: Any, z_m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Depth tolerance ``tol_m + tol_n_sigma * tol_k_per_m * z**2`` at depth ``z_m`` (metres)."""
+    return p.tol_m + p.tol_n_sigma * p.tol_k_per_m * np.asarray(z_m, float) ** 2
 
 
 @dataclass(frozen=True)
@@ -87,18 +103,12 @@ class VisibilityParams:
     frame_stride: int = 1
 
     def __post_init__(self) -> None:
-        for name in ("spacing_m", "max_range_m", "object_spacing_m"):
-            if not getattr(self, name) > 0:
-                raise LabelingError(f"visibility parameter {name}: {getattr(self, name)}, expected > 0")
-        for name in ("min_fraction", "object_min_fraction", "min_cos"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise LabelingError(f"visibility parameter {name}: {getattr(self, name)}, expected in [0, 1]")
-        if self.frame_stride < 1:
-            raise LabelingError(f"visibility parameter frame_stride: {self.frame_stride}, expected >= 1")
+        check_params(self, "visibility", positive=("spacing_m", "max_range_m", "object_spacing_m"),
+                     unit=("min_fraction", "object_min_fraction", "min_cos"))
 
     def tolerance_m(self, z_m: NDArray[np.float64]) -> NDArray[np.float64]:
         """Depth tolerance at depth ``z_m``, metres."""
-        return self.tol_m + self.tol_n_sigma * self.tol_k_per_m * np.asarray(z_m, float) ** 2
+        return depth_tolerance_m(self, z_m)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -121,7 +131,7 @@ class SurfaceVisibility:
     seen: NDArray[np.bool_]
 
 
-class _Accumulator:
+class SampleAccumulator:
     def __init__(self, samples: SurfaceSamples) -> None:
         self.s = samples
         self.seen = np.zeros(len(samples), bool)
@@ -133,51 +143,65 @@ class _Accumulator:
         s = self.s
         if len(s) == 0:
             return
-        R = T_world_camera[:3, :3]
-        pc = (s.points - T_world_camera[:3, 3]) @ R
-        z = pc[:, 2]
-        nc = s.normals @ R
-        ndotp = np.einsum("ij,ij->i", nc, pc)
-        dist = np.linalg.norm(pc, axis=1)
+        pc, z, nc, ndotp, dist = self.to_camera(T_world_camera)
         cand = (z > p.min_range_m) & (z < p.max_range_m) & (ndotp < 0) & (-ndotp >= p.min_cos * dist)
-        idx = np.flatnonzero(cand)
+        idx, ui, vi, nd = self.in_image(pc, nc, cand, depth_m.shape, cam, p.border_px)
         if idx.size == 0:
             return
-        uv = project_points(pc[idx], cam)
-        ui = np.rint(uv[:, 0])
-        vi = np.rint(uv[:, 1])
-        H, W = depth_m.shape
-        b = p.border_px
-        inside = np.isfinite(ui) & np.isfinite(vi) & (ui >= b) & (ui <= W - 1 - b) & (vi >= b) & (vi <= H - 1 - b)
-        idx, ui, vi = idx[inside], ui[inside].astype(np.int64), vi[inside].astype(np.int64)
-        if idx.size == 0:
-            return
-        ray = pixel_rays(np.column_stack([ui, vi]).astype(float), cam)
-        nd = np.einsum("ij,ij->i", nc[idx], ray)
         with np.errstate(divide="ignore", invalid="ignore"):
             z_face = ndotp[idx] / nd
         d = depth_m[vi, ui].astype(np.float64)
         ok = (d > 0) & np.isfinite(z_face) & (z_face > 0) & (np.abs(d - z_face) < p.tolerance_m(z_face))
-        hit = idx[ok]
+        self.mark_seen(idx[ok], ndotp, z, cam)
+
+    # -- shared by the door observation (psg_data.labeling._doors) ----------------------------
+    def to_camera(self, T_world_camera: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """Samples in the camera frame: points, z, normals, n.p (negated plane distance), range."""
+        R = T_world_camera[:3, :3]
+        pc = (self.s.points - T_world_camera[:3, 3]) @ R
+        nc = self.s.normals @ R
+        return pc, pc[:, 2], nc, np.einsum("ij,ij->i", nc, pc), np.linalg.norm(pc, axis=1)
+
+    @staticmethod
+    def in_image(pc: NDArray[np.float64], nc: NDArray[np.float64], cand: NDArray[np.bool_], shape: tuple[int, ...],
+                 cam: CameraIntrinsics, border_px: int) -> tuple[NDArray[np.int64], ...]:
+        """Candidate samples that land in the image: indices, pixel column / row, n . ray of their pixel."""
+        idx = np.flatnonzero(cand)
+        if idx.size == 0:
+            return idx, idx, idx, np.zeros(0)
+        inside, ui, vi = pixels_in_image(pc[idx], cam, shape, border_px)
+        idx = idx[inside]
+        if idx.size == 0:
+            return idx, ui, vi, np.zeros(0)
+        ray = pixel_rays(np.column_stack([ui, vi]).astype(float), cam)
+        return idx, ui, vi, np.einsum("ij,ij->i", nc[idx], ray)
+
+    def mark_seen(self, hit: NDArray[np.int64], ndotp: NDArray[np.float64], z: NDArray[np.float64],
+                  cam: CameraIntrinsics) -> None:
+        """Record the samples seen in one frame: union, per-owner projected pixels (max), frames."""
         if hit.size == 0:
             return
+        s = self.s
         self.seen[hit] = True
         area_px = s.area_m2[hit] * cam.fx * cam.fy * np.abs(ndotp[hit]) / z[hit] ** 3
         px = np.bincount(s.owner[hit], weights=area_px, minlength=s.n_owners)
         np.maximum(self.pixels, px, out=self.pixels)
         self.frames += np.bincount(s.owner[hit], minlength=s.n_owners) > 0
 
-    def result(self) -> SurfaceVisibility:
+    def seen_fraction(self) -> NDArray[np.float64]:
+        """Fraction of each owner's samples seen in at least one frame."""
         counts = np.maximum(self.s.counts, 1)
-        frac = np.bincount(self.s.owner, weights=self.seen.astype(float), minlength=self.s.n_owners) / counts
-        return SurfaceVisibility(frac, self.pixels.copy(), self.frames.copy(), self.seen.copy())
+        return np.bincount(self.s.owner, weights=self.seen.astype(float), minlength=self.s.n_owners) / counts
+
+    def result(self) -> SurfaceVisibility:
+        return SurfaceVisibility(self.seen_fraction(), self.pixels.copy(), self.frames.copy(), self.seen.copy())
 
 
 def surface_visibility(frames: Any, samples: SurfaceSamples, params: VisibilityParams | None = None
                        ) -> SurfaceVisibility:
     """Visibility of ``samples`` over an iterable of :class:`~psg_data.schemas.Frame` (depth needed)."""
     p = params or VisibilityParams()
-    acc = _Accumulator(samples)
+    acc = SampleAccumulator(samples)
     for fr in frames:
         acc.add_frame(fr.depth_m, fr.camera, np.asarray(fr.T_world_camera, float), p)
     return acc.result()
@@ -223,7 +247,7 @@ def compute_visibility(ds: Any, params: VisibilityParams | None = None, *,
             obj_ids = [o for o in ds.objects if o in boxes]
             obj_samples = box_surface_samples([boxes[o] for o in obj_ids], p.object_spacing_m)
             samples = SurfaceSamples.concat([rec_samples, obj_samples])
-        acc = _Accumulator(samples)
+        acc = SampleAccumulator(samples)
         it = scan.frames(color=False, stride=p.frame_stride)
         while True:
             t0 = time.perf_counter()

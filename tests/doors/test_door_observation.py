@@ -80,13 +80,13 @@ def test_planar_scene_closed_and_open(leaf: bool) -> None:
     p = DoorParams()
     acc = _DoorAccumulator(doorway_samples([box], p.spacing_m, p.inset_m))
     acc.add_frame(depth, cam, T, p)
-    frac, px, frames, of = acc.result()
+    frac, px, frames, of = acc.door_result()
     assert frames[0] == 1 and frac[0] > 0.5 and px[0] > p.min_pixels
     assert of[0] == (0.0 if leaf else 1.0)
     # an occluder in front of the doorway hides it: nothing is seen
     acc2 = _DoorAccumulator(doorway_samples([box], p.spacing_m, p.inset_m))
     acc2.add_frame(np.full_like(depth, 1.0), cam, T, p)
-    assert acc2.result()[0][0] == 0.0 and acc2.result()[2][0] == 0
+    assert acc2.door_result()[0][0] == 0.0 and acc2.door_result()[2][0] == 0
 
 
 def test_doorway_samples_lie_on_the_mid_plane_inside_the_opening() -> None:
