@@ -376,7 +376,12 @@ class LabelSummary:
         out = [f"source {self.source}: {self.n_edges} edges, observations per edge mean {m:.1f} (min {lo}, max {hi})",
                f"codes: 1 (present) {c.get(1, 0)}, 0 (absent) {c.get(0, 0)}, -1 (not observed) {c.get(-1, 0)}, "
                f"-2 (invalid) {c.get(-2, 0)}"]
-        out.append(f"vs ground truth: {self.rates}" if self.rates is not None else "vs ground truth: no schedule")
+        if self.rates is not None:
+            out.append(f"vs ground truth: {self.rates}")
+        elif self.source == "observed":
+            out.append("objects: none (observed is a door-only source)")
+        elif self.source != "gt":
+            out.append("vs ground truth: no schedule")
         out += [f"{k}: {v}" for k, v in self.extra.items()]
         if self.timings:
             out.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in self.timings.items()))
