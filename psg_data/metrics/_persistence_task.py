@@ -727,8 +727,8 @@ def evaluate_persistence(
         ZoneInfo(timezone)
     except Exception:  # noqa: BLE001
         raise EvaluationError(f"unknown timezone {timezone!r}; expected an IANA name such as 'Europe/Zurich'") from None
-    if jobs == -1:
-        jobs = os.cpu_count() or 1
+    if jobs == -1:  # the CPUs this process may run on (cgroup / taskset aware where the OS tells)
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if jobs < 1:
         raise EvaluationError(f"jobs must be >= 1 or -1, got {jobs}")
 
