@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import json
 import sys
 import textwrap
 from pathlib import Path
@@ -127,6 +128,19 @@ def test_entry_point_plugin_is_listed_and_scored(tmp_path: Path, monkeypatch: py
     gt_x = streams[0].meta["gt_state"].astype(float)
     mae = np.mean(np.abs(gt_x - f.predict(streams[0].meta["gt_t_s"])))
     assert mae == pytest.approx(0.5)
+    # scored by psg-eval like a built-in, with no change to psg_data
+    from click.testing import CliRunner
+
+    from psg_data.cli.psg_eval_cmd import main as psg_eval
+
+    out = tmp_path / "res"
+    res = CliRunner().invoke(psg_eval, ["--dataset", "persistence-benchmark", "-e", "half", "--no-references",
+                                        "--seeds", "1", "--out", str(out), "--quiet", "--no-plots"])
+    assert res.exit_code == 0, res.output + str(res.exception)
+    assert "half" in res.output
+    summary = json.loads((out / "results.json").read_text())["summary"]
+    assert list(summary) == ["half"]
+    assert summary["half"]["mae"]["mean"] == pytest.approx(0.5)  # a constant 0.5 is 0.5 away from any 0/1 truth
 
 
 def test_check_estimator_catches_broken_estimators() -> None:
