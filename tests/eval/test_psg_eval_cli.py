@@ -186,6 +186,14 @@ def test_navigation_task(lab: Path, tmp_path: Path) -> None:
     data2 = json.loads((out2 / "results.json").read_text())
     assert data2["info"]["reachable_only"] is True and data2["info"]["delta"] == 0.1
     assert all(r["n_unreachable"] == 0 for r in data2["summary"])
+    cmp = run("compare", str(out), str(out2))
+    assert cmp.exit_code == 0 and "[navigation]" in cmp.output and "[persistence]" not in cmp.output
+    assert sum(" oracle " in l and "100.0 +- 0.0" in l for l in cmp.output.splitlines()) == 2
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "results.json").write_text(json.dumps({"info": {"task": "mapping"}, "summary": []}))
+    res = run("compare", str(bad))
+    assert res.exit_code == 1 and "expected task persistence, navigation or doors" in res.stderr
 
 
 def test_dataset_files_untouched_by_eval(lab: Path, tmp_path: Path) -> None:
@@ -215,6 +223,10 @@ def test_doors_task_table_files_and_figure(tmp_path: Path) -> None:
     assert info["task"] == "doors" and info["seeds"] == [0, 1]
     _assert_png(out / "doors_perpetua_star.png")
     assert "perpetua_star" in res.output and "blocked %" in res.output
+    cmp = run("compare", str(out))
+    assert cmp.exit_code == 0 and "[doors]" in cmp.output
+    line = next(l for l in cmp.output.splitlines() if " perpetua_star " in l)
+    assert f"{100 * summary.loc['perpetua_star', 'blocked_rate']:.1f}" in line
 
 
 def test_doors_task_rejects_other_inputs(tmp_path: Path) -> None:
