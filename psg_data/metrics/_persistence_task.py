@@ -632,10 +632,6 @@ def _resolve_estimators(estimators: Any) -> dict[str, EstimatorFactory]:
     out: dict[str, EstimatorFactory] = {}
     for name, spec in items:
         if isinstance(spec, str):
-            try:
-                from psg_data.estimators import get_estimator  # type: ignore[attr-defined]
-            except ImportError as e:
-                raise EvaluationError(f"estimator {name!r}: the estimator registry is not available ({e})") from None
             out[str(name)] = RegistryFactory(spec)
         elif callable(spec):
             out[str(name)] = spec

@@ -85,6 +85,7 @@ def test_jpeg_dataset_roundtrip_is_byte_identical(tmp_path: Path) -> None:
     raw = export_raw(src, tmp_path / "raw", "ros1")
     convert(raw, tmp_path / "out", config=ConvertConfig(color_encoding="jpeg"))
     a, b = open_dataset(src), open_dataset(tmp_path / "out")
+    assert b.info.color_encoding == "jpeg"
     for p in a.df("frames")["color_path"]:
         assert (src / p).read_bytes() == (tmp_path / "out" / p).read_bytes()
     assert_same_dataset(src, tmp_path / "out")

@@ -9,7 +9,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from psg_data.loaders import backproject, open_dataset
+from psg_data.loaders import backproject
 from psg_data.schemas._records import Frame
 from psg_data.synth import RECEPTACLE_ID0, ID_FLOOR, LabConfig, LabModel, build_lab, rerender_frame
 

@@ -1,0 +1,65 @@
+"""``psg-eval --task persistence``: the Table I shaped run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import click
+
+from psg_data.cli._common import Progress
+from psg_data.cli._eval_provenance import provenance
+
+__all__ = ["run_persistence"]
+
+
+def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int], jobs: int,
+                     out: Path, no_plots: bool, quiet: bool) -> bool:
+    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset, with_hints
+    from psg_data.metrics import (
+        RegistryFactory,
+        choose_plot_edges,
+        evaluate_persistence,
+        format_persistence_table,
+        merge_results,
+        plot_beliefs,
+        plot_metric_bars,
+        write_persistence_results,
+    )
+
+    choice = resolve_dataset(dataset, quiet=quiet)
+    tasks, info = persistence_tasks(choice, labels=labels, seeds=seeds, quiet=quiet)
+    n_edges = len(tasks[0].ground_truth)
+    prog = Progress("evaluating", total=len(specs) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
+    offset = 0
+    results = []
+    plot_edges = choose_plot_edges(tasks[0].ground_truth, k=4)
+    run_seeds = [[s] for s in seeds] if len(tasks) > 1 else [seeds]
+    for task, task_seeds in zip(tasks, run_seeds):
+        factories = {s.label: RegistryFactory(s.name, with_hints(s, task.estimator_hints).settings) for s in specs}
+
+        def progress(done: int, total: int, base: int = offset) -> None:
+            prog.done = base + done
+            prog.update(0)
+
+        results.append(evaluate_persistence(
+            factories, task.train_streams, task.test_streams, task.ground_truth, val_streams=task.val_streams,
+            setting=setting, timezone=task.timezone, seeds=task_seeds, jobs=jobs, progress=progress,
+            keep_predictions=plot_edges if task is tasks[0] else ()))
+        offset += len(specs) * len(task_seeds) * len(task.ground_truth)
+    prog.close()
+    result = results[0] if len(results) == 1 else merge_results(results)
+    info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **info,
+                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
+    write_persistence_results(result, out, info=info)
+    if not no_plots:
+        plot_beliefs(result.traces, out / "belief.png", timezone=tasks[0].timezone)
+        plot_metric_bars(result, out / "bars.png")
+    click.echo(f"\nPersistence estimation on {choice.label} ({info.get('edges')} edges, labels {labels}, "
+               f"{setting}, seeds {seeds[0]}..{seeds[-1]})")
+    click.echo(format_persistence_table(result))
+    if result.errors:
+        click.echo(f"\n{len(result.errors)} problem(s) (see results.json 'errors'):", err=True)
+        for e in result.errors[:20]:
+            click.echo(f"error: {e.message}", err=True)
+    return result.ok
