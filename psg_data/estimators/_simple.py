@@ -131,7 +131,9 @@ class PersistenceFilterEstimator(BaseEstimator):
 
 
 # ---------------------------------------------------------------------------------------- baselines
-class _ConstFilter(BaseFilter):
+class ConstantFilter(BaseFilter):
+    """Predicts ``value`` at every time, or the last observation (0.5 before any) when ``value`` is None."""
+
     def __init__(self, edge: EdgeKey, name: str, value: float | None) -> None:
         super().__init__(edge)
         self._name = name
@@ -159,11 +161,11 @@ class _NoFitEstimator(BaseEstimator):
         self.fitted_ = True
         return self
 
-    def make_filter(self, edge: EdgeKey) -> _ConstFilter:
+    def make_filter(self, edge: EdgeKey) -> ConstantFilter:
         self._check_fitted()
-        return _ConstFilter(edge, self.name, self.value)
+        return ConstantFilter(edge, self.name, self.value)
 
-    def filter_from_state(self, state: dict[str, Any]) -> _ConstFilter:
+    def filter_from_state(self, state: dict[str, Any]) -> ConstantFilter:
         edge = self._check_state(state)
         f = self.make_filter(edge)
         f.last_y = state["last_y"]

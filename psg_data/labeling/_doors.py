@@ -40,8 +40,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import LabelingError
-from psg_data.labeling._codes import LabelGrid
-from psg_data.labeling._visibility import SampleAccumulator, check_params, depth_tolerance_m
+from psg_data.labeling._codes import LabelGrid, inject_noise
+from psg_data.labeling._geometry import SurfaceSamples
+from psg_data.labeling._visibility import SampleAccumulator, check_params, depth_tolerance_m, visibility_matrix
 from psg_data.schemas._records import Box
 from psg_data.schemas._tables import CODE_ABSENT, CODE_MISSING, CODE_PRESENT
 
@@ -97,9 +98,8 @@ class DoorParams:
         return asdict(self)
 
 
-@dataclass
-class DoorwaySamples:
-    """Samples on the doorway planes of a list of doors.
+class DoorwaySamples(SurfaceSamples):
+    """Samples on the doorway planes of a list of doors (:class:`SurfaceSamples` plus slab thickness).
 
     Attributes:
         points: (N, 3) world points on the mid-planes, metres.
@@ -110,19 +110,10 @@ class DoorwaySamples:
         n_owners: number of doors.
     """
 
-    points: NDArray[np.float64]
-    normals: NDArray[np.float64]
-    half_thickness_m: NDArray[np.float64]
-    area_m2: NDArray[np.float64]
-    owner: NDArray[np.int64]
-    n_owners: int
-
-    def __len__(self) -> int:
-        return int(self.owner.size)
-
-    @property
-    def counts(self) -> NDArray[np.int64]:
-        return np.bincount(self.owner, minlength=self.n_owners)
+    def __init__(self, points: NDArray[np.float64], normals: NDArray[np.float64], half_thickness_m: NDArray[np.float64],
+                 area_m2: NDArray[np.float64], owner: NDArray[np.int64], n_owners: int) -> None:
+        super().__init__(points, normals, area_m2, owner, n_owners)
+        self.half_thickness_m = half_thickness_m
 
 
 def doorway_samples(boxes: list[Box], spacing_m: float = 0.05, inset_m: float = 0.06,
@@ -224,7 +215,8 @@ class _DoorAccumulator(SampleAccumulator):
     """Door samples: the visibility bookkeeping of :class:`SampleAccumulator` plus free / blocked votes."""
 
     def __init__(self, s: DoorwaySamples) -> None:
-        super().__init__(s)  # type: ignore[arg-type]  # same attributes as SurfaceSamples
+        super().__init__(s)
+        self.s: DoorwaySamples = s
         self.free_votes = np.zeros(s.n_owners)
         self.blocked_votes = np.zeros(s.n_owners)
 
@@ -235,12 +227,12 @@ class _DoorAccumulator(SampleAccumulator):
             return
         pc, z, nc, ndotp, dist = self.to_camera(T)  # ndotp: signed distance of the camera to the plane, negated
         # camera outside the slab (farther from the mid-plane than its half thickness), sample in front
-        cand = ((z > p.min_range_m) & (z < p.max_range_m) & (np.abs(ndotp) > s.half_thickness_m)  # type: ignore[attr-defined]
+        cand = ((z > p.min_range_m) & (z < p.max_range_m) & (np.abs(ndotp) > s.half_thickness_m)
                 & (np.abs(ndotp) >= p.min_cos * dist))
         idx, ui, vi, nd = self.in_image(pc, nc, cand, depth_m.shape, cam, p.border_px)
         if idx.size == 0:
             return
-        h = s.half_thickness_m[idx]  # type: ignore[attr-defined]
+        h = s.half_thickness_m[idx]
         with np.errstate(divide="ignore", invalid="ignore"):
             z_plane = ndotp[idx] / nd
             za = (ndotp[idx] - h) / nd
@@ -301,16 +293,9 @@ def observe_doors(ds: Any, params: DoorParams | None = None, *, progress: Callab
 
 def door_visibility_from_table(table: Any, scan_ids: list[str], door_ids: list[str]) -> NDArray[np.bool_] | None:
     """(S, D) visible flags of the doors from a ``visibility`` table; None if it has no door rows."""
-    d = table.to_pydict()
-    if "door" not in set(d["kind"]):
+    if "door" not in set(table.column("kind").to_pylist()):
         return None
-    out = np.zeros((len(scan_ids), len(door_ids)), bool)
-    si = {s: i for i, s in enumerate(scan_ids)}
-    di = {k: i for i, k in enumerate(door_ids)}
-    for s, kd, i, v in zip(d["scan_id"], d["kind"], d["id"], d["visible"]):
-        if kd == "door" and s in si and i in di:
-            out[si[s], di[i]] = bool(v)
-    return out
+    return visibility_matrix(table, scan_ids, door_ids, kind="door")
 
 
 # -- label grids ----------------------------------------------------------------------------------
@@ -384,17 +369,21 @@ def door_label_grid(ds: Any, kind: str, *, source: str | None = None, visible: N
     vis = np.asarray(visible, bool)
     if vis.shape != (len(gt.scan_ids), len(gt.object_ids)):
         raise LabelingError(f"door visibility: shape {vis.shape}, expected {(len(gt.scan_ids), len(gt.object_ids))}")
-    is_open = np.where(gt.codes[..., 0] == CODE_PRESENT, 1, np.where(gt.codes[..., 0] == CODE_ABSENT, 0, -1))
-    is_open = np.where(vis, is_open, -1).astype(np.int8)
-    meta: dict[str, Any] = {}
-    if kind == "noisy":
-        u = np.random.default_rng([int(seed), 7927]).random(is_open.shape)
-        flipped = is_open.copy()
-        flipped[(is_open == 1) & (u < p_m)] = 0
-        flipped[(is_open == 0) & (u < p_f)] = 1
-        is_open = flipped
-        meta = {"p_m": p_m, "p_f": p_f, "seed": int(seed), "base": "privileged"}
-    return _grid_from_open(gt.scan_ids, gt.object_ids, gt.stamps_ns, is_open, name, meta)
+    privileged = _grid_from_open(gt.scan_ids, gt.object_ids, gt.stamps_ns,
+                                 np.where(vis, _open_state(gt.codes[..., 0]), -1), name)
+    if kind == "privileged":
+        return privileged
+    # noise on the 'open' edge only (as object codes are flipped); the 'closed' edge stays its complement
+    open_edge = LabelGrid(privileged.scan_ids, privileged.object_ids, ["open"], privileged.stamps_ns,
+                          privileged.codes[..., :1], "privileged")
+    noisy = inject_noise(open_edge, p_m, p_f, seed, source=name)
+    return _grid_from_open(gt.scan_ids, gt.object_ids, gt.stamps_ns, _open_state(noisy.codes[..., 0]), name,
+                           noisy.meta)
+
+
+def _open_state(open_codes: NDArray[np.int8]) -> NDArray[np.int8]:
+    """Codes of the 'open' edge as a door state: 1 open, 0 closed, -1 unknown."""
+    return np.where(open_codes == CODE_PRESENT, 1, np.where(open_codes == CODE_ABSENT, 0, -1)).astype(np.int8)
 
 
 def is_door_row(object_ids: list[str], receptacle_ids: list[str], door_ids: set[str]) -> NDArray[np.bool_]:

@@ -219,31 +219,30 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
     timings["codes"] = time.perf_counter() - t1
     res = LabelResult(labels, gt, visibility, perception, timings, reused)
     if doors and has_doors and spec.kind != "detections":
-        _label_doors(ds, spec, res, seed, door_params, progress)
+        _label_doors(ds, spec, res, seed, door_params)
     return res
 
 
-def _label_doors(ds: Any, spec: SourceSpec, res: LabelResult, seed: int, params: DoorParams | None,
-                 progress: Callable[..., Any] | None) -> None:
+def _label_doors(ds: Any, spec: SourceSpec, res: LabelResult, seed: int, params: DoorParams | None) -> None:
     """Fill ``res.doors`` / ``res.door_gt`` (and door rows of ``res.visibility``) for ``spec``."""
     t0 = time.perf_counter()
     has_states = ds.has_table("door_states") and ds.table("door_states").num_rows > 0
     if spec.kind in ("gt", "privileged", "noisy") and not has_states:
         log.warning("%s/tables/door_states.parquet: missing or empty; no door labels for source %s", ds.root, spec.name)
         return
-    door_ids, scan_ids = list(ds.doors), list(ds.scan_ids)
     if has_states:
         res.door_gt = door_label_grid(ds, "gt")
     if spec.kind == "gt":
-        res.doors = door_label_grid(ds, "gt")
+        res.doors = res.door_gt
         return
-    vis = door_visibility_from_table(res.visibility, scan_ids, door_ids) if res.visibility is not None else None
-    obs = None
-    if vis is None or spec.kind == "observed":
+    stored = (door_visibility_from_table(res.visibility, list(ds.scan_ids), list(ds.doors))
+              if res.visibility is not None else None)
+    vis, obs = stored, None
+    if stored is None or spec.kind == "observed":
         obs = observe_doors(ds, params)
         res.door_observations = obs
         vis = obs.visible
-        if res.visibility is None or door_visibility_from_table(res.visibility, scan_ids, door_ids) is None:
+        if stored is None:  # the visibility table gets the door rows
             res.door_visibility = obs.visibility_table()
     if spec.kind == "observed":
         res.doors = door_label_grid(ds, "observed", observations=obs)

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeStream
+from psg_data.estimators._simple import ConstantFilter
 from psg_data.navigation._grid import OccupancyGrid, grid_from_geometry
 from psg_data.navigation._planner import PlanningCache
 
@@ -124,32 +125,6 @@ class DoorEpisode:
         return 0.0 if abs(d) < 1e-6 else d  # float round-off of two sums of the same steps
 
 
-class _ConstantFilter:
-    """A door belief that does not depend on time (baselines and never-seen doors)."""
-
-    def __init__(self, p: float) -> None:
-        self.p = float(p)
-        self._last: float | None = None
-
-    @property
-    def last_t_s(self) -> float | None:
-        return self._last
-
-    def update(self, t_s: float, y: int) -> None:
-        self._last = float(t_s)
-
-    def update_many(self, t_s: Any, y: Any) -> None:
-        t = np.asarray(t_s, float).reshape(-1)
-        if t.size:
-            self._last = float(t[-1])
-
-    def predict(self, t_s: Any) -> NDArray[np.float64]:
-        return np.full(np.shape(np.asarray(t_s, float)), self.p)
-
-    def get_state(self) -> dict[str, Any]:
-        return {"p": self.p}
-
-
 def _open_streams(streams: Sequence[EdgeStream]) -> dict[str, EdgeStream]:
     out: dict[str, EdgeStream] = {}
     for s in streams:
@@ -197,7 +172,7 @@ def fit_door_filters(estimator: Any, streams: Sequence[EdgeStream], door_ids: Se
     for d in door_ids:
         s = by_door.get(d)
         if s is None or len(s) == 0:
-            filters[d], kind[d] = _ConstantFilter(unseen_prior), "prior"
+            filters[d], kind[d] = ConstantFilter((d, "open"), "prior", unseen_prior), "prior"
             continue
         f = est.make_filter(s.edge)
         f.update_many(s.t_s, s.y)
