@@ -68,19 +68,6 @@ class ScanResult:
     origin: float
 
 
-def _lae(a: float, b: float) -> float:
-    """Scalar logaddexp (numpy's formula)."""
-    if a == b:
-        return a + _LOG2 if a != -math.inf else a
-    d = a - b
-    if d > 0:
-        return a + math.log1p(math.exp(-d))
-    if d <= 0:
-        return b + math.log1p(math.exp(d))
-    return d  # nan
-
-
-_LOG2 = math.log(2.0)
 _NEG_INF = -math.inf
 
 

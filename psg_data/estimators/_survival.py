@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError
 
-__all__ = ["SurvivalMixture", "SURVIVAL_FAMILIES", "log1mexp", "log_sub_exp", "log_ndtr_scalar"]
+__all__ = ["SurvivalMixture", "SURVIVAL_FAMILIES", "log_ndtr_scalar"]
 
 _SQRT1_2 = 0.7071067811865476
 _LOG_2SQRTPI = math.log(2.0 * math.sqrt(math.pi))
@@ -46,24 +46,6 @@ SURVIVAL_FAMILIES = ("exponential", "lognormal", "weibull", "loglogistic")
 - ``weibull``: p1 = shape k, p2 = scale (s);
 - ``loglogistic``: p1 = shape beta, p2 = scale alpha (s, the median).
 """
-
-
-def log1mexp(x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``log(1 - exp(x))`` for ``x <= 0``, accurate everywhere (Maechler 2012); -inf at x = 0."""
-    x = np.minimum(np.asarray(x, dtype=np.float64), 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.where(x > -0.6931471805599453, np.log(-np.expm1(x)), np.log1p(-np.exp(x)))
-    return out
-
-
-def log_sub_exp(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``log(exp(a) - exp(b))`` for ``b <= a`` (-inf when equal or when a is -inf)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    finite = np.isfinite(a)
-    with np.errstate(invalid="ignore"):
-        d = np.where(finite, b - a, -np.inf)
-    return np.where(finite, a + log1mexp(d), -np.inf)
 
 
 @dataclass(frozen=True)

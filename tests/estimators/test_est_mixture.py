@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators import MixtureFilter, SurvivalMixture
-from psg_data.estimators._survival import log1mexp
 
 FAMILIES = {
     "exponential": SurvivalMixture.single("exponential", 1 / 3000.0),
@@ -136,15 +135,6 @@ def test_weights_sum_to_one_and_predictions_in_range(ys, gaps, pm, pf, w) -> Non
         assert np.all(np.isfinite(p)) and np.all((p >= 0) & (p <= 1))
         if not emergence:
             assert np.all(np.diff(p) <= 1e-12)  # persistence beliefs only decay without observations
-
-
-def test_log1mexp_accuracy() -> None:
-    from decimal import Decimal, getcontext
-
-    getcontext().prec = 400
-    x = -np.logspace(-20, 2.5, 200)
-    want = np.array([float((1 - Decimal(float(v)).exp()).ln()) for v in x])  # 400-digit reference
-    np.testing.assert_allclose(log1mexp(x), want, rtol=1e-12)
 
 
 def test_survival_validation() -> None:
