@@ -94,7 +94,7 @@ def run_doors_task(specs: list[Any], dataset: str | None, labels: str, seeds: li
     cols = ["blocked_rate", "mean_extra_distance_m", "SR", "SPL"]
     g = per_seed.groupby("estimator", sort=False)
     summary = g[cols].mean()
-    std = g[cols].std(ddof=1).fillna(0.0) if len(seeds) > 1 else g[cols].mean() * 0.0
+    std = g[cols].std(ddof=1).fillna(0.0)  # one seed: 0
     summary = summary.join(std.add_suffix("_std")).reset_index()
     summary.insert(1, "queries", g["queries"].sum().to_numpy())
     summary.insert(2, "blocked_first_plans", g["blocked_first_plans"].sum().to_numpy())

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import shutil
 import time
 from collections import Counter
@@ -16,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from psg_data._cpus import available_cpus
 from psg_data.convert._config import ConvertConfig
 from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, run_task
 from psg_data.errors import ConversionError, DatasetExistsError, PsgDataError
@@ -249,7 +249,7 @@ def convert(
         scan_rows = side.scan_rows()
         tasks: list[ScanTask] = []
         # workers share the machine's cores: jobs x threads beyond the core count only adds contention
-        worker_threads = threads if jobs <= 1 else max(1, min(threads, (os.cpu_count() or 1) // jobs))
+        worker_threads = threads if jobs <= 1 else max(1, min(threads, available_cpus() // jobs))
         seen_ids: dict[str, Path] = {}
         for path, kind in sources:
             row = scan_rows.get(path.name) or scan_rows.get(path.stem)

@@ -42,7 +42,6 @@ from __future__ import annotations
 import logging
 import math
 import multiprocessing
-import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -723,8 +722,10 @@ def evaluate_persistence(
         ZoneInfo(timezone)
     except Exception:  # noqa: BLE001
         raise EvaluationError(f"unknown timezone {timezone!r}; expected an IANA name such as 'Europe/Zurich'") from None
-    if jobs == -1:  # the CPUs this process may run on (cgroup / taskset aware where the OS tells)
-        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if jobs == -1:
+        from psg_data._cpus import available_cpus
+
+        jobs = available_cpus()
     if jobs < 1:
         raise EvaluationError(f"jobs must be >= 1 or -1, got {jobs}")
 
