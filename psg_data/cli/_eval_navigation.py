@@ -15,8 +15,9 @@ __all__ = ["run_navigation_task", "run_doors_task"]
 
 
 def run_navigation_task(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int],
-                    n_queries: int, out: Path, no_plots: bool, quiet: bool, reachable_only: bool = False,
-                    delta: float = 0.2) -> bool:
+                        n_queries: int, out: Path, no_plots: bool, quiet: bool, reachable_only: bool = False,
+                        delta: float = 0.2) -> bool:
+    """Object navigation on a dataset: SR / SPL / AR / DIST per method (paper Table "Predictive Navigation")."""
     from psg_data.cli._eval_inputs import resolve_dataset
     from psg_data.errors import EvaluationError
     from psg_data.navigation import run_navigation
@@ -39,7 +40,7 @@ def run_navigation_task(specs: list[Any], dataset: str | None, setting: str, lab
                          estimator_settings=settings or None, reachable_only=reachable_only, delta=delta)
     res.save(out)
     info = provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path),
-                        "seconds": round(time.perf_counter() - t0, 2), **res.config})
+                       "seconds": round(time.perf_counter() - t0, 2), **res.config})
     (out / "results.json").write_text(json.dumps({"info": info, "summary": json.loads(res.summary.to_json(
         orient="records"))}, indent=1) + "\n", encoding="utf-8")
     res.summary.to_csv(out / "results.csv", index=False)
@@ -57,8 +58,8 @@ def run_navigation_task(specs: list[Any], dataset: str | None, setting: str, lab
 
 
 def run_doors_task(specs: list[Any], dataset: str | None, labels: str, seeds: list[int], n_queries: int, out: Path,
-               no_plots: bool) -> bool:
-    """Door navigation (issue "doors"): every estimator predicts P(open) per door; the planner closes doors below 0.5."""
+                   no_plots: bool) -> bool:
+    """Door navigation: every estimator predicts P(open) per door; the planner closes doors below 0.5."""
     import pandas as pd
 
     from psg_data.errors import EvaluationError
@@ -68,17 +69,19 @@ def run_doors_task(specs: list[Any], dataset: str | None, labels: str, seeds: li
         raise EvaluationError(f"--dataset {dataset}: --task doors runs on the built-in door loop world; "
                               "expected door-loop (weekly door pattern) or door-loop-lab (the lab's door schedule)")
     pattern = "lab" if dataset == "door-loop-lab" else "weekly"
-    if labels == "gt":
-        noise = 0.0
-    elif labels.startswith("noisy:"):
-        try:
-            noise = float(labels[len("noisy:"):])
-        except ValueError:
-            noise = -1.0
-        if not 0.0 <= noise < 0.5:
-            raise EvaluationError(f"--labels {labels}: expected noisy:P with P in [0, 0.5)")
-    else:
-        raise EvaluationError(f"--labels {labels}: --task doors takes gt or noisy:P (training door observations)")
+    from psg_data.errors import LabelingError
+    from psg_data.labeling import parse_source
+
+    try:
+        src = parse_source(labels)
+    except LabelingError:
+        src = None
+    if src is None or src.kind not in ("gt", "noisy") or (src.kind == "noisy" and src.p_m != src.p_f):
+        raise EvaluationError(f"--labels {labels}: --task doors takes gt or noisy:P (training door observations "
+                              "flipped with probability P)")
+    noise = 0.0 if src.kind == "gt" else float(src.p_m)
+    if not 0.0 <= noise < 0.5:
+        raise EvaluationError(f"--labels {labels}: expected noisy:P with P in [0, 0.5)")
     settings = {s.label: dict(s.settings) for s in specs if s.settings}
     t0 = time.perf_counter()
     tables, records, first = [], [], None
@@ -104,9 +107,9 @@ def run_doors_task(specs: list[Any], dataset: str | None, labels: str, seeds: li
     pd.concat(records, ignore_index=True).to_csv(out / "records.csv", index=False)
     summary.to_csv(out / "results.csv", index=False)
     info = provenance({"task": "doors", "dataset_label": dataset or "door-loop", "pattern": pattern,
-                        "training_noise": noise, "seeds": seeds, "queries_per_seed": n_queries, "threshold": 0.5,
-                        "seconds": round(time.perf_counter() - t0, 2),
-                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
+                       "training_noise": noise, "seeds": seeds, "queries_per_seed": n_queries, "threshold": 0.5,
+                       "seconds": round(time.perf_counter() - t0, 2),
+                       "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
     (out / "results.json").write_text(json.dumps({"info": info, "summary": json.loads(summary.to_json(
         orient="records"))}, indent=1) + "\n", encoding="utf-8")
     shown = summary.copy()

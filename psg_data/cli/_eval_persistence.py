@@ -50,7 +50,7 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
     prog.close()
     result = results[0] if len(results) == 1 else merge_results(results)
     info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **info,
-                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
+                       "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
     write_persistence_results(result, out, info=info)
     if not no_plots:
         plot_beliefs(result.traces, out / "belief.png", timezone=tasks[0].timezone)
