@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from psg_data.estimators import EdgeStream, FremenModel, SurvivalMixture, get_estimator  # noqa: E402
+from psg_data.estimators import FremenModel, SurvivalMixture, get_estimator  # noqa: E402
 from psg_data.estimators._fremen import _direct_sums  # noqa: E402
 from psg_data.estimators._perpetua_star import PerpetuaStarFilter  # noqa: E402
 from psg_data.estimators._priors import ConstantPrior  # noqa: E402
