@@ -1,4 +1,7 @@
-"""Loader throughput: psg-data frame iteration vs a plain ``cv2.imread`` loop over the same files.
+"""Loader throughput: psg-data frame iteration vs a plain ``cv2.imread`` loop over the same images.
+
+The same frames are written in both image layouts (one tar archive per scan, the default, and one
+file per image); the baseline decodes the files layout's files with ``cv2.imread``.
 
 Also measures ``import psg_data`` time in fresh interpreters. Run:
 
@@ -25,14 +28,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def make_dataset(root: Path, frames: int, width: int, height: int) -> Path:
+def make_dataset(root: Path, frames: int, width: int, height: int, layout: str = "tar") -> Path:
     from psg_data.schemas import CameraIntrinsics
     from psg_data.writers import DatasetWriter
 
     rng = np.random.default_rng(0)
     v, u = np.mgrid[0:height, 0:width]
     cam = CameraIntrinsics("cam", width, height, 0.9 * width, 0.9 * width, width / 2 - 0.5, height / 2 - 0.5)
-    with DatasetWriter(root, timezone="UTC") as w:
+    with DatasetWriter(root, timezone="UTC", image_layout=layout) as w:
         w.add_camera(cam)
         with w.scan("s0") as sw:
             for i in range(frames):
@@ -84,31 +87,35 @@ def main() -> None:
     frames, (w, h) = (20, (320, 240)) if args.quick else (60, (640, 480))
     with tempfile.TemporaryDirectory() as tmp:
         root = make_dataset(Path(tmp) / "ds", frames, w, h)
-        size_mb = sum(p.stat().st_size for p in (root / "images").rglob("*.png")) / 1e6
-        time_loader(root), time_imread(root)  # warm the page cache
-        lo, lo0, im = [], [], []
+        files_root = make_dataset(Path(tmp) / "ds_files", frames, w, h, layout="files")
+        size_mb = sum(p.stat().st_size for p in (files_root / "images").rglob("*.png")) / 1e6
+        time_loader(root), time_loader(files_root), time_imread(files_root)  # warm the page cache
+        lo, lo0, lf, im = [], [], [], []
         for _ in range(3):  # interleave to share machine noise
             lo.append(time_loader(root)[0])
             lo0.append(time_loader(root, prefetch=0)[0])
-            im.append(time_imread(root)[0])
-        t_lo, t_lo0, t_im = min(lo), min(lo0), min(im)
+            lf.append(time_loader(files_root)[0])
+            im.append(time_imread(files_root)[0])
+        t_lo, t_lo0, t_lf, t_im = min(lo), min(lo0), min(lf), min(im)
     imp = import_time(5)
     rows = [
-        ("psg_data loader (RGB + depth metres)", frames / t_lo, size_mb / t_lo),
+        ("psg_data loader, tar layout", frames / t_lo, size_mb / t_lo),
         ("plain cv2.imread loop (baseline)", frames / t_im, size_mb / t_im),
-        ("psg_data loader, prefetch=0", frames / t_lo0, size_mb / t_lo0),
+        ("psg_data loader, tar layout, prefetch=0", frames / t_lo0, size_mb / t_lo0),
+        ("psg_data loader, files layout", frames / t_lf, size_mb / t_lf),
     ]
     print(f"frames: {frames} x {w}x{h}, {size_mb:.1f} MB of PNG; machine: {platform.machine()}, "
           f"{platform.python_version()}")
-    print(f"{'reader':40s} {'frames/s':>10s} {'MB/s':>8s} {'ratio':>7s}")
+    print(f"{'reader':42s} {'frames/s':>10s} {'MB/s':>8s} {'ratio':>7s}")
     for name, fps, mbs in rows:
-        print(f"{name:40s} {fps:10.1f} {mbs:8.1f} {fps / rows[1][1]:7.2f}x")
+        print(f"{name:42s} {fps:10.1f} {mbs:8.1f} {fps / rows[1][1]:7.2f}x")
     print(f"import psg_data: {imp * 1000:.1f} ms (median of 5 fresh interpreters)")
     out = Path(__file__).parent / "out"
     out.mkdir(exist_ok=True)
     (out / "loader.json").write_text(json.dumps({
         "frames": frames, "resolution": [w, h], "loader_fps": rows[0][1], "imread_fps": rows[1][1],
-        "ratio": rows[0][1] / rows[1][1], "ratio_no_prefetch": rows[2][1] / rows[1][1], "import_s": imp}, indent=2))
+        "ratio": rows[0][1] / rows[1][1], "ratio_no_prefetch": rows[2][1] / rows[1][1],
+        "ratio_files_layout": rows[3][1] / rows[1][1], "import_s": imp}, indent=2))
 
 
 if __name__ == "__main__":

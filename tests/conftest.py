@@ -27,13 +27,14 @@ def tiny_images(rng: np.random.Generator, h: int, w: int) -> tuple[np.ndarray, n
 
 
 def write_tiny_dataset(root: Path, *, scans: int = 3, frames: int = 4, width: int = 32, height: int = 24,
-                       color_encoding: str = "png", seed: int = 0, overwrite: bool = False) -> Path:
+                       color_encoding: str = "png", seed: int = 0, overwrite: bool = False,
+                       image_layout: str = "tar") -> Path:
     """A small but complete dataset: 2 rooms, 3 receptacles, 1 door, 2 objects, images, schedule."""
     rng = np.random.default_rng(seed)
     cam = CameraIntrinsics("d435", width, height, 0.9 * width, 0.9 * width, (width - 1) / 2, (height - 1) / 2,
                            "plumb_bob", (0.01, -0.02, 0.0, 0.0, 0.0), 0.001, "camera_color_optical_frame")
     with DatasetWriter(root, name="tiny", timezone="America/Toronto", color_encoding=color_encoding,
-                       overwrite=overwrite, extra={"generator": "tests"}) as w:
+                       overwrite=overwrite, image_layout=image_layout, extra={"generator": "tests"}) as w:
         w.add_camera(cam)
         w.set_rooms([Room("kitchen", "Kitchen", np.array([[0, 0], [4, 0], [4, 3], [0, 3.0]])), Room("office", "Office")])
         w.set_receptacles([

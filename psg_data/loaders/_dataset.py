@@ -1,12 +1,16 @@
 """Reading a psg-dataset: :func:`open_dataset` -> :class:`Dataset` -> :class:`Scan` -> :class:`Frame`.
 
-Tables are read on first access and cached; images are decoded one frame at a time.
+Tables are read on first access and cached; images are decoded one frame at a time. An image is a
+whole file (``files`` layout, every 1.x dataset) or a byte range of its scan's tar archive (``tar``
+layout): reading frame *i* costs two ``pread`` calls either way, never a scan-wide read.
 """
 
 from __future__ import annotations
 
 import bisect
 import logging
+import os
+import threading
 from collections.abc import Iterator
 from functools import cached_property
 from pathlib import Path
@@ -48,6 +52,17 @@ class Dataset:
             raise FormatError(f"{self.root}: not a directory; expected a psg-dataset directory")
         self.info: DatasetInfo = read_manifest(self.root)
         self._arrow: dict[str, pa.Table] = {}
+        self._images = _ImageFiles(self.root)
+
+    def close(self) -> None:
+        """Close the image archives kept open for reading (reopened on demand)."""
+        self._images.close()
+
+    def __enter__(self) -> Dataset:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
 
     def __repr__(self) -> str:
         return f"Dataset({str(self.root)!r}, scans={len(self.scan_ids)}, frames={self.table('frames').num_rows})"
@@ -139,6 +154,11 @@ class Dataset:
             "color_path": np.asarray(t.column("color_path").to_numpy(zero_copy_only=False))[order],
             "depth_path": np.asarray(t.column("depth_path").to_numpy(zero_copy_only=False))[order],
         }
+        for col in ("color_offset", "color_size", "depth_offset", "depth_size"):  # 2.0; -1: whole file
+            if col in t.column_names:
+                cols[col] = np.asarray(t.column(col).fill_null(-1).to_numpy(), dtype=np.int64)[order]
+            else:
+                cols[col] = np.full(t.num_rows, -1, np.int64)
         scan = scan[order]
         out: dict[str, dict[str, NDArray[Any]]] = {}
         if scan.size == 0:
@@ -196,28 +216,51 @@ class Scan:
         """(N, 4, 4) camera-to-world poses."""
         return self._f["T"] if self._f else np.zeros((0, 4, 4))
 
-    def frame(self, i: int, *, color: bool = True, depth: bool = True) -> Frame:
-        """Frame ``i`` (random access: reads only that frame's two images)."""
+    def _read(self, kind: str, i: int) -> bytes:
+        f = self._f
+        path, off = str(f[f"{kind}_path"][i]), int(f[f"{kind}_offset"][i])
+        try:
+            return self.dataset._images.read(path, off, int(f[f"{kind}_size"][i]))
+        except FormatError as exc:
+            what = "colour" if kind == "color" else "depth"
+            raise FormatError(f"{self._where(kind, i)}: missing or unreadable {what} image ({exc})") from exc
+
+    def _where(self, kind: str, i: int) -> Path:
+        """Where an image is stored: its file, or ``ARCHIVE@OFFSET``."""
+        path = str(self._f[f"{kind}_path"][i])
+        off = int(self._f[f"{kind}_offset"][i])
+        return self.dataset.root / (path if off < 0 else f"{path}@{off}")
+
+    def image_bytes(self, i: int, *, color: bool = True, depth: bool = True) -> tuple[bytes, bytes]:
+        """The stored (encoded) images of frame ``i``: colour PNG/JPEG and 16-bit depth PNG bytes
+        (``b""`` for an image not asked for).
+
+        Raises:
+            FormatError: an image file is missing or its byte range lies outside its archive.
+        """
         if not 0 <= i < len(self):
             raise IndexError(f"scan {self.scan_id}: frame index {i} out of range 0..{len(self) - 1}")
+        return (self._read("color", i) if color else b""), (self._read("depth", i) if depth else b"")
+
+    def frame(self, i: int, *, color: bool = True, depth: bool = True) -> Frame:
+        """Frame ``i`` (random access: reads only that frame's two images)."""
+        cbytes, dbytes = self.image_bytes(i, color=color, depth=depth)
         import cv2
 
-        root = self.dataset.root
         cam = self.dataset.cameras[str(self._f["camera_id"][i])]
         rgb = np.zeros((0, 0, 3), np.uint8)
         dm = np.zeros((0, 0), np.float32)
         if color:
-            path = root / str(self._f["color_path"][i])
-            rgb = _imread_rgb(cv2, str(path))
+            rgb = _decode_rgb(cv2, cbytes)
             if rgb is None:
-                raise FormatError(f"{path}: missing or unreadable colour image")
+                raise FormatError(f"{self._where('color', i)}: missing or unreadable colour image (cannot decode)")
         if depth:
-            path = root / str(self._f["depth_path"][i])
-            raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            raw = cv2.imdecode(np.frombuffer(dbytes, np.uint8), cv2.IMREAD_UNCHANGED) if dbytes else None
+            where = self._where("depth", i)
             if raw is None:
-                raise FormatError(f"{path}: missing or unreadable depth image")
+                raise FormatError(f"{where}: missing or unreadable depth image")
             if raw.dtype != np.uint16 or raw.ndim != 2:
-                raise FormatError(f"{path}: depth must be single-channel uint16, got {raw.dtype} with shape {raw.shape}")
+                raise FormatError(f"{where}: depth must be single-channel uint16, got {raw.dtype} with shape {raw.shape}")
             dm = np.multiply(raw, np.float32(cam.depth_scale_m), dtype=np.float32)
         return Frame(self.scan_id, int(self._f["frame_index"][i]), int(self._f["stamp_ns"][i]), rgb, dm, cam,
                      self._f["T"][i].copy())
@@ -278,13 +321,71 @@ class Scan:
         return pcd
 
 
-def _imread_rgb(cv2: Any, path: str) -> NDArray[np.uint8] | None:
-    """Decode an image file straight to RGB (OpenCV >= 4.11 has IMREAD_COLOR_RGB)."""
+def _decode_rgb(cv2: Any, data: bytes) -> NDArray[np.uint8] | None:
+    """Decode encoded image bytes straight to RGB (OpenCV >= 4.11 has IMREAD_COLOR_RGB)."""
+    if not data:
+        return None
+    buf = np.frombuffer(data, np.uint8)
     flag = getattr(cv2, "IMREAD_COLOR_RGB", None)
     if flag is not None:
-        return cv2.imread(path, flag)
-    bgr = cv2.imread(path, cv2.IMREAD_COLOR)
+        return cv2.imdecode(buf, flag)
+    bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
     return None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+class _ImageFiles:
+    """Reads images: whole files, or byte ranges of archives kept open (``pread``, thread-safe)."""
+
+    _MAX_OPEN = 64
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self._fds: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    def read(self, rel: str, offset: int, size: int) -> bytes:
+        """Bytes of the image stored at ``rel`` (``offset`` < 0: the whole file). FormatError says why not."""
+        path = self.root / rel
+        if offset < 0:
+            try:
+                return path.read_bytes()
+            except OSError as exc:
+                raise FormatError(exc.strerror or type(exc).__name__) from exc
+        fd = self._fd(rel)
+        data = os.pread(fd, size, offset) if hasattr(os, "pread") else self._seek_read(fd, size, offset)
+        if len(data) != size:
+            raise FormatError(f"{size} bytes at offset {offset} lie beyond the end of {rel} (truncated?)")
+        return data
+
+    def _seek_read(self, fd: int, size: int, offset: int) -> bytes:
+        with self._lock:
+            os.lseek(fd, offset, os.SEEK_SET)
+            return os.read(fd, size)
+
+    def _fd(self, rel: str) -> int:
+        with self._lock:
+            fd = self._fds.get(rel)
+            if fd is None:
+                if len(self._fds) >= self._MAX_OPEN:
+                    os.close(self._fds.pop(next(iter(self._fds))))
+                try:
+                    fd = os.open(self.root / rel, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+                except OSError as exc:
+                    raise FormatError(exc.strerror or type(exc).__name__) from exc
+                self._fds[rel] = fd
+            return fd
+
+    def close(self) -> None:
+        with self._lock:
+            for fd in self._fds.values():
+                os.close(fd)
+            self._fds.clear()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # pragma: no cover - interpreter shutdown
+            pass
 
 
 def backproject(frame: Frame, *, stride: int = 1, max_depth_m: float = np.inf

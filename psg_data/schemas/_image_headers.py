@@ -1,20 +1,30 @@
-"""Reading image size and sample format from PNG / JPEG headers without decoding pixels."""
+"""Reading image size and sample format from PNG / JPEG headers without decoding pixels.
+
+One parser serves the validator (stored images, whole files or byte ranges of a scan archive) and
+the converter (encoded payloads of ``CompressedImage`` messages, checked before pass-through).
+"""
 
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-__all__ = ["ImageHeader", "read_image_header"]
+__all__ = ["ImageHeader", "parse_image_header", "read_image_header"]
 
 _PNG_SIG = b"\x89PNG\r\n\x1a\n"
 _PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
+_HEAD_BYTES = 64 * 1024
+"""Enough for the frame header of any JPEG short of one carrying a large EXIF thumbnail first."""
 
 
 @dataclass(frozen=True)
 class ImageHeader:
-    kind: str  # "png" or "jpeg"
+    """What an encoded image holds, read from its header."""
+
+    kind: str
+    """``png`` or ``jpeg``."""
     width: int
     height: int
     channels: int
@@ -25,32 +35,74 @@ class ImageHeader:
         return "uint16" if self.bit_depth == 16 else "uint8"
 
 
-def read_image_header(path: str | Path) -> ImageHeader:
-    """Parse the header of a PNG or JPEG file.
+def _jpeg_frame_header(head: bytes) -> ImageHeader | None:
+    """SOFn segment of a JPEG; None when ``head`` ends before it."""
+    i = 2
+    n = len(head)
+    while i + 1 < n:
+        if head[i] != 0xFF:
+            raise ValueError("corrupt JPEG marker")
+        marker = head[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # markers without a length
+            i += 2
+            continue
+        if i + 4 > n:
+            return None
+        (seglen,) = struct.unpack_from(">H", head, i + 2)
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            if i + 10 > n:
+                return None
+            bits, height, width, comps = struct.unpack_from(">BHHB", head, i + 4)
+            return ImageHeader("jpeg", width, height, comps, bits)
+        if marker == 0xD9 or seglen < 2:
+            raise ValueError("JPEG without a frame header")
+        i += 2 + seglen
+    return None
+
+
+def parse_image_header(data: Any) -> ImageHeader:
+    """Header of an encoded PNG or JPEG (``bytes``, ``memoryview`` or uint8 array).
+
+    Reads only the first bytes: 33 for a PNG, up to the frame header for a JPEG (a short prefix
+    first, the whole buffer only if the frame header lies further in).
 
     Raises:
-        ValueError: not a PNG/JPEG file, or a truncated header.
+        ValueError: not a PNG or JPEG, or a truncated or corrupt header.
     """
-    with open(path, "rb") as fh:
-        head = fh.read(64 * 1024)
+    mv = memoryview(data).cast("B") if not isinstance(data, bytes) else data
+    head = bytes(mv[:1024])
     if head.startswith(_PNG_SIG):
         if len(head) < 33 or head[12:16] != b"IHDR":
             raise ValueError("truncated PNG header")
-        width, height, bit_depth, color_type = struct.unpack(">IIBB", head[16:26])
+        width, height, bit_depth, color_type = struct.unpack_from(">IIBB", head, 16)
         return ImageHeader("png", width, height, _PNG_CHANNELS.get(color_type, 0), bit_depth)
     if head.startswith(b"\xff\xd8"):
-        i = 2
-        while i + 9 < len(head):
-            if head[i] != 0xFF:
-                raise ValueError("corrupt JPEG marker")
-            marker = head[i + 1]
-            if marker == 0xFF:
-                i += 1
-                continue
-            (seglen,) = struct.unpack(">H", head[i + 2:i + 4])
-            if marker in (0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF):
-                bits, height, width, comps = struct.unpack(">BHHB", head[i + 4:i + 10])
-                return ImageHeader("jpeg", width, height, comps, bits)
-            i += 2 + seglen
-        raise ValueError("JPEG without a frame header")
+        hdr = _jpeg_frame_header(head)
+        if hdr is None and len(mv) > len(head):
+            hdr = _jpeg_frame_header(bytes(mv))
+        if hdr is None:
+            raise ValueError("JPEG without a frame header")
+        return hdr
     raise ValueError("not a PNG or JPEG file")
+
+
+def read_image_header(path: str | Path, offset: int = 0, size: int | None = None) -> ImageHeader:
+    """Parse the header of a PNG or JPEG file, or of the image at ``offset`` (``size`` bytes) in it.
+
+    Raises:
+        ValueError: not a PNG/JPEG, or a truncated header.
+        OSError: the file cannot be read.
+    """
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        head = fh.read(_HEAD_BYTES if size is None else min(size, _HEAD_BYTES))
+        try:
+            return parse_image_header(head)
+        except ValueError:
+            if size is None or size <= len(head) or not head.startswith(b"\xff\xd8"):
+                raise
+            fh.seek(offset)
+            return parse_image_header(fh.read(size))

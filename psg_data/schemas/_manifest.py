@@ -11,13 +11,16 @@ from typing import Any
 
 from psg_data.errors import FormatError
 
-__all__ = ["DatasetInfo", "FORMAT_NAME", "FORMAT_VERSION", "read_manifest", "manifest_from_dict"]
+__all__ = ["DatasetInfo", "FORMAT_NAME", "FORMAT_VERSION", "read_manifest", "manifest_from_dict", "format_major"]
 
 log = logging.getLogger(__name__)
 
 FORMAT_NAME = "psg-dataset"
-FORMAT_VERSION = "1.0"
-"""``MAJOR.MINOR``: readers accept any minor of their major and refuse a newer major."""
+FORMAT_VERSION = "2.0"
+"""``MAJOR.MINOR``: readers accept any minor of their major and refuse a newer major.
+
+2.0 added the tar image layout (``frames`` columns ``color_offset`` ... ``depth_size``); this
+release reads 1.x datasets too."""
 
 COLOR_ENCODINGS = ("png", "jpeg")
 
@@ -61,10 +64,20 @@ class DatasetInfo:
     def tz(self) -> zoneinfo.ZoneInfo:
         return zoneinfo.ZoneInfo(self.timezone)
 
+    @property
+    def major(self) -> int:
+        """Major format version of the dataset."""
+        return format_major(self.format_version)
+
+
+def format_major(version: str) -> int:
+    """Major number of a ``MAJOR.MINOR`` format version (ValueError if malformed)."""
+    return int(str(version).split(".")[0])
+
 
 def _major(version: str, where: str) -> int:
     try:
-        return int(str(version).split(".")[0])
+        return format_major(version)
     except ValueError as exc:
         raise FormatError(f"{where}: format_version: expected 'MAJOR.MINOR', got {version!r}") from exc
 

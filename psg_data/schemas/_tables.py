@@ -1,4 +1,4 @@
-"""Arrow schemas of every table of the psg-dataset format, version 1.
+"""Arrow schemas of every table of the psg-dataset format, version 2.
 
 These schemas are the single source of truth: the writer casts to them, the validator checks
 against them, and ``docs/FORMAT.md`` lists exactly their fields (a test keeps the two in step).
@@ -19,6 +19,11 @@ __all__ = [
     "table_path",
     "COLOR_PATH_TEMPLATE",
     "DEPTH_PATH_TEMPLATE",
+    "ARCHIVE_PATH_TEMPLATE",
+    "ARCHIVE_MEMBER_TEMPLATES",
+    "IMAGE_LAYOUTS",
+    "COLUMNS_SINCE",
+    "schema_for",
     "MANIFEST_NAME",
     "DOOR_STATES",
     "LABEL_CODES",
@@ -37,6 +42,16 @@ COLOR_PATH_TEMPLATE = "images/{scan_id}/color/{frame_index:06d}.{ext}"
 
 DEPTH_PATH_TEMPLATE = "images/{scan_id}/depth/{frame_index:06d}.png"
 """Relative path of a depth image (16-bit PNG, millimetres, 0 = invalid)."""
+
+ARCHIVE_PATH_TEMPLATE = "images/{scan_id}.tar"
+"""Relative path of a scan's image archive (``tar`` layout): an uncompressed POSIX ustar archive."""
+
+ARCHIVE_MEMBER_TEMPLATES = ("color/{frame_index:06d}.{ext}", "depth/{frame_index:06d}.png")
+"""Member names of a frame's colour and depth image inside its scan archive (extracting the archive
+into ``images/<scan_id>/`` gives the ``files`` layout's paths)."""
+
+IMAGE_LAYOUTS = ("tar", "files")
+"""How images are stored: one tar archive per scan (default) or one file per image."""
 
 DOOR_STATES = ("open", "closed", "unknown")
 """Allowed values of ``door_states.state``."""
@@ -139,10 +154,18 @@ _add(TableSpec(
         _f("stamp_ns", pa.int64(), "capture time, int64 UTC nanoseconds, increasing within a scan"),
         _f("camera_id", pa.string(), "camera that took the frame"),
         _f("T_world_camera", _MAT4, "row-major 4x4 camera-to-world pose (OpenCV camera axes), metres"),
-        _f("color_path", pa.string(), "relative path of the colour image"),
-        _f("depth_path", pa.string(), "relative path of the depth image"),
+        _f("color_path", pa.string(), "relative path of the colour image, or of the scan archive holding it"),
+        _f("depth_path", pa.string(), "relative path of the depth image, or of the scan archive holding it"),
+        _f("color_offset", pa.int64(), "byte offset of the colour image inside color_path; null: the whole file",
+           nullable=True),
+        _f("color_size", pa.int64(), "byte length of the colour image inside color_path; null: the whole file",
+           nullable=True),
+        _f("depth_offset", pa.int64(), "byte offset of the depth image inside depth_path; null: the whole file",
+           nullable=True),
+        _f("depth_size", pa.int64(), "byte length of the depth image inside depth_path; null: the whole file",
+           nullable=True),
     ]),
-    "One row per RGB-D frame; images are separate files addressed by path.",
+    "One row per RGB-D frame; each image is a file, or a byte range of its scan's archive.",
     key=("scan_id", "frame_index"),
     references=(("scan_id", "scans", "scan_id"), ("camera_id", "cameras", "camera_id")),
 ))
@@ -269,3 +292,17 @@ _add(TableSpec(
 ))
 
 REQUIRED_TABLES: tuple[str, ...] = tuple(name for name, spec in TABLES.items() if spec.required)
+
+COLUMNS_SINCE: dict[str, dict[str, int]] = {
+    "frames": {"color_offset": 2, "color_size": 2, "depth_offset": 2, "depth_size": 2},
+}
+"""Columns added by a format major version (table -> column -> major): older datasets lack them."""
+
+
+def schema_for(name: str, major: int) -> pa.Schema:
+    """Schema of table ``name`` in datasets of format major version ``major`` (1 or 2)."""
+    schema = TABLES[name].schema
+    newer = [c for c, since in COLUMNS_SINCE.get(name, {}).items() if since > major]
+    for col in newer:
+        schema = schema.remove(schema.get_field_index(col))
+    return schema

@@ -14,9 +14,17 @@ from pathlib import Path
 import numpy as np
 
 from psg_data.errors import FormatError
-from psg_data.schemas._image_headers import read_image_header
+from psg_data.schemas._image_headers import parse_image_header, read_image_header
 from psg_data.schemas._manifest import manifest_from_dict
-from psg_data.schemas._tables import DOOR_STATES, LABEL_CODES, MANIFEST_NAME, TABLES, VISIBILITY_KINDS, table_path
+from psg_data.schemas._tables import (
+    DOOR_STATES,
+    LABEL_CODES,
+    MANIFEST_NAME,
+    TABLES,
+    VISIBILITY_KINDS,
+    schema_for,
+    table_path,
+)
 
 __all__ = ["Problem", "validate_dataset"]
 
@@ -115,12 +123,14 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
 
     # -- tables: presence, readability, schema -------------------------------------------------
     tables: dict[str, pa.Table] = {}
+    major = info.major
     for name, spec in TABLES.items():
         rel = table_path(name)
         p = root / rel
+        schema = schema_for(name, major)
         if not p.is_file():
             if spec.required:
-                c.add(rel, "file", f"missing table '{name}', expected a Parquet file with columns {spec.schema.names}")
+                c.add(rel, "file", f"missing table '{name}', expected a Parquet file with columns {schema.names}")
             continue
         try:
             t = pq.read_table(p)
@@ -129,7 +139,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                                "expected a complete Parquet file (truncated or corrupt?)")
             continue
         ok = True
-        for f in spec.schema:
+        for f in schema:
             if f.name not in t.column_names:
                 c.add(rel, f.name, f"missing column, expected type {f.type}")
                 ok = False
@@ -144,9 +154,9 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                 for i in nulls[:3]:
                     c.add(rel, f.name, "null value, expected a value (column is not nullable)", int(i))
                 ok = False
-        extra_cols = [n for n in t.column_names if n not in spec.schema.names]
+        extra_cols = [n for n in t.column_names if n not in schema.names]
         for n in extra_cols:
-            c.add(rel, n, f"unknown column, expected only {spec.schema.names}")
+            c.add(rel, n, f"unknown column, expected only {schema.names} (format {major}.x)")
         if ok:
             tables[name] = t
 
@@ -297,32 +307,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                                            f"[{a}, {b}]", j)
 
         if images:
-            cam_ids = np.asarray(t.column("camera_id").to_numpy(zero_copy_only=False)).astype(str)
-            cpaths = t.column("color_path").to_pylist()
-            dpaths = t.column("depth_path").to_pylist()
-            for j in range(t.num_rows):
-                cam = cams.get(cam_ids[j])
-                for kind, rp in (("color_path", cpaths[j]), ("depth_path", dpaths[j])):
-                    p = root / rp
-                    if not p.is_file():
-                        c.add(rel, kind, f"image {rp} does not exist", j)
-                        continue
-                    try:
-                        hdr = read_image_header(p)
-                    except (OSError, ValueError) as exc:
-                        c.add(rp, "image", f"unreadable image header ({exc}), expected PNG or JPEG")
-                        continue
-                    if cam is not None and (hdr.width, hdr.height) != (cam["width"], cam["height"]):
-                        c.add(rp, "size", f"{hdr.width}x{hdr.height}, expected the camera's "
-                                          f"{cam['width']}x{cam['height']}")
-                    if kind == "depth_path" and (hdr.kind != "png" or hdr.bit_depth != 16 or hdr.channels != 1):
-                        c.add(rp, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), "
-                                           "expected a 16-bit single-channel PNG (uint16 millimetres)")
-                    if kind == "color_path":
-                        want = "jpeg" if info.color_encoding == "jpeg" else "png"
-                        if hdr.kind != want or hdr.bit_depth != 8 or hdr.channels != 3:
-                            c.add(rp, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected "
-                                               f"an 8-bit 3-channel {want} (dataset color_encoding)")
+            _check_images(c, root, cols["frames"], cams, info.color_encoding)
 
     _check_label_tables(c, cols, scan_bounds)
 
@@ -331,6 +316,96 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
         if name in info.counts and info.counts[name] != t.num_rows:
             c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
     return c.problems
+
+
+def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str, dict], color_encoding: str) -> None:
+    """Every image exists (whole file or byte range of a tar member) and its header fits its camera."""
+    rel = table_path("frames")
+    n = len(d["scan_id"])
+    sizes: dict[str, int | None] = {}
+    fds: dict[str, object] = {}
+
+    def file_size(rp: str) -> int | None:
+        if rp not in sizes:
+            p = root / rp
+            sizes[rp] = p.stat().st_size if p.is_file() else None
+        return sizes[rp]
+
+    try:
+        for j in range(n):
+            cam = cams.get(d["camera_id"][j])
+            for kind in ("color", "depth"):
+                rp = d[f"{kind}_path"][j]
+                off = d.get(f"{kind}_offset", [None] * n)[j]
+                size = d.get(f"{kind}_size", [None] * n)[j]
+                fsize = file_size(rp)
+                if fsize is None:
+                    c.add(rel, f"{kind}_path", f"image {rp} does not exist", j)
+                    continue
+                where = rp
+                if (off is None) != (size is None):
+                    c.add(rel, f"{kind}_offset", f"{kind}_offset and {kind}_size must both be set (a byte range of "
+                                                 f"{rp}) or both null (the whole file)", j)
+                    continue
+                if off is not None:
+                    where = f"{rp}@{off}"
+                    if off < 512 or size <= 0 or off + size > fsize or off % 512:
+                        c.add(rel, f"{kind}_offset", f"byte range [{off}, {off + size}) is not inside {rp} "
+                                                     f"({fsize} bytes) at a tar block boundary, expected the data "
+                                                     f"of one archive member", j)
+                        continue
+                    fh = fds.get(rp)
+                    if fh is None:
+                        fh = fds[rp] = open(root / rp, "rb")
+                    fh.seek(off - 512)  # type: ignore[attr-defined]
+                    block = fh.read(512 + min(size, 65536))  # type: ignore[attr-defined]
+                    member = _tar_member(block[:512])
+                    if member is None or member[1] != size:
+                        c.add(where, "tar", f"no tar member header of {size} bytes before the image "
+                                            f"(found {member!r}), expected the ustar header of its member")
+                        continue
+                    try:
+                        hdr = parse_image_header(block[512:])
+                    except ValueError:
+                        try:
+                            hdr = read_image_header(root / rp, off, size)
+                        except (OSError, ValueError) as exc:
+                            c.add(where, "image", f"unreadable image header ({exc}), expected PNG or JPEG")
+                            continue
+                else:
+                    try:
+                        hdr = read_image_header(root / rp)
+                    except (OSError, ValueError) as exc:
+                        c.add(where, "image", f"unreadable image header ({exc}), expected PNG or JPEG")
+                        continue
+                if cam is not None and (hdr.width, hdr.height) != (cam["width"], cam["height"]):
+                    c.add(where, "size", f"{hdr.width}x{hdr.height}, expected the camera's "
+                                         f"{cam['width']}x{cam['height']}")
+                if kind == "depth" and (hdr.kind != "png" or hdr.bit_depth != 16 or hdr.channels != 1):
+                    c.add(where, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), "
+                                          "expected a 16-bit single-channel PNG (uint16 millimetres)")
+                if kind == "color":
+                    want = "jpeg" if color_encoding == "jpeg" else "png"
+                    if hdr.kind != want or hdr.bit_depth != 8 or hdr.channels != 3:
+                        c.add(where, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected "
+                                              f"an 8-bit 3-channel {want} (dataset color_encoding)")
+    finally:
+        for fh in fds.values():
+            fh.close()  # type: ignore[attr-defined]
+
+
+def _tar_member(block: bytes) -> tuple[str, int] | None:
+    """(name, size) of a ustar regular-file header block with a valid checksum, else None."""
+    if len(block) != 512 or block[257:262] != b"ustar" or block[156:157] not in (b"0", b"\0"):
+        return None
+    try:
+        stored = int(block[148:156].split(b"\0")[0].strip() or b"-1", 8)
+        size = int(block[124:136].split(b"\0")[0].strip() or b"0", 8)
+    except ValueError:
+        return None
+    if stored != sum(block[:148]) + 8 * ord(" ") + sum(block[156:]):
+        return None
+    return block[:100].split(b"\0")[0].decode("utf-8", "replace"), size
 
 
 def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bounds: dict[str, tuple[int, int]]) -> None:

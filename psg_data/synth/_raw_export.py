@@ -315,21 +315,18 @@ def export_raw(
                 for i in range(len(scan)):
                     t = int(scan.stamps_ns[i])
                     T_wc = scan.poses[i]
-                    color_file = root / str(scan._f["color_path"][i])
-                    depth_file = root / str(scan._f["depth_path"][i])
-                    color_bytes = color_file.read_bytes()
-                    depth_png = depth_file.read_bytes()
+                    color_bytes, depth_png = scan.image_bytes(i)
                     rgb = None
                     depth_mm = None
                     if want_raw or ds.info.color_encoding != "jpeg":
                         bgr = cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
                         if bgr is None:
-                            raise FormatError(f"{color_file}: unreadable colour image")
+                            raise FormatError(f"{root}: scan {scan.scan_id} frame {i}: unreadable colour image")
                         rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
                     if want_raw or abs(cam.depth_scale_m - 0.001) > 1e-12:
                         raw = cv2.imdecode(np.frombuffer(depth_png, np.uint8), cv2.IMREAD_UNCHANGED)
                         if raw is None:
-                            raise FormatError(f"{depth_file}: unreadable depth image")
+                            raise FormatError(f"{root}: scan {scan.scan_id} frame {i}: unreadable depth image")
                         if abs(cam.depth_scale_m - 0.001) > 1e-12:
                             mm = np.rint(raw.astype(np.float64) * cam.depth_scale_m * 1000.0)
                             raw = np.where((mm > 0) & (mm <= 65535), mm, 0).astype(np.uint16)

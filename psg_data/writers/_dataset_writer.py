@@ -4,6 +4,9 @@ Writes go into ``ROOT.partial/`` beside the target; :meth:`DatasetWriter.close` 
 the checksum table and the manifest, then renames the directory into place. An existing dataset is
 only replaced with ``overwrite=True``. An interrupted write leaves ``ROOT.partial/``; reopening with
 ``resume=True`` keeps the scans whose images are complete (see :meth:`DatasetWriter.completed_scans`).
+
+Images go into one tar archive per scan by default (``image_layout="tar"``, written by
+:class:`~psg_data.writers._tar_archive.TarArchiveWriter`) or one file per image (``"files"``).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import logging
 import os
 import shutil
 from collections.abc import Collection, Iterable, Mapping
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, fields, is_dataclass
 from pathlib import Path
@@ -28,14 +32,18 @@ from psg_data.errors import DatasetExistsError, FormatError
 from psg_data.schemas._manifest import DatasetInfo
 from psg_data.schemas._records import CameraIntrinsics, Door, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import (
+    ARCHIVE_MEMBER_TEMPLATES,
+    ARCHIVE_PATH_TEMPLATE,
     COLOR_PATH_TEMPLATE,
     DEPTH_PATH_TEMPLATE,
+    IMAGE_LAYOUTS,
     MANIFEST_NAME,
     TABLES,
     table_path,
 )
+from psg_data.writers._tar_archive import BufferPool, TarArchiveWriter
 
-__all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "PNG_LEVEL", "JPEG_QUALITY"]
+__all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "encode_color", "encode_depth", "PNG_LEVEL", "JPEG_QUALITY"]
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +51,8 @@ PNG_LEVEL = 1
 """zlib level for PNG images; chosen by measurement (see docs/FORMAT.md, BENCHMARKS.md)."""
 JPEG_QUALITY = 95
 _PARTIAL_SUFFIX = ".partial"
-_SCAN_DONE = ".scan_complete.json"
+_SCANS_DIR = ".scans"
+"""Inside ``ROOT.partial``: one JSON record per completed scan (what a resumed write adopts)."""
 _WRITE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0)
 
 
@@ -96,7 +105,12 @@ def to_arrow(name: str, rows: Any) -> pa.Table:
 
 
 class ScanWriter:
-    """Adds the frames of one scan; obtained from :meth:`DatasetWriter.scan`."""
+    """Adds the frames of one scan; obtained from :meth:`DatasetWriter.scan`.
+
+    Images are stored in frame order: appended to the scan's tar archive (``tar`` layout) or
+    written one file each (``files`` layout). With encoding threads, :meth:`add_frame` returns
+    before its images are encoded; they are stored in order as the encodings finish.
+    """
 
     def __init__(self, writer: DatasetWriter, scan_id: str, source: str | None, split: str | None) -> None:
         self._w = writer
@@ -104,7 +118,16 @@ class ScanWriter:
         self.source = source
         self.split = split
         self._frames: list[dict[str, Any]] = []
-        self._pending: list[Future[None]] = []
+        self._queue: deque[tuple[dict[str, Any], Any, Any]] = deque()
+        self._files: dict[str, tuple[int, str]] = {}
+        self._ext = "jpg" if writer.color_encoding == "jpeg" else "png"
+        self._archive: TarArchiveWriter | None = None
+        self._archive_rel = ARCHIVE_PATH_TEMPLATE.format(scan_id=scan_id)
+        if writer.image_layout == "tar":
+            path = writer.tmp / self._archive_rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._archive = TarArchiveWriter(path, writer._buffers(), direct_io=writer.direct_io)
+        self._done = False
 
     def __enter__(self) -> ScanWriter:
         return self
@@ -113,31 +136,29 @@ class ScanWriter:
         if exc_type is None:
             self.close()
         else:
-            for fut in self._pending:
-                fut.cancel()
+            self.abort()
 
     @property
     def n_frames(self) -> int:
         return len(self._frames)
 
-    def _paths(self, index: int) -> tuple[str, str]:
-        ext = "jpg" if self._w.color_encoding == "jpeg" else "png"
-        return (COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=index, ext=ext),
-                DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=index))
-
-    def _record(self, stamp_ns: int, T_world_camera: NDArray[np.float64], camera_id: str) -> tuple[int, str, str]:
+    def _record(self, stamp_ns: int, T_world_camera: NDArray[np.float64], camera_id: str) -> dict[str, Any]:
         T = np.asarray(T_world_camera, dtype=np.float64)
         if T.shape != (4, 4):
             raise FormatError(f"scan {self.scan_id}: T_world_camera must be 4x4, got shape {T.shape}")
         if camera_id not in self._w._cameras:
             raise FormatError(f"scan {self.scan_id}: unknown camera_id {camera_id!r}; add it with add_camera first")
         index = len(self._frames)
-        color_path, depth_path = self._paths(index)
-        self._frames.append({
-            "scan_id": self.scan_id, "frame_index": index, "stamp_ns": int(stamp_ns), "camera_id": camera_id,
-            "T_world_camera": T.reshape(16).tolist(), "color_path": color_path, "depth_path": depth_path,
-        })
-        return index, color_path, depth_path
+        if self._archive is not None:
+            color_path = depth_path = self._archive_rel
+        else:
+            color_path = COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=index, ext=self._ext)
+            depth_path = DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=index)
+        rec = {"scan_id": self.scan_id, "frame_index": index, "stamp_ns": int(stamp_ns), "camera_id": camera_id,
+               "T_world_camera": T.reshape(16).tolist(), "color_path": color_path, "depth_path": depth_path,
+               "color_offset": None, "color_size": None, "depth_offset": None, "depth_size": None}
+        self._frames.append(rec)
+        return rec
 
     def add_frame(
         self,
@@ -167,40 +188,115 @@ class ScanWriter:
             if depth_mm.shape != expect or depth_mm.dtype != np.uint16:
                 raise FormatError(f"scan {self.scan_id}: depth must be {expect[0]}x{expect[1]} uint16 mm, "
                                   f"got {depth_mm.shape} {depth_mm.dtype}")
-        index, color_path, depth_path = self._record(stamp_ns, T_world_camera, camera_id)
-        self._submit(self._w._encode_color, color_path, color_rgb)
-        self._submit(self._w._encode_depth, depth_path, depth_mm)
-        return index
+        rec = self._record(stamp_ns, T_world_camera, camera_id)
+        pool = self._w._pool
+        if pool is None:
+            self._store(rec, encode_color(color_rgb, self._w.color_encoding), encode_depth(depth_mm))
+        else:
+            self._push(rec, pool.submit(encode_color, color_rgb, self._w.color_encoding),
+                       pool.submit(encode_depth, depth_mm))
+        return rec["frame_index"]
 
     def add_encoded_frame(
         self,
         stamp_ns: int,
         T_world_camera: NDArray[np.float64],
-        color_bytes: bytes,
-        depth_png_bytes: bytes,
+        color_bytes: Any,
+        depth_png_bytes: Any,
         camera_id: str,
     ) -> int:
-        """Store already-encoded images as they are (no re-encoding).
+        """Store already-encoded images as they are (no re-encoding); returns the frame index.
 
         ``color_bytes`` must be in the dataset's colour encoding (PNG or JPEG) and
         ``depth_png_bytes`` a 16-bit single-channel PNG in millimetres; the caller checks that.
+        Both may be any bytes-like object (a ``memoryview`` of a message buffer is not copied
+        more than once: straight into the archive's write buffer).
         """
-        index, color_path, depth_path = self._record(stamp_ns, T_world_camera, camera_id)
-        # one task for both files: small payloads make the per-task overhead count
-        self._submit(self._w._write_pair, color_path, bytes(color_bytes), depth_path, bytes(depth_png_bytes))
-        return index
+        rec = self._record(stamp_ns, T_world_camera, camera_id)
+        if not self._queue:
+            self._store(rec, color_bytes, depth_png_bytes)
+        else:  # behind frames still being encoded: keep a copy, the caller may reuse its buffers
+            self._push(rec, bytes(color_bytes), bytes(depth_png_bytes))
+        return rec["frame_index"]
 
-    def _submit(self, fn: Any, *args: Any) -> None:
-        self._pending.append(self._w._pool.submit(fn, *args))
-        if len(self._pending) > 4 * self._w._threads:
-            self._pending.pop(0).result()
+    def _push(self, rec: dict[str, Any], color: Any, depth: Any) -> None:
+        self._queue.append((rec, color, depth))
+        while self._queue:
+            _, c, d = self._queue[0]
+            if len(self._queue) <= 2 * self._w._threads and (
+                    (isinstance(c, Future) and not c.done()) or (isinstance(d, Future) and not d.done())):
+                break
+            self._store(*self._queue.popleft())
+
+    def _store(self, rec: dict[str, Any], color: Any, depth: Any) -> None:
+        if isinstance(color, Future):
+            color = color.result()
+        if isinstance(depth, Future):
+            depth = depth.result()
+        i = rec["frame_index"]
+        if self._archive is not None:
+            mtime = rec["stamp_ns"] // 1_000_000_000
+            cname, dname = ARCHIVE_MEMBER_TEMPLATES
+            rec["color_offset"] = self._archive.add(cname.format(frame_index=i, ext=self._ext), color, mtime)
+            rec["color_size"] = memoryview(color).nbytes
+            rec["depth_offset"] = self._archive.add(dname.format(frame_index=i), depth, mtime)
+            rec["depth_size"] = memoryview(depth).nbytes
+        else:
+            for rel, data in ((rec["color_path"], color), (rec["depth_path"], depth)):
+                self._files[rel] = self._w._write_file(rel, data)
+
+    def abort(self) -> None:
+        """Drop the scan: cancel pending encodings and stop its archive (the file stays partial)."""
+        for _, c, d in self._queue:
+            for x in (c, d):
+                if isinstance(x, Future):
+                    x.cancel()
+        self._queue.clear()
+        if self._archive is not None:
+            self._archive.abort()
+        self._done = True
+        self._w._open.discard(self)
 
     def close(self) -> None:
-        """Wait for pending writes, then register the scan with the dataset writer."""
-        for fut in self._pending:
-            fut.result()
-        self._pending.clear()
+        """Store pending frames, finish the archive, then register the scan with the dataset writer."""
+        if self._done:
+            return
+        try:
+            while self._queue:
+                self._store(*self._queue.popleft())
+            if self._archive is not None:
+                self._files[self._archive_rel] = self._archive.close()
+                self._archive = None
+        except BaseException:
+            self.abort()
+            raise
+        self._done = True
+        self._w._open.discard(self)
         self._w._finish_scan(self)
+
+
+def encode_color(rgb: NDArray[np.uint8], encoding: str) -> bytes:
+    """(H, W, 3) uint8 RGB -> PNG (level :data:`PNG_LEVEL`) or JPEG (quality :data:`JPEG_QUALITY`) bytes."""
+    import cv2
+
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    if encoding == "jpeg":
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    else:
+        ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
+    if not ok:  # pragma: no cover
+        raise FormatError("OpenCV could not encode the colour image")
+    return buf.tobytes()
+
+
+def encode_depth(depth_mm: NDArray[np.uint16]) -> bytes:
+    """(H, W) uint16 millimetres -> 16-bit PNG bytes (level :data:`PNG_LEVEL`)."""
+    import cv2
+
+    ok, buf = cv2.imencode(".png", depth_mm, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
+    if not ok:  # pragma: no cover
+        raise FormatError("OpenCV could not encode the depth image")
+    return buf.tobytes()
 
 
 class DatasetWriter:
@@ -221,7 +317,10 @@ class DatasetWriter:
         color_encoding: ``png`` (lossless) or ``jpeg``.
         overwrite: replace an existing dataset at ``root`` (only once the new one is complete).
         resume: reuse the scans of an interrupted write found in ``ROOT.partial``.
-        threads: image-encoding threads (OpenCV releases the GIL).
+        threads: image-encoding threads (OpenCV releases the GIL); 0 encodes in the calling thread.
+        image_layout: ``tar`` (one archive per scan, the default) or ``files`` (one file per image);
+            see docs/FORMAT.md.
+        direct_io: write scan archives with ``O_DIRECT`` where the file system supports it.
         extra: provenance stored in the manifest's ``extra``.
     """
 
@@ -235,31 +334,38 @@ class DatasetWriter:
         overwrite: bool = False,
         resume: bool = False,
         threads: int = 2,
+        image_layout: str = "tar",
+        direct_io: bool = True,
         extra: Mapping[str, Any] | None = None,
     ) -> None:
         self.root = Path(root)
         if color_encoding not in ("png", "jpeg"):
             raise FormatError(f"color_encoding: expected 'png' or 'jpeg', got {color_encoding!r}")
+        if image_layout not in IMAGE_LAYOUTS:
+            raise FormatError(f"image_layout: expected one of {', '.join(IMAGE_LAYOUTS)}, got {image_layout!r}")
         if self.root.exists() and not overwrite:
             raise DatasetExistsError(f"{self.root}: output exists; pass --overwrite (overwrite=True) to replace it")
         self.name = name or self.root.name
         self.timezone = timezone
         self.color_encoding = color_encoding
+        self.image_layout = image_layout
+        self.direct_io = direct_io
         self.extra: dict[str, Any] = dict(extra or {})
         self.tmp = self.root.with_name(self.root.name + _PARTIAL_SUFFIX)
         if self.tmp.exists() and not resume:
             shutil.rmtree(self.tmp)
         self.tmp.mkdir(parents=True, exist_ok=True)
         self._tmp_str = str(self.tmp)
-        self._threads = max(1, threads)
-        self._pool = ThreadPoolExecutor(max_workers=self._threads)
+        self._threads = max(0, int(threads))
+        self._pool = ThreadPoolExecutor(max_workers=self._threads) if self._threads else None
+        self._buffer_pool: BufferPool | None = None
+        self._open: set[ScanWriter] = set()
         self._cameras: dict[str, CameraIntrinsics] = {}
         self._tables: dict[str, pa.Table] = {}
         self._scans: dict[str, dict[str, Any]] = {}
         self._frames: dict[str, list[dict[str, Any]]] = {}
         self._files: dict[str, tuple[int, str]] = {}
         """relative path -> (size, sha256) of every file written or adopted (hashed from memory)."""
-        self._written: dict[str, tuple[int, str]] = {}
         self._closed = False
 
     # -- context manager -------------------------------------------------------------------
@@ -309,7 +415,15 @@ class DatasetWriter:
         if not scan_id or "/" in scan_id or scan_id.startswith("."):
             raise FormatError(f"scan_id: {scan_id!r} must be a non-empty name without '/' and not start with '.'")
         shutil.rmtree(self.tmp / "images" / scan_id, ignore_errors=True)
-        return ScanWriter(self, scan_id, source, split)
+        (self.tmp / ARCHIVE_PATH_TEMPLATE.format(scan_id=scan_id)).unlink(missing_ok=True)
+        sw = ScanWriter(self, scan_id, source, split)
+        self._open.add(sw)
+        return sw
+
+    def _buffers(self) -> BufferPool:
+        if self._buffer_pool is None:
+            self._buffer_pool = BufferPool()
+        return self._buffer_pool
 
     def completed_scans(self, trusted: Collection[str] = ()) -> dict[str, dict[str, Any]]:
         """Scans of an interrupted write that are complete and whose images match their checksums.
@@ -323,18 +437,20 @@ class DatasetWriter:
         """
         trust = set(trusted)
         done: dict[str, dict[str, Any]] = {}
-        for marker in sorted((self.tmp / "images").glob(f"*/{_SCAN_DONE}")):
+        for marker in sorted((self.tmp / _SCANS_DIR).glob("*.json")):
             try:
                 rec = json.loads(marker.read_text())
-            except (OSError, json.JSONDecodeError):
+                scan_id = rec["scan"]["scan_id"]
+                files = rec["files"]
+            except (OSError, json.JSONDecodeError, KeyError, TypeError):
                 continue
-            if rec["scan"]["scan_id"] in trust:
+            if scan_id in trust:
                 ok = True
             else:
-                ok = all((self.tmp / p).is_file() and sha256_file(self.tmp / p) == s
-                         for p, (_, s) in rec["files"].items())
+                ok = all((self.tmp / p).is_file() and (self.tmp / p).stat().st_size == n
+                         and sha256_file(self.tmp / p) == s for p, (n, s) in files.items())
             if ok:
-                done[rec["scan"]["scan_id"]] = rec
+                done[scan_id] = rec
         return done
 
     def adopt_scan(self, record: Mapping[str, Any]) -> None:
@@ -342,7 +458,7 @@ class DatasetWriter:
         scan_id = record["scan"]["scan_id"]
         self._scans[scan_id] = dict(record["scan"])
         self._frames[scan_id] = list(record["frames"])
-        self._files.update({p: tuple(v) for p, v in record["files"].items()})
+        self._files.update({p: (int(v[0]), str(v[1])) for p, v in record["files"].items()})
 
     def _finish_scan(self, sw: ScanWriter) -> None:
         if not sw._frames:
@@ -350,62 +466,43 @@ class DatasetWriter:
         stamps = [f["stamp_ns"] for f in sw._frames]
         scan = {"scan_id": sw.scan_id, "start_stamp_ns": min(stamps), "end_stamp_ns": max(stamps),
                 "source": sw.source, "split": sw.split}
-        files: dict[str, tuple[int, str]] = {}
-        for f in sw._frames:
-            for rel in (f["color_path"], f["depth_path"]):
-                files[rel] = self._written.pop(rel)
         self._scans[sw.scan_id] = scan
         self._frames[sw.scan_id] = sw._frames
-        self._files.update(files)
-        marker = self.tmp / "images" / sw.scan_id / _SCAN_DONE
-        marker.write_text(json.dumps({"scan": scan, "frames": sw._frames,
-                                      "files": {k: list(v) for k, v in files.items()}}))
+        self._files.update(sw._files)
+        markers = self.tmp / _SCANS_DIR
+        markers.mkdir(exist_ok=True)
+        tmp = markers / f".{sw.scan_id}.json.tmp"
+        tmp.write_text(json.dumps({"scan": scan, "frames": sw._frames,
+                                   "files": {k: list(v) for k, v in sw._files.items()}}))
+        os.replace(tmp, markers / f"{sw.scan_id}.json")
 
-    # -- image encoding (run in the thread pool) ---------------------------------------------
-    def _write_bytes(self, rel: str, data: bytes) -> None:
-        # os-level calls: fewer GIL round trips per file than open()/write()/close() on a file object
+    # -- files layout ---------------------------------------------------------------------------
+    def _write_file(self, rel: str, data: Any) -> tuple[int, str]:
+        """Write one image file (``files`` layout); returns (size, sha256) hashed from memory."""
         path = os.path.join(self._tmp_str, rel)
         try:
             fd = os.open(path, _WRITE_FLAGS, 0o666)
         except FileNotFoundError:
             os.makedirs(os.path.dirname(path), exist_ok=True)
             fd = os.open(path, _WRITE_FLAGS, 0o666)
+        view = memoryview(data).cast("B")
+        size = view.nbytes
         try:
-            view = memoryview(data)
             while view:
                 view = view[os.write(fd, view):]
         finally:
             os.close(fd)
-        self._written[rel] = (len(data), hashlib.sha256(data).hexdigest())
-
-    def _write_pair(self, rel_a: str, data_a: bytes, rel_b: str, data_b: bytes) -> None:
-        self._write_bytes(rel_a, data_a)
-        self._write_bytes(rel_b, data_b)
-
-    def _encode_color(self, rel: str, rgb: NDArray[np.uint8]) -> None:
-        import cv2
-
-        bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
-        if self.color_encoding == "jpeg":
-            ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-        else:
-            ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
-        if not ok:  # pragma: no cover
-            raise FormatError(f"{rel}: OpenCV could not encode the colour image")
-        self._write_bytes(rel, buf.tobytes())
-
-    def _encode_depth(self, rel: str, depth_mm: NDArray[np.uint16]) -> None:
-        import cv2
-
-        ok, buf = cv2.imencode(".png", depth_mm, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
-        if not ok:  # pragma: no cover
-            raise FormatError(f"{rel}: OpenCV could not encode the depth image")
-        self._write_bytes(rel, buf.tobytes())
+        return size, hashlib.sha256(data).hexdigest()
 
     # -- finish -------------------------------------------------------------------------------
     def abort(self, keep_partial: bool = False) -> None:
         """Stop writing; remove ``ROOT.partial`` unless ``keep_partial`` (to resume later)."""
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        for sw in list(self._open):
+            sw.abort()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        if self._buffer_pool is not None:
+            self._buffer_pool.close()
         self._closed = True
         if not keep_partial:
             shutil.rmtree(self.tmp, ignore_errors=True)
@@ -416,11 +513,29 @@ class DatasetWriter:
         pq.write_table(table, path, compression="zstd")
         self._files[table_path(name)] = (path.stat().st_size, sha256_file(path))
 
+    def _remove_stale_images(self) -> None:
+        """Delete image files left by an interrupted run that no scan of this dataset uses."""
+        images = self.tmp / "images"
+        if not images.is_dir():
+            return
+        for p in sorted(images.rglob("*"), reverse=True):
+            rel = p.relative_to(self.tmp).as_posix()
+            if p.is_file() and rel not in self._files:
+                p.unlink()
+            elif p.is_dir() and not any(p.iterdir()):
+                p.rmdir()
+
     def close(self) -> Path:
         """Write tables, checksums and manifest; rename into place. Returns the dataset path."""
         if self._closed:
             return self.root
-        self._pool.shutdown(wait=True)
+        if self._open:
+            open_ids = ", ".join(sorted(sw.scan_id for sw in self._open))
+            raise FormatError(f"{self.root}: scans still open ({open_ids}); close them before the dataset")
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+        if self._buffer_pool is not None:
+            self._buffer_pool.close()
         scans = sorted(self._scans.values(), key=lambda s: (s["start_stamp_ns"], s["scan_id"]))
         frames = [f for s in scans for f in self._frames[s["scan_id"]]]
         tables: dict[str, pa.Table] = dict(self._tables)
@@ -435,8 +550,8 @@ class DatasetWriter:
                 tables[name] = spec.schema.empty_table()
         for name, table in tables.items():
             self._write_table(name, table)
-        for marker in (self.tmp / "images").glob(f"*/{_SCAN_DONE}"):
-            marker.unlink()
+        shutil.rmtree(self.tmp / _SCANS_DIR, ignore_errors=True)
+        self._remove_stale_images()
         files = sorted(self._files.items())
         files_table = to_arrow("files", [{"path": p, "size_bytes": n, "sha256": s} for p, (n, s) in files])
         fpath = self.tmp / table_path("files")
@@ -459,5 +574,3 @@ class DatasetWriter:
             os.replace(self.tmp, self.root)
         log.info("wrote %s (%d scans, %d frames)", self.root, len(scans), len(frames))
         return self.root
-
-

@@ -103,14 +103,17 @@ def _interrupted_write(root: Path) -> Path:
 
 def test_completed_scans_trusted_skips_only_the_trusted_checksums(tmp_path: Path) -> None:
     tmp = _interrupted_write(tmp_path / "ds")
-    for s in range(2):  # corrupt one image of each scan
-        (tmp / "images" / f"scan_{s}" / "depth" / "000001.png").write_bytes(b"not the written bytes")
+    for s in range(2):  # corrupt one image of each scan (same size, other bytes)
+        p = tmp / "images" / f"scan_{s}.tar"
+        data = bytearray(p.read_bytes())
+        data[600] ^= 0xFF
+        p.write_bytes(bytes(data))
     w = DatasetWriter(tmp_path / "ds", resume=True, threads=1)
     assert w.completed_scans() == {}
     got = w.completed_scans(trusted={"scan_1"})
     assert set(got) == {"scan_1"}
-    marker = json.loads((tmp / "images" / "scan_1" / ".scan_complete.json").read_text())
-    assert got["scan_1"]["files"] == marker["files"]
+    marker = json.loads((tmp / ".scans" / "scan_1.json").read_text())
+    assert got["scan_1"]["files"] == marker["files"] and list(marker["files"]) == ["images/scan_1.tar"]
     w.abort()
 
 

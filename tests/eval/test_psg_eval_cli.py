@@ -48,7 +48,7 @@ def test_persistence_on_dataset_writes_table_files_and_plots(lab: Path, tmp_path
     assert "MAE" in res.stdout and "B-Acc" in res.stdout and "F1" in res.stdout
     data = json.loads((out / "results.json").read_text())
     assert data["config"]["seeds"] == [0, 1]
-    assert data["info"]["psg_data_version"] and data["info"]["format_version"] == "1.0"
+    assert data["info"]["psg_data_version"] and data["info"]["format_version"] == "2.0"
     assert data["info"]["labels"] == "gt" and "dense schedule" in data["info"]["ground_truth"]
     assert set(data["summary"]) == {"last_seen", "always_present"}
     csv = pd.read_csv(out / "results.csv")

@@ -16,10 +16,18 @@ from psg_data.writers import DatasetWriter
 from tests.conftest import T0_NS, tiny_images, write_tiny_dataset
 
 
-def test_round_trip_tables_images_poses(tmp_path: Path) -> None:
-    root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=3, seed=7)
+@pytest.mark.parametrize("layout", ["tar", "files"])
+def test_round_trip_tables_images_poses(tmp_path: Path, layout: str) -> None:
+    root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=3, seed=7, image_layout=layout)
     ds = psg_data.open_dataset(root)
-    assert ds.info.format == "psg-dataset" and ds.info.format_version == "1.0"
+    assert ds.info.format == "psg-dataset" and ds.info.format_version == "2.0"
+    frames = ds.df("frames")
+    if layout == "tar":
+        assert set(frames.color_path) == {"images/scan_000.tar", "images/scan_001.tar"}
+        assert (frames.color_offset % 512 == 0).all() and (frames.depth_offset > frames.color_offset).all()
+    else:
+        assert frames.color_offset.isna().all() and frames.depth_size.isna().all()
+        assert frames.color_path[0] == "images/scan_000/color/000000.png"
     assert ds.info.timezone == "America/Toronto"
     assert ds.scan_ids == ["scan_000", "scan_001"]
     assert set(ds.receptacles) == {"table", "shelf", "desk"}
@@ -47,8 +55,8 @@ def test_round_trip_tables_images_poses(tmp_path: Path) -> None:
             assert fr.camera.width == 32
 
 
-def test_random_access_reads_one_frame(make_dataset) -> None:
-    ds = psg_data.open_dataset(make_dataset(frames=5))
+def test_random_access_reads_one_frame_files_layout(make_dataset) -> None:
+    ds = psg_data.open_dataset(make_dataset(frames=5, image_layout="files"))
     scan = ds.scan("scan_002")
     # delete every other image of the scan: frame 3 must still load on its own
     for i in (0, 1, 2, 4):
@@ -59,6 +67,50 @@ def test_random_access_reads_one_frame(make_dataset) -> None:
         scan.frame(0)
     with pytest.raises(IndexError, match="out of range"):
         scan.frame(5)
+
+
+def test_random_access_reads_one_frame_tar_layout(make_dataset) -> None:
+    ds = psg_data.open_dataset(make_dataset(frames=5))
+    scan = ds.scan("scan_002")
+    frames = ds.df("frames").query("scan_id == 'scan_002'").sort_values("frame_index")
+    archive = ds.root / "images/scan_002.tar"
+    # zero everything but frame 3's two byte ranges: frame 3 must still load on its own
+    data = bytearray(archive.stat().st_size)
+    raw = archive.read_bytes()
+    for kind in ("color", "depth"):
+        off, size = int(frames[f"{kind}_offset"].iloc[3]), int(frames[f"{kind}_size"].iloc[3])
+        data[off:off + size] = raw[off:off + size]
+    archive.write_bytes(bytes(data))
+    ds.close()
+    fr = scan.frame(3)
+    assert fr.index == 3 and fr.color.shape == (24, 32, 3)
+    with pytest.raises(FormatError, match=r"scan_002\.tar@\d+: missing or unreadable colour image"):
+        scan.frame(0)
+    archive.write_bytes(raw[: int(frames["color_offset"].iloc[4])])  # truncated before frame 4
+    ds.close()
+    with pytest.raises(FormatError, match="beyond the end of images/scan_002.tar"):
+        scan.frame(4)
+    assert scan.frame(1).color.shape == (24, 32, 3)
+
+
+def test_tar_archive_is_a_plain_tar(make_dataset) -> None:
+    import tarfile
+
+    root = make_dataset(scans=1, frames=3, color_encoding="jpeg")
+    ds = psg_data.open_dataset(root)
+    frames = ds.df("frames")
+    with tarfile.open(root / "images/scan_000.tar") as tf:
+        members = tf.getmembers()
+        assert [m.name for m in members] == ["color/000000.jpg", "depth/000000.png", "color/000001.jpg",
+                                             "depth/000001.png", "color/000002.jpg", "depth/000002.png"]
+        for i in range(3):
+            c, d = members[2 * i], members[2 * i + 1]
+            assert (c.offset_data, c.size) == (frames.color_offset[i], frames.color_size[i])
+            assert (d.offset_data, d.size) == (frames.depth_offset[i], frames.depth_size[i])
+            assert c.mtime == frames.stamp_ns[i] // 10**9
+            cbytes, dbytes = ds.scan("scan_000").image_bytes(i)
+            assert tf.extractfile(c).read() == cbytes and tf.extractfile(d).read() == dbytes
+    assert (root / "images/scan_000.tar").stat().st_size % 4096 == 0
 
 
 def test_scan_at_and_unknown_scan(make_dataset) -> None:
@@ -167,8 +219,10 @@ def test_resume_rejects_scan_with_corrupted_image(tmp_path: Path) -> None:
     with w.scan("s0") as sw:
         sw.add_frame(1, np.eye(4), np.zeros((6, 8, 3), np.uint8), np.zeros((6, 8), np.uint16), "c")
     w.abort(keep_partial=True)
-    png = root.with_name("out.partial") / "images/s0/depth/000000.png"
-    png.write_bytes(png.read_bytes()[:-3])
+    archive = root.with_name("out.partial") / "images/s0.tar"
+    data = bytearray(archive.read_bytes())
+    data[700] ^= 0xFF  # same size, other content
+    archive.write_bytes(bytes(data))
     assert DatasetWriter(root, timezone="UTC", resume=True).completed_scans() == {}
 
 
@@ -192,14 +246,16 @@ def test_jpeg_dataset(make_dataset) -> None:
     root = make_dataset(color_encoding="jpeg", scans=1, frames=1)
     ds = psg_data.open_dataset(root)
     assert ds.info.color_encoding == "jpeg"
-    assert ds.df("frames").color_path[0].endswith(".jpg")
+    assert ds.scan("scan_000").image_bytes(0)[0][:2] == b"\xff\xd8"
     assert ds.scan("scan_000").frame(0).color.shape == (24, 32, 3)
+    files = psg_data.open_dataset(make_dataset("files", color_encoding="jpeg", scans=1, frames=1, image_layout="files"))
+    assert files.df("frames").color_path[0].endswith(".jpg")
 
 
 def test_manifest_newer_major_is_refused(make_dataset) -> None:
     root = make_dataset(scans=1, frames=1)
     m = json.loads((root / "dataset.json").read_text())
-    m["format_version"] = "2.0"
+    m["format_version"] = "3.0"
     (root / "dataset.json").write_text(json.dumps(m))
     with pytest.raises(FormatError, match="newer than this psg-data reads"):
         psg_data.open_dataset(root)
@@ -208,12 +264,12 @@ def test_manifest_newer_major_is_refused(make_dataset) -> None:
 def test_manifest_unknown_keys_warn(make_dataset, caplog: pytest.LogCaptureFixture) -> None:
     root = make_dataset(scans=1, frames=1)
     m = json.loads((root / "dataset.json").read_text())
-    m["format_version"] = "1.7"
+    m["format_version"] = "2.7"
     m["future_key"] = 1
     (root / "dataset.json").write_text(json.dumps(m))
     with caplog.at_level("WARNING"):
         ds = psg_data.open_dataset(root)
-    assert ds.info.format_version == "1.7"
+    assert ds.info.format_version == "2.7"
     assert "future_key" in caplog.text
 
 

@@ -135,7 +135,7 @@ def _corrupt_missing_image(root: Path) -> None:
 
 def _corrupt_newer_manifest(root: Path) -> None:
     m = json.loads((root / "dataset.json").read_text())
-    m["format_version"] = "2.0"
+    m["format_version"] = "3.0"
     (root / "dataset.json").write_text(json.dumps(m))
 
 
@@ -152,7 +152,7 @@ CORRUPTIONS = {
     "depth dtype": (_corrupt_depth_dtype, r"^images/scan_000/depth/000001\.png: dtype: png uint8 .* expected a 16-bit single-channel PNG"),
     "depth size": (_corrupt_depth_size, r"^images/scan_000/depth/000003\.png: size: 16x12, expected the camera's 32x24"),
     "missing image": (_corrupt_missing_image, r"^images/scan_002/depth/000000\.png: file: missing"),
-    "newer manifest": (_corrupt_newer_manifest, r"^dataset\.json: format_version: 2\.0 is newer than this psg-data reads"),
+    "newer manifest": (_corrupt_newer_manifest, r"^dataset\.json: format_version: 3\.0 is newer than this psg-data reads"),
 }
 
 
@@ -160,7 +160,7 @@ CORRUPTIONS = {
 def test_each_corruption_one_clear_line(make_dataset, name: str) -> None:
     import re
 
-    root = make_dataset()
+    root = make_dataset(image_layout="files")
     corrupt, pattern = CORRUPTIONS[name]
     corrupt(root)
     code, out, err = _run("validate", str(root))
@@ -188,7 +188,7 @@ def test_problem_lines_have_the_documented_shape(make_dataset) -> None:
 
 
 def test_stray_file_and_counts(make_dataset) -> None:
-    root = make_dataset()
+    root = make_dataset(image_layout="files")
     (root / "images/scan_000/notes.txt").write_text("hello")
     problems = [str(p) for p in validate_dataset(root)]
     assert problems == ["images/scan_000/notes.txt: file: not listed in tables/files.parquet "
@@ -205,7 +205,7 @@ def test_files_table_tampering_detected(make_dataset) -> None:
 
 
 def test_quick_mode_skips_content_checksums(make_dataset) -> None:
-    root = make_dataset()
+    root = make_dataset(image_layout="files")
     p = root / "images/scan_001/depth/000000.png"
     data = bytearray(p.read_bytes())
     data[-20] ^= 0xFF  # same size, different content (inside IDAT/IEND crc)
@@ -236,3 +236,109 @@ def test_cli_errors_are_one_line(tmp_path: Path) -> None:
     assert err.strip().count("\n") == 0 and err.startswith("error: ") and "not a directory" in err
     code, out, err = _run("validate", str(tmp_path))
     assert code == 1 and out.strip() == "dataset.json: file: missing manifest, expected dataset.json at the dataset root"
+
+
+# -- the tar layout -----------------------------------------------------------------------------
+
+def _frames(root: Path) -> pa.Table:
+    return pq.read_table(root / "tables/frames.parquet")
+
+
+def test_tar_archive_content_change_is_a_checksum_mismatch(make_dataset) -> None:
+    root = make_dataset()
+    p = root / "images/scan_001.tar"
+    data = bytearray(p.read_bytes())
+    off = _frames(root).column("color_offset")[5].as_py()
+    data[off + 100] ^= 0xFF
+    p.write_bytes(bytes(data))
+    assert [str(x) for x in validate_dataset(root)] == [
+        "images/scan_001.tar: sha256: checksum mismatch: content differs from tables/files.parquet"]
+
+
+def test_truncated_tar_archive(make_dataset) -> None:
+    root = make_dataset()
+    p = root / "images/scan_002.tar"
+    t = _frames(root)
+    cut = t.filter(pa.compute.equal(t.column("scan_id"), "scan_002")).column("depth_offset")[1].as_py()
+    p.write_bytes(p.read_bytes()[:cut])
+    code, out, err = _run("validate", str(root))
+    assert code == 1 and "Traceback" not in out + err
+    lines = out.strip().splitlines()
+    assert lines[0].startswith("images/scan_002.tar: size_bytes: file has")
+    assert any(ln.startswith("tables/frames.parquet:9: depth_offset: byte range") for ln in lines), lines
+
+
+def test_tar_offset_not_at_a_member(make_dataset) -> None:
+    root = make_dataset()
+    _rewrite_table(root, "frames", lambda t: _set_cell(t, "color_offset", 2, t.column("color_offset")[2].as_py() + 512))
+    problems = [str(p) for p in validate_dataset(root)]
+    assert len(problems) == 1 and problems[0].startswith("images/scan_000.tar@")
+    assert "tar: no tar member header" in problems[0]
+
+
+def test_tar_member_header_damaged(make_dataset) -> None:
+    root = make_dataset()
+    p = root / "images/scan_000.tar"
+    off = _frames(root).column("depth_offset")[1].as_py()
+    data = bytearray(p.read_bytes())
+    data[off - 512 + 3] ^= 0x01  # one bit of the member name: the header checksum no longer holds
+    p.write_bytes(bytes(data))
+    _refresh_checksum(root, "images/scan_000.tar")
+    problems = [str(p) for p in validate_dataset(root)]
+    assert problems == [f"images/scan_000.tar@{off}: tar: no tar member header of "
+                        f"{_frames(root).column('depth_size')[1].as_py()} bytes before the image (found None), "
+                        "expected the ustar header of its member"]
+
+
+def test_tar_depth_range_pointing_at_colour(make_dataset) -> None:
+    root = make_dataset()
+
+    def fn(t: pa.Table) -> pa.Table:
+        t = _set_cell(t, "depth_offset", 1, t.column("color_offset")[1].as_py())
+        return _set_cell(t, "depth_size", 1, t.column("color_size")[1].as_py())
+    _rewrite_table(root, "frames", fn)
+    off = _frames(root).column("depth_offset")[1].as_py()
+    assert [str(p) for p in validate_dataset(root)] == [
+        f"images/scan_000.tar@{off}: dtype: png uint8 with 3 channel(s), expected a 16-bit single-channel PNG "
+        "(uint16 millimetres)"]
+
+
+def test_tar_offset_without_size(make_dataset) -> None:
+    root = make_dataset()
+    _rewrite_table(root, "frames", lambda t: _set_cell(t, "color_size", 4, None))
+    assert [str(p) for p in validate_dataset(root)] == [
+        "tables/frames.parquet:4: color_offset: color_offset and color_size must both be set (a byte range of "
+        "images/scan_001.tar) or both null (the whole file)"]
+
+
+# -- format 1.x datasets ------------------------------------------------------------------------
+
+def _as_format_1(root: Path, *, drop_columns: bool = True) -> None:
+    if drop_columns:
+        _rewrite_table(root, "frames", lambda t: t.drop_columns(["color_offset", "color_size", "depth_offset",
+                                                                 "depth_size"]))
+    m = json.loads((root / "dataset.json").read_text())
+    m["format_version"] = "1.0"
+    (root / "dataset.json").write_text(json.dumps(m))
+
+
+def test_format_1_dataset_is_read_and_valid(make_dataset) -> None:
+    import psg_data
+
+    root = make_dataset(image_layout="files", scans=2, frames=2)
+    before = psg_data.open_dataset(root).scan("scan_001").frame(1)
+    _as_format_1(root)
+    assert validate_dataset(root) == []
+    ds = psg_data.open_dataset(root)
+    assert ds.info.format_version == "1.0" and "color_offset" not in ds.df("frames").columns
+    fr = ds.scan("scan_001").frame(1)
+    np.testing.assert_array_equal(fr.color, before.color)
+    np.testing.assert_array_equal(fr.depth_m, before.depth_m)
+
+
+def test_format_1_dataset_with_format_2_columns_is_flagged(make_dataset) -> None:
+    root = make_dataset(image_layout="files", scans=1, frames=1)
+    _as_format_1(root, drop_columns=False)
+    problems = [str(p) for p in validate_dataset(root)]
+    assert [p.split(": ")[1] for p in problems] == ["color_offset", "color_size", "depth_offset", "depth_size"]
+    assert all(p.startswith("tables/frames.parquet: ") and "(format 1.x)" in p for p in problems)

@@ -25,7 +25,7 @@ def test_demo_builds_once_and_rebuilds_when_corrupted(tmp_path: Path, monkeypatc
     manifest = root / "dataset.json"
     stamp = manifest.stat().st_mtime_ns
     assert demo() == root and manifest.stat().st_mtime_ns == stamp  # cached, not rebuilt
-    img = next((root / "images").rglob("*.png"))
-    img.write_bytes(b"corrupt")
+    archive = next((root / "images").glob("*.tar"))
+    archive.write_bytes(b"corrupt")
     assert demo() == root and manifest.stat().st_mtime_ns != stamp  # rebuilt
-    assert img.read_bytes()[:4] == b"\x89PNG"
+    assert archive.read_bytes()[257:262] == b"ustar"

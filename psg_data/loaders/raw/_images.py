@@ -9,13 +9,13 @@ a fresh, writable array. 16-bit PNGs are decoded with ``cv2.IMREAD_UNCHANGED`` (
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import ConversionError
+from psg_data.schemas._image_headers import ImageHeader, parse_image_header
 
 __all__ = [
     "COLOR_ENCODINGS",
@@ -38,43 +38,21 @@ COMPRESSED_DEPTH_HEADER_SIZE = 12
 """``compressed_depth_image_transport`` ConfigHeader: int32 format, float32 depthQuantA, depthQuantB."""
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-_JPEG_MAGIC = b"\xff\xd8"
 
 
-@dataclass(frozen=True)
-class EncodedInfo:
-    """What an encoded image holds, read from its header without decoding it."""
-
-    kind: str
-    """``png`` or ``jpeg``."""
-    width: int
-    height: int
-    channels: int
-    bit_depth: int
+EncodedInfo = ImageHeader
+"""What an encoded image holds (kind, width, height, channels, bit depth), read from its header."""
 
 
 def inspect_encoded(data: bytes | memoryview | NDArray[np.uint8]) -> EncodedInfo | None:
-    """Header of a PNG or baseline/progressive JPEG; None if neither (or malformed)."""
-    b = bytes(data[:65536]) if not isinstance(data, bytes) else data
-    if b.startswith(_PNG_MAGIC) and len(b) >= 33 and b[12:16] == b"IHDR":
-        w, h, depth, ctype = struct.unpack(">IIBB", b[16:26])
-        channels = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}.get(ctype, 0)
-        return EncodedInfo("png", w, h, channels, depth)
-    if b.startswith(_JPEG_MAGIC):
-        i = 2
-        while i + 9 < len(b):
-            if b[i] != 0xFF:
-                return None
-            marker = b[i + 1]
-            if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
-                i += 2
-                continue
-            (seglen,) = struct.unpack(">H", b[i + 2:i + 4])
-            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-                prec, h, w, nc = struct.unpack(">BHHB", b[i + 4:i + 10])
-                return EncodedInfo("jpeg", w, h, nc, prec)
-            i += 2 + seglen
-    return None
+    """Header of a PNG or baseline/progressive JPEG; None if neither (or malformed).
+
+    Reads only the header bytes of ``data`` (no copy of the image).
+    """
+    try:
+        return parse_image_header(data)
+    except ValueError:
+        return None
 
 
 def _rows(msg: Any, bpp: int, where: str) -> NDArray[np.uint8]:
@@ -155,27 +133,28 @@ def decode_compressed_color(data: Any, fmt: str, where: str) -> NDArray[np.uint8
     return cv2.cvtColor(img, code)
 
 
-def compressed_depth_png(data: Any, fmt: str, where: str) -> tuple[bytes, str, tuple[float, float]]:
+def compressed_depth_png(data: Any, fmt: str, where: str) -> tuple[memoryview, str, tuple[float, float]]:
     """Split a ``compressedDepth`` payload into (PNG bytes, source encoding, (quantA, quantB)).
 
     The payload is the 12-byte ConfigHeader followed by the PNG (older writers omit the header).
+    The PNG comes back as a zero-copy view of ``data``.
 
     Raises:
         ConversionError: not PNG (e.g. ``compressedDepth rvl``) or too short.
     """
-    raw = bytes(memoryview(data))
+    raw = memoryview(data).cast("B")
     src_enc = fmt.split(";")[0].strip() or "16UC1"
     if "rvl" in fmt.lower():
         raise ConversionError(f"{where}: unknown compressedDepth format {fmt!r}; expected "
                               f"'16UC1; compressedDepth png' or '32FC1; compressedDepth png'")
-    if raw.startswith(_PNG_MAGIC):
+    n = COMPRESSED_DEPTH_HEADER_SIZE
+    if raw[:8] == _PNG_MAGIC:
         return raw, src_enc, (0.0, 0.0)
-    if len(raw) > COMPRESSED_DEPTH_HEADER_SIZE and raw[COMPRESSED_DEPTH_HEADER_SIZE:].startswith(_PNG_MAGIC):
-        _, qa, qb = struct.unpack("<iff", raw[:COMPRESSED_DEPTH_HEADER_SIZE])
-        return raw[COMPRESSED_DEPTH_HEADER_SIZE:], src_enc, (float(qa), float(qb))
+    if len(raw) > n and raw[n:n + 8] == _PNG_MAGIC:
+        _, qa, qb = struct.unpack_from("<iff", raw, 0)
+        return raw[n:], src_enc, (float(qa), float(qb))
     raise ConversionError(f"{where}: compressedDepth payload ({len(raw)} bytes, format {fmt!r}) is not a PNG "
-                          f"after the {COMPRESSED_DEPTH_HEADER_SIZE}-byte header; expected "
-                          f"'16UC1; compressedDepth png'")
+                          f"after the {n}-byte header; expected '16UC1; compressedDepth png'")
 
 
 def decode_compressed_depth(data: Any, fmt: str, where: str, depth_scale_m: float = 0.001) -> NDArray[np.uint16]:
@@ -189,7 +168,7 @@ def decode_compressed_depth(data: Any, fmt: str, where: str, depth_scale_m: floa
     if "compresseddepth" in fmt.lower():
         png, src_enc, (qa, qb) = compressed_depth_png(data, fmt, where)
     else:
-        png, src_enc, qa, qb = bytes(memoryview(data)), "16UC1", 0.0, 0.0
+        png, src_enc, qa, qb = memoryview(data).cast("B"), "16UC1", 0.0, 0.0
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ConversionError(f"{where}: corrupt PNG in depth CompressedImage (format {fmt!r})")

@@ -1,0 +1,280 @@
+"""Appending a scan's images to one uncompressed POSIX (ustar) tar archive.
+
+The archive is what ``tar``, Python's ``tarfile`` or any archive tool reads: one regular-file member
+per image (``color/000000.png``, ``depth/000000.png``, ...), each a 512-byte header followed by the
+image bytes padded to 512, then the end-of-archive zero blocks, padded with zeros to a multiple of
+4 KiB. The byte offset of every member's data is returned to the caller, who stores it in the
+``frames`` table: a reader then fetches one image with a single ``pread`` of a known range.
+
+Writing is a pipeline: the caller copies image bytes into page-aligned 16 MiB buffers; full
+buffers go to two threads, one hashing (SHA-256 of the archive, for ``files.parquet``) and one
+writing, which both release the GIL. Where the file system supports it the archive is written with
+``O_DIRECT``: the bytes go from the buffers to the device without first being copied into newly
+allocated page-cache pages (on the development VM that copy made buffered writing 2-10x slower
+and erratic; BENCHMARKS.md). Buffers are reused from a :class:`BufferPool`, so a conversion touches
+a bounded, constant amount of memory whatever the recording size.
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import mmap
+import os
+import queue
+import threading
+from typing import Any
+
+__all__ = ["BufferPool", "TarArchiveWriter", "ustar_header", "TAR_BLOCK", "ARCHIVE_ALIGN"]
+
+TAR_BLOCK = 512
+"""Tar block size: headers and member data are padded to it."""
+ARCHIVE_ALIGN = 4096
+"""Archives are padded with zero blocks to a multiple of this (the O_DIRECT transfer unit)."""
+BUFFER_BYTES = 16 << 20
+"""Size of one write buffer (a multiple of ARCHIVE_ALIGN)."""
+
+_ZEROS = bytes(ARCHIVE_ALIGN)
+
+
+def _header_template() -> tuple[bytearray, int]:
+    h = bytearray(TAR_BLOCK)
+    h[100:108] = b"0000644\0"  # mode
+    h[108:116] = b"0000000\0"  # uid
+    h[116:124] = b"0000000\0"  # gid
+    h[156:157] = b"0"  # regular file
+    h[257:263] = b"ustar\0"
+    h[263:265] = b"00"
+    h[329:337] = b"0000000\0"  # devmajor
+    h[337:345] = b"0000000\0"  # devminor
+    return h, sum(h) + 8 * ord(" ")  # the checksum counts its own field as eight spaces
+
+
+_TEMPLATE, _TEMPLATE_SUM = _header_template()
+
+
+def ustar_header(name: str, size: int, mtime: int = 0) -> bytes:
+    """512-byte ustar header of a regular file ``name`` (ASCII, at most 100 bytes) of ``size`` bytes."""
+    raw = name.encode("utf-8")
+    if len(raw) > 100:
+        raise ValueError(f"tar member name {name!r} is longer than 100 bytes")
+    if not 0 <= size < 8 ** 11:
+        raise ValueError(f"tar member {name!r}: size {size} does not fit an ustar header")
+    s = b"%011o\0" % size
+    t = b"%011o\0" % max(0, min(int(mtime), 8 ** 11 - 1))
+    h = _TEMPLATE.copy()
+    h[0:len(raw)] = raw
+    h[124:136] = s
+    h[136:148] = t
+    h[148:156] = b"%06o\0 " % (_TEMPLATE_SUM + sum(raw) + sum(s) + sum(t))
+    return bytes(h)
+
+
+class BufferPool:
+    """Page-aligned write buffers (anonymous mmaps), reused by every archive of one dataset writer.
+
+    Reuse matters: a fresh buffer's pages must be faulted in on first use, which costs as much as
+    writing them. :meth:`take` blocks while ``max_buffers`` are in use.
+    """
+
+    def __init__(self, buffer_bytes: int = BUFFER_BYTES, max_buffers: int = 4) -> None:
+        if buffer_bytes % ARCHIVE_ALIGN:
+            raise ValueError(f"buffer_bytes must be a multiple of {ARCHIVE_ALIGN}")
+        self.buffer_bytes = buffer_bytes
+        self.max_buffers = max(2, max_buffers)
+        self._free: list[mmap.mmap] = []
+        self._made = 0
+        self._cond = threading.Condition()
+
+    def take(self) -> mmap.mmap:
+        with self._cond:
+            while not self._free and self._made >= self.max_buffers:
+                self._cond.wait()
+            if self._free:
+                return self._free.pop()
+            self._made += 1
+        return mmap.mmap(-1, self.buffer_bytes)
+
+    def give(self, buf: mmap.mmap) -> None:
+        with self._cond:
+            self._free.append(buf)
+            self._cond.notify()
+
+    def close(self) -> None:
+        """Unmap the free buffers (buffers still in use are unmapped when they are given back)."""
+        with self._cond:
+            for b in self._free:
+                b.close()
+            self._made -= len(self._free)
+            self._free.clear()
+
+
+class _Stage(threading.Thread):
+    """One pipeline stage: applies ``fn`` to each buffer in order, then releases it."""
+
+    def __init__(self, fn: Any, release: Any, name: str) -> None:
+        super().__init__(name=name, daemon=True)
+        self.fn, self.release = fn, release
+        self.q: queue.SimpleQueue[tuple[mmap.mmap, int] | None] = queue.SimpleQueue()
+        self.error: BaseException | None = None
+        self.start()
+
+    def run(self) -> None:
+        while (item := self.q.get()) is not None:
+            buf, n = item
+            if self.error is None:
+                try:
+                    self.fn(buf, n)
+                except BaseException as exc:  # reported by the caller's next call
+                    # without its traceback: its frames hold views of the buffer, which must be unmappable
+                    self.error = exc.with_traceback(None)
+            self.release(buf)
+
+
+class TarArchiveWriter:
+    """Write one tar archive of images (see the module docstring).
+
+    Args:
+        path: archive path (created or truncated).
+        pool: buffers to use (shared by the archives of one dataset writer).
+        direct_io: write with ``O_DIRECT`` where the file system accepts it (falls back to
+            buffered writes, with the same bytes, where it does not).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], pool: BufferPool, *, direct_io: bool = True) -> None:
+        self.path = os.fspath(path)
+        self._pool = pool
+        flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0)
+        direct = getattr(os, "O_DIRECT", 0) if direct_io else 0
+        self.direct = False
+        if direct:
+            try:
+                self._fd = os.open(self.path, flags | direct, 0o666)
+                self.direct = True
+            except OSError:
+                self._fd = os.open(self.path, flags, 0o666)
+        else:
+            self._fd = os.open(self.path, flags, 0o666)
+        self._sha = hashlib.sha256()
+        self._refs: dict[int, int] = {}
+        self._lock = threading.Lock()
+        self._hasher = _Stage(self._hash, self._release, "psg-tar-sha256")
+        self._writer = _Stage(self._write, self._release, "psg-tar-write")
+        self._buf = pool.take()
+        self._mv = memoryview(self._buf)
+        self._n = 0
+        self._size = 0
+        """Bytes of the archive so far (dispatched + buffered)."""
+        self._closed = False
+
+    # -- stages (worker threads) ------------------------------------------------------------
+    def _hash(self, buf: mmap.mmap, n: int) -> None:
+        with memoryview(buf) as mv:
+            self._sha.update(mv[:n])
+
+    def _write(self, buf: mmap.mmap, n: int) -> None:
+        with memoryview(buf) as whole:
+            mv = whole[:n]
+            while mv:
+                try:
+                    k = os.write(self._fd, mv)
+                except OSError as exc:
+                    if not (self.direct and exc.errno == errno.EINVAL):
+                        raise
+                    self._drop_direct()  # the file system refused this transfer: continue buffered
+                    continue
+                mv = mv[k:]
+
+    def _drop_direct(self) -> None:
+        import fcntl
+
+        fl = fcntl.fcntl(self._fd, fcntl.F_GETFL)
+        fcntl.fcntl(self._fd, fcntl.F_SETFL, fl & ~os.O_DIRECT)
+        self.direct = False
+
+    def _release(self, buf: mmap.mmap) -> None:
+        with self._lock:
+            left = self._refs[id(buf)] - 1
+            if left:
+                self._refs[id(buf)] = left
+                return
+            del self._refs[id(buf)]
+        self._pool.give(buf)
+
+    # -- caller side -------------------------------------------------------------------------
+    def _check(self) -> None:
+        for stage in (self._writer, self._hasher):
+            if stage.error is not None:
+                raise OSError(f"{self.path}: writing the image archive failed: {stage.error}") from stage.error
+
+    def _dispatch(self) -> None:
+        self._check()
+        buf, n = self._buf, self._n
+        with self._lock:
+            self._refs[id(buf)] = 2
+        self._hasher.q.put((buf, n))
+        self._writer.q.put((buf, n))
+        self._buf = self._pool.take()
+        self._mv = memoryview(self._buf)
+        self._n = 0
+
+    def _put(self, data: Any) -> None:
+        src = data if isinstance(data, memoryview) else memoryview(data)
+        if src.format != "B" or src.ndim != 1:
+            src = src.cast("B")
+        cap = self._pool.buffer_bytes
+        while src:
+            k = min(len(src), cap - self._n)
+            self._mv[self._n:self._n + k] = src[:k]
+            self._n += k
+            self._size += k
+            src = src[k:]
+            if self._n == cap:
+                self._dispatch()
+
+    def add(self, name: str, data: Any, mtime: int = 0) -> int:
+        """Append one member ``name`` holding ``data`` (any bytes-like); returns its data offset."""
+        size = memoryview(data).nbytes
+        self._put(ustar_header(name, size, mtime))
+        offset = self._size
+        self._put(data)
+        pad = -size % TAR_BLOCK
+        if pad:
+            self._put(_ZEROS[:pad])
+        return offset
+
+    @property
+    def size(self) -> int:
+        """Bytes appended so far (before the end-of-archive blocks)."""
+        return self._size
+
+    def close(self) -> tuple[int, str]:
+        """Write the end of the archive, wait for the stages; returns (size in bytes, hex SHA-256)."""
+        if self._closed:
+            raise ValueError(f"{self.path}: archive already closed")
+        try:
+            self._put(_ZEROS[:2 * TAR_BLOCK])
+            pad = -self._size % ARCHIVE_ALIGN
+            if pad:
+                self._put(_ZEROS[:pad])
+            if self._n:
+                self._dispatch()
+        finally:
+            self._stop()
+        self._check()
+        return self._size, self._sha.hexdigest()
+
+    def abort(self) -> None:
+        """Stop without finishing the archive (the caller removes the file)."""
+        if not self._closed:
+            self._stop()
+
+    def _stop(self) -> None:
+        self._closed = True
+        for stage in (self._hasher, self._writer):
+            stage.q.put(None)
+        for stage in (self._hasher, self._writer):
+            stage.join()
+        self._mv.release()
+        self._pool.give(self._buf)
+        os.close(self._fd)
