@@ -28,8 +28,11 @@ from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_lo
 @click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=None,
               help="Largest colour/depth stamp difference paired, seconds (default 0.02).")
 @click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet"]), default=None)
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Scans converted in parallel (worker processes).")
+@click.option("--image-layout", type=click.Choice(["tar", "files"]), default=None,
+              help="Images in one tar archive per scan (default) or one file per image.")
+@click.option("--jobs", "-j", type=int, default=1, show_default=True,
+              help="CPUs to use (-1: all): scans in parallel worker processes, or encoding threads "
+                   "within a scan when there are fewer scans than jobs. 1: one core.")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists (once the new dataset is complete).")
 @quiet_option
 @handle_errors
@@ -54,6 +57,8 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     setup_logging(quiet)
     from psg_data.convert import ConvertConfig, convert, load_config
 
+    if jobs == 0 or jobs < -1:
+        raise click.BadParameter(f"{jobs}: expected a number of CPUs >= 1, or -1 for all", param_hint="'--jobs'")
     cfg = load_config(config_file) if config_file else ConvertConfig()
     cfg = cfg.merged(**opts)
     progress = Progress("convert", unit="frames", quiet=quiet)

@@ -42,6 +42,8 @@ class ConvertConfig:
         fps / start_stamp_ns: stamps of ScanNet folders (no stamps on disk).
         side_dir: directory of the side files (default: the input directory).
         name / timezone: dataset name and IANA timezone (default: site file, else input name / UTC).
+        image_layout: ``tar`` (one archive per scan, default) or ``files`` (one file per image).
+        direct_io: write scan archives with ``O_DIRECT`` where the file system supports it.
     """
 
     input_format: str = "auto"
@@ -67,8 +69,14 @@ class ConvertConfig:
     side_dir: str | None = None
     name: str | None = None
     timezone: str | None = None
+    image_layout: str = "tar"
+    direct_io: bool = True
 
     def __post_init__(self) -> None:
+        if self.image_layout not in ("tar", "files"):
+            raise ConversionError(f"config: image_layout: expected tar or files, got {self.image_layout!r}")
+        if not isinstance(self.direct_io, bool):
+            raise ConversionError(f"config: direct_io: expected true or false, got {self.direct_io!r}")
         if self.input_format not in ("auto", "ros1", "ros2", "mcap", "tum", "scannet"):
             raise ConversionError(f"config: input_format: expected auto, ros1, ros2, mcap, tum or scannet, got "
                                   f"{self.input_format!r}")

@@ -17,14 +17,14 @@ from typing import Any
 
 from psg_data._cpus import available_cpus
 from psg_data.convert._config import ConvertConfig
-from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, run_task
+from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, open_task_writer, run_task
 from psg_data.errors import ConversionError, DatasetExistsError, PsgDataError
 from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format
 from psg_data.loaders.raw._folders import folder_format
 from psg_data.loaders.raw._images import inspect_encoded
 from psg_data.loaders.raw._side import SideData, read_side_files
 
-__all__ = ["convert", "ConversionReport", "plan_sources"]
+__all__ = ["convert", "ConversionReport", "plan_sources", "plan_parallelism"]
 
 log = logging.getLogger(__name__)
 
@@ -151,15 +151,17 @@ def _init_worker() -> None:
     import rosbags.highlevel  # noqa: F401
 
     import psg_data.writers  # noqa: F401
+    from psg_data.writers._tar_archive import reuse_buffers
 
+    reuse_buffers().__enter__()  # for the life of the worker: its tasks reuse write buffers
 
-def _run_parallel(tasks: list[ScanTask], jobs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
+def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
     import multiprocessing
     from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 
     results: list[ScanResult] = []
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx, initializer=_init_worker) as pool:
+    with ProcessPoolExecutor(max_workers=procs, mp_context=ctx, initializer=_init_worker) as pool:
         futs = {pool.submit(run_task, t): t for t in tasks}
         pending = set(futs)
         while pending:
@@ -177,6 +179,47 @@ def _run_parallel(tasks: list[ScanTask], jobs: int, progress: Callable[..., Any]
     return results
 
 
+def _run_here(tasks: list[ScanTask], progress: Callable[..., Any] | None) -> list[ScanResult]:
+    """Convert in this process, OpenCV limited to one thread meanwhile (``--jobs`` counts the cores).
+
+    The tasks share one writer, so a scan's archive completes while the next recording is read.
+    """
+    import cv2
+
+    from psg_data.writers._tar_archive import reuse_buffers
+
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with reuse_buffers():
+            writer = open_task_writer(tasks[0])
+            try:
+                results = [r for t in tasks for r in run_task(t, progress, writer)]
+                for r in results:
+                    r.record = writer.scan_record(r.scan_id)
+            finally:
+                writer.abort(keep_partial=True)  # our writer finishes the dataset
+        return results
+    finally:
+        cv2.setNumThreads(before)
+
+
+def plan_parallelism(jobs: int, n_tasks: int, threads: int | None = None) -> tuple[int, int]:
+    """(worker processes, encoding threads per process) for ``--jobs jobs`` over ``n_tasks`` sources.
+
+    ``jobs`` CPUs are shared out: one process per source up to ``jobs`` (1: convert in this
+    process), and the CPUs left per process become image-encoding threads beside its reading thread
+    (0 threads: the reading thread encodes). ``jobs`` = -1 means every CPU this process may use.
+    """
+    if jobs == -1:
+        jobs = available_cpus()
+    if jobs < 1:
+        raise ConversionError(f"jobs: {jobs}, expected a number of CPUs >= 1 or -1 for all")
+    procs = max(1, min(jobs, n_tasks))
+    per = jobs // procs if threads is None else threads
+    return procs, (0 if per <= 1 else per)
+
+
 def convert(
     input_path: str | Path,
     out: str | Path,
@@ -184,7 +227,7 @@ def convert(
     config: ConvertConfig | None = None,
     overwrite: bool = False,
     jobs: int = 1,
-    threads: int = 2,
+    threads: int | None = None,
     progress: Callable[..., Any] | None = None,
 ) -> ConversionReport:
     """Convert raw recordings into a psg-dataset at ``out``.
@@ -197,8 +240,11 @@ def convert(
         out: output dataset directory.
         config: settings (default :class:`ConvertConfig`).
         overwrite: replace ``out`` if it exists (only once the new dataset is complete).
-        jobs: worker processes converting scans in parallel.
-        threads: image-encoding threads per worker.
+        jobs: CPUs to use (-1: all), see :func:`plan_parallelism`: ``jobs`` = 1 converts on one
+            core; more run that many sources in parallel worker processes and give the CPUs left
+            over to image-encoding threads. Archive writing and hashing run in two I/O threads
+            either way.
+        threads: image-encoding threads per process (default: from ``jobs``).
         progress: called as ``progress(n_frames, nbytes)``.
 
     Returns:
@@ -236,7 +282,8 @@ def convert(
     timezone = cfg.timezone or side.timezone or "UTC"
     try:
         writer = DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding,
-                               overwrite=overwrite, resume=resume, threads=threads)
+                               overwrite=overwrite, resume=resume, threads=0, image_layout=cfg.image_layout,
+                               direct_io=cfg.direct_io)
     except PsgDataError:
         raise
     except Exception as exc:
@@ -248,8 +295,6 @@ def convert(
         completed = writer.completed_scans() if resume else {}
         scan_rows = side.scan_rows()
         tasks: list[ScanTask] = []
-        # workers share the machine's cores: jobs x threads beyond the core count only adds contention
-        worker_threads = threads if jobs <= 1 else max(1, min(threads, available_cpus() // jobs))
         seen_ids: dict[str, Path] = {}
         for path, kind in sources:
             row = scan_rows.get(path.name) or scan_rows.get(path.stem)
@@ -262,19 +307,27 @@ def convert(
             if cfg.split is None and scan_id in completed:
                 continue
             tasks.append(ScanTask(str(path), kind, scan_id, split_label, cfg_dict, str(out), color_encoding,
-                                  dict(side.cameras), sorted(completed), worker_threads))
-        if jobs > 1 and len(tasks) > 1:
-            results = _run_parallel(tasks, jobs, progress)
+                                  dict(side.cameras), sorted(completed)))
+        procs, worker_threads = plan_parallelism(jobs, len(tasks), threads)
+        for t in tasks:
+            t.threads, t.direct_io, t.image_layout = worker_threads, cfg.direct_io, cfg.image_layout
+        if procs > 1:
+            results = _run_parallel(tasks, procs, progress)
+        elif tasks:
+            results = _run_here(tasks, progress)
         else:
-            results = [r for t in tasks for r in run_task(t, progress)]
-        # scans written now or by an interrupted run: records from the writer, cameras from our state.
-        # Scans written now were checksummed from memory and resumed ones verified above: no re-read.
+            results = []
+        # scans written now (their records come with the results, checksummed from memory while
+        # writing) and scans of an interrupted run (verified above; cameras from their state files)
         new_ids = {r.scan_id for r in results}
-        completed = writer.completed_scans(trusted=new_ids | set(completed))
         by_scan: dict[str, ScanResult] = {}
         for f in (tmp / STATE_DIR).glob("*.json"):
-            if f.name != _STATE_FILE:
+            if f.name != _STATE_FILE and f.stem in completed and f.stem not in new_ids:
                 by_scan[f.stem] = ScanResult(**json.loads(f.read_text()))
+        for r in results:
+            by_scan[r.scan_id] = r
+            if r.record is not None:
+                completed[r.scan_id] = r.record
         cameras: dict[str, dict[str, Any]] = {}
         skipped: Counter[str] = Counter()
         passthrough: Counter[str] = Counter()
@@ -294,11 +347,14 @@ def convert(
             if cid not in cameras:
                 cameras[cid] = cam
                 writer.add_camera(CameraIntrinsics(**cam))
-            for fr in rec["frames"]:
-                fr["camera_id"] = cid
-            writer.adopt_scan(rec)
+            import pyarrow as pa
+
+            frames = rec["frames"]
+            frames = frames.set_column(frames.schema.get_field_index("camera_id"), frames.schema.field("camera_id"),
+                                       pa.array([cid] * frames.num_rows, pa.string()))
+            writer.adopt_scan({**rec, "frames": frames})
             report.scans.append(scan_id)
-            report.frames += len(rec["frames"])
+            report.frames += frames.num_rows
             if scan_id not in new_ids:
                 report.resumed.append(scan_id)
             skipped.update(res.skipped)

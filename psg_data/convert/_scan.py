@@ -16,7 +16,7 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +38,7 @@ from psg_data.loaders.raw._images import (
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform
 from psg_data.schemas._records import CameraIntrinsics
 
-__all__ = ["ScanTask", "ScanResult", "run_task", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
+__all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,10 @@ class ScanTask:
     color_encoding: str
     camera_ids: dict[str, str]
     skip_scans: list[str] = field(default_factory=list)
-    threads: int = 2
+    threads: int = 0
+    """Image-encoding threads beside the reading thread (0: encode in the reading thread)."""
+    direct_io: bool = True
+    image_layout: str = "tar"
 
 
 @dataclass
@@ -90,6 +93,13 @@ class ScanResult:
     source: str
     seconds: float
     passthrough: dict[str, int]
+    record: dict[str, Any] | None = None
+    """The scan as written (``scan``, ``frames``, ``files``; see DatasetWriter.scan_record); not in
+    the state file, which a resumed run reads together with the writer's own scan record."""
+
+    def state(self) -> dict[str, Any]:
+        """What the state file of the scan stores (everything but the record)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "record"}
 
 
 def _stamp(header: Any) -> int:
@@ -176,6 +186,10 @@ def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> Ca
                             float(K[5]), model, coeffs, 0.001, frame_id.lstrip("/") or None)
 
 
+def _first(item: tuple[int, Any]) -> int:
+    return item[0]
+
+
 class _Assembler:
     """Pairs colour and depth on header stamps within a tolerance, in stamp order."""
 
@@ -196,12 +210,18 @@ class _Assembler:
             self.skipped["out_of_order"] += 1
             return
         self.seen_colors.add(stamp)
-        bisect.insort(self.colors, (stamp, p), key=lambda x: x[0])
+        if not self.colors or stamp > self.colors[-1][0]:  # the usual case: in stamp order
+            self.colors.append((stamp, p))
+        else:
+            bisect.insort(self.colors, (stamp, p), key=_first)
 
     def add_depth(self, stamp: int, p: _Payload) -> None:
         if stamp in self.depths:
             return
-        bisect.insort(self.depth_stamps, stamp)
+        if not self.depth_stamps or stamp > self.depth_stamps[-1]:
+            self.depth_stamps.append(stamp)
+        else:
+            bisect.insort(self.depth_stamps, stamp)
         self.depths[stamp] = p
 
     def ready(self, before_ns: int | None) -> Iterator[tuple[int, _Payload, _Payload]]:
@@ -319,15 +339,21 @@ class _FrameWriter:
     def __init__(self, encoding: str, depth_scale_m: float, where: str) -> None:
         self.encoding = encoding
         self.depth_scale_m = depth_scale_m
+        self.scale_is_mm = abs(depth_scale_m - 0.001) < 1e-12
         self.where = where
         self.passthrough: Counter[str] = Counter()
 
-    def color(self, p: _Payload, topic: str) -> tuple[bytes | None, NDArray[np.uint8] | None, tuple[int, int]]:
+    def color(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
+        if p.kind == "bytes":  # pass-through fast path: checks on the header only
+            info = inspect_encoded(p.obj)
+            if info is not None and _passthrough_ok(info, self.encoding):
+                self.passthrough["color"] += 1
+                return p.obj, None, (info.width, info.height)
         where = f"{self.where}: {topic}"
         if p.kind == "msg":
             arr = decode_color_image(p.obj, where)
             return None, arr, (arr.shape[1], arr.shape[0])
-        data = bytes(memoryview(p.obj)) if p.kind == "bytes" else Path(p.obj).read_bytes()
+        data = memoryview(p.obj) if p.kind == "bytes" else Path(p.obj).read_bytes()  # no copy of a message
         info = inspect_encoded(data)
         if info is not None and _passthrough_ok(info, self.encoding):
             self.passthrough["color"] += 1
@@ -335,14 +361,14 @@ class _FrameWriter:
         arr = decode_compressed_color(data, p.fmt or "file", where)
         return None, arr, (arr.shape[1], arr.shape[0])
 
-    def depth(self, p: _Payload, topic: str) -> tuple[bytes | None, NDArray[np.uint16] | None, tuple[int, int]]:
+    def depth(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
         where = f"{self.where}: {topic}"
-        scale_ok = abs(self.depth_scale_m - 0.001) < 1e-12
+        scale_ok = self.scale_is_mm
         if p.kind == "msg":
             arr = decode_depth_image(p.obj, where, self.depth_scale_m)
             return None, arr, (arr.shape[1], arr.shape[0])
         fmt = p.fmt
-        data = bytes(memoryview(p.obj)) if p.kind == "bytes" else Path(p.obj).read_bytes()
+        data = memoryview(p.obj) if p.kind == "bytes" else Path(p.obj).read_bytes()  # no copy of a message
         png, src = data, "16UC1"
         if "compresseddepth" in fmt.lower():
             png, src, _ = compressed_depth_png(data, fmt, where)
@@ -424,7 +450,7 @@ class _ScanSink:
                              time.perf_counter() - self.t0, dict(self.fw.passthrough))
             state = Path(self.w.tmp) / STATE_DIR
             state.mkdir(exist_ok=True)
-            (state / f"{self.scan_id}.json").write_text(json.dumps(asdict(res)))
+            (state / f"{self.scan_id}.json").write_text(json.dumps(res.state()))
             self.results.append(res)
         self.sw = None
         self.scan_id = None
@@ -464,7 +490,7 @@ class _ScanSink:
         if T is None:
             self.skipped["no_pose"] += 1
             return
-        if not np.all(np.isfinite(T)):
+        if not math.isfinite(T.sum()):  # NaN and inf propagate into the sum
             self.skipped["nonfinite_pose"] += 1
             return
         if not self._keep(T):
@@ -499,6 +525,12 @@ class _ScanSink:
         if self.progress is not None:
             self.progress(1, nbytes)
 
+    def abort_scan(self) -> None:
+        """Drop the scan being written (an error stops the task)."""
+        if self.sw is not None:
+            self.sw.abort()
+            self.sw = None
+
     def finish(self, asm_skipped: Counter[str]) -> list[ScanResult]:
         self.skipped.update(asm_skipped)
         if self.scan_id is None and not self.results:
@@ -508,14 +540,16 @@ class _ScanSink:
         return self.results
 
 
-def _open_writer(task: ScanTask) -> Any:
+def open_task_writer(task: ScanTask) -> Any:
+    """The dataset writer tasks write their scans with: ``OUT.partial``, resumable."""
     from psg_data.writers import DatasetWriter
 
     return DatasetWriter(task.out, color_encoding=task.color_encoding, overwrite=True, resume=True,
-                         threads=task.threads)
+                         threads=task.threads, direct_io=task.direct_io, image_layout=task.image_layout)
 
 
-def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None) -> list[ScanResult]:
+def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None, writer: Any
+             ) -> list[ScanResult]:
     from psg_data.loaders.raw._bag import RosRecording
 
     rec = RosRecording(task.source)
@@ -530,7 +564,6 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
             raise ConversionError(f"{where}: /tf: no tf2_msgs/TFMessage topic for --poses {cfg.poses}")
         asm = _Assembler(int(cfg.sync_tolerance_s * 1e9))
         fw = _FrameWriter(task.color_encoding, cfg.depth_scale_m or 0.001, where)
-        writer = _open_writer(task)
         try:
             sink = _ScanSink(task, cfg, writer, fw, (topics["color"], topics["depth"]), progress)
             wanted = {topics["color"], topics["depth"], topics["camera_info"], *topics["tf"], *topics["tf_static"]}
@@ -541,8 +574,12 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
             static_t = set(topics["tf_static"])
             pending_bytes = 0
 
+            colors = asm.colors
+
             def emit(before: int | None) -> None:
                 nonlocal pending_bytes
+                if before is not None and (not colors or colors[0][0] >= before):
+                    return  # nothing old enough yet (checked per message: keep it cheap)
                 if sink.camera is None:
                     if before is not None:
                         return
@@ -553,9 +590,21 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                     sink.frame(stamp, T, cp, dp, pending_bytes)
                     pending_bytes = 0
 
+            # intrinsics come from the first CameraInfo: read it first, then leave the topic out
+            for conn, _, raw in rec.raw_messages({info_t}):
+                msg = rec.deserialize(raw, conn.msgtype, info_t)
+                frame_id = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
+                cid = task.camera_ids.get(frame_id) or cfg.camera_id or "camera"
+                sink.camera = _camera_from_info(msg, cid, frame_id, f"{where}: {info_t}")
+                poses.optical = frame_id
+                break
+            if info_t != color_t and info_t != depth_t and info_t != poses.odom_topic:
+                wanted.discard(info_t)
+            read_bytes = 0
             for conn, log_t, raw in rec.raw_messages(wanted):
                 topic = conn.topic
                 pending_bytes += len(raw)
+                read_bytes += len(raw)
                 if topic == color_t or topic == depth_t:
                     if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
                         ci = rec.compressed_image(raw, topic)
@@ -571,35 +620,26 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                         asm.add_depth(stamp, payload)
                     emit(log_t - window)
                     continue
-                if topic == info_t and sink.camera is not None:  # intrinsics come from the first CameraInfo
+                if conn.msgtype == _TF:
+                    static = topic in static_t
+                    for smp in rec.tf_transforms(raw, topic):  # header, frames and 7 floats: no full message
+                        tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
                     emit(log_t - window)
                     continue
-                msg = rec.deserialize(raw, conn.msgtype, topic)
-                if topic == info_t:
-                    if sink.camera is None:
-                        frame_id = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
-                        cid = task.camera_ids.get(frame_id) or cfg.camera_id or "camera"
-                        sink.camera = _camera_from_info(msg, cid, frame_id, f"{where}: {topic}")
-                        poses.optical = frame_id
-                elif topic == poses.odom_topic:
-                    poses.add_odom(msg)
-                elif conn.msgtype == _TF:
-                    static = topic in static_t
-                    for tr in msg.transforms:
-                        t, q = tr.transform.translation, tr.transform.rotation
-                        tf.add(str(tr.header.frame_id), str(tr.child_frame_id), _stamp(tr.header),
-                               (t.x, t.y, t.z), (q.x, q.y, q.z, q.w), static=static)
+                if topic == poses.odom_topic:
+                    poses.add_odom(rec.deserialize(raw, conn.msgtype, topic))
                 emit(log_t - window)
             emit(None)
-            results = sink.finish(asm.skipped)
+            # the report counts the whole recording as input (topics not needed were not read)
+            sink.bytes_in += max(0, rec.size_bytes - read_bytes)
+            return sink.finish(asm.skipped)
         except BaseException:
-            writer.abort(keep_partial=True)
+            sink.abort_scan()
             raise
-        writer.abort(keep_partial=True)  # the parent writer finishes the dataset
-    return results
 
 
-def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None) -> list[ScanResult]:
+def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None, writer: Any
+                ) -> list[ScanResult]:
     if task.kind == "tum":
         fr: FolderRecording = read_tum_folder(task.source, cfg.intrinsics, cfg.depth_scale_m)
     else:
@@ -619,9 +659,8 @@ def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
     for s, p in fr.depths:
         asm.add_depth(s, _Payload("file", p))
     fw = _FrameWriter(task.color_encoding, fr.depth_scale_m, where)
-    writer = _open_writer(task)
+    sink = _ScanSink(task, cfg, writer, fw, ("rgb", "depth"), progress)
     try:
-        sink = _ScanSink(task, cfg, writer, fw, ("rgb", "depth"), progress)
         cid = cfg.camera_id or task.camera_ids.get("") or "camera"
         sink.camera = CameraIntrinsics(cid, fr.width, fr.height, *fr.K, depth_scale_m=0.001)
         for stamp, cp, dp in asm.ready(None):
@@ -631,20 +670,37 @@ def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
                 T = poses.at(stamp)
             nbytes = Path(cp.obj).stat().st_size + Path(dp.obj).stat().st_size
             sink.frame(stamp, T, cp, dp, nbytes)
-        results = sink.finish(asm.skipped)
+        return sink.finish(asm.skipped)
     except BaseException:
-        writer.abort(keep_partial=True)
+        sink.abort_scan()
         raise
-    writer.abort(keep_partial=True)
-    return results
 
 
-def run_task(task: ScanTask, progress: Callable[..., Any] | None = None) -> list[ScanResult]:
-    """Convert one source into one or more scans inside ``OUT.partial`` (see module docstring)."""
+def run_task(task: ScanTask, progress: Callable[..., Any] | None = None, writer: Any = None) -> list[ScanResult]:
+    """Convert one source into one or more scans inside ``OUT.partial`` (see module docstring).
+
+    Args:
+        writer: a dataset writer on ``OUT.partial`` shared by the tasks of this process; its scans
+            may still be completing when this returns and their results carry no record (the
+            caller takes them from the writer). Default: a writer of the task's own, finished
+            before returning, whose records come with the results.
+    """
     cfg = ConvertConfig.from_dict(task.config)
-    if task.kind in ("tum", "scannet"):
-        return _run_folder(task, cfg, progress)
-    return _run_bag(task, cfg, progress)
+    own = writer is None
+    if own:
+        writer = open_task_writer(task)
+    try:
+        if task.kind in ("tum", "scannet"):
+            results = _run_folder(task, cfg, progress, writer)
+        else:
+            results = _run_bag(task, cfg, progress, writer)
+        if own:
+            for r in results:
+                r.record = writer.scan_record(r.scan_id)
+    finally:
+        if own:
+            writer.abort(keep_partial=True)  # the parent's writer finishes the dataset
+    return results
 
 
 def make_static(parent: str, child: str, T: NDArray[np.float64]) -> dict[str, Any]:

@@ -16,7 +16,7 @@ import json
 import logging
 import os
 import shutil
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, fields, is_dataclass
@@ -104,6 +104,49 @@ def to_arrow(name: str, rows: Any) -> pa.Table:
         raise FormatError(f"table '{name}': cannot cast to the format schema: {exc}") from exc
 
 
+class _FrameColumns:
+    """The ``frames`` rows of one scan, column by column (cheap to append, to tabulate and to store)."""
+
+    def __init__(self) -> None:
+        self.stamp_ns: list[int] = []
+        self.T: list[NDArray[np.float64]] = []
+        self.camera_id: list[str] = []
+        self.color_path: list[str] = []
+        self.depth_path: list[str] = []
+        self.color_offset: list[int] = []
+        self.color_size: list[int] = []
+        self.depth_offset: list[int] = []
+        self.depth_size: list[int] = []
+
+    def append(self, stamp_ns: int, T: NDArray[np.float64], camera_id: str) -> int:
+        self.stamp_ns.append(stamp_ns)
+        self.T.append(T)
+        self.camera_id.append(camera_id)
+        return len(self.stamp_ns) - 1
+
+    def table(self, scan_id: str, archive: str | None) -> pa.Table:
+        """The rows as an Arrow table of the ``frames`` schema; ``archive``: the tar layout's path."""
+        n = len(self.stamp_ns)
+        T = np.stack(self.T).reshape(-1) if n else np.zeros(0)
+        cols: dict[str, Any] = {
+            "scan_id": pa.array([scan_id] * n, pa.string()),
+            "frame_index": pa.array(np.arange(n, dtype=np.int32)),
+            "stamp_ns": pa.array(np.asarray(self.stamp_ns, dtype=np.int64)),
+            "camera_id": pa.array(self.camera_id, pa.string()),
+            "T_world_camera": pa.FixedSizeListArray.from_arrays(pa.array(T, pa.float64()), 16),
+        }
+        if archive is not None:
+            cols["color_path"] = cols["depth_path"] = pa.array([archive] * n, pa.string())
+            for k in ("color_offset", "color_size", "depth_offset", "depth_size"):
+                cols[k] = pa.array(np.asarray(getattr(self, k), dtype=np.int64))
+        else:
+            cols["color_path"] = pa.array(self.color_path, pa.string())
+            cols["depth_path"] = pa.array(self.depth_path, pa.string())
+            for k in ("color_offset", "color_size", "depth_offset", "depth_size"):
+                cols[k] = pa.nulls(n, pa.int64())
+        return to_arrow("frames", pa.table(cols))
+
+
 class ScanWriter:
     """Adds the frames of one scan; obtained from :meth:`DatasetWriter.scan`.
 
@@ -117,8 +160,8 @@ class ScanWriter:
         self.scan_id = scan_id
         self.source = source
         self.split = split
-        self._frames: list[dict[str, Any]] = []
-        self._queue: deque[tuple[dict[str, Any], Any, Any]] = deque()
+        self._cols = _FrameColumns()
+        self._queue: deque[tuple[int, Any, Any]] = deque()
         self._files: dict[str, tuple[int, str]] = {}
         self._ext = "jpg" if writer.color_encoding == "jpeg" else "png"
         self._archive: TarArchiveWriter | None = None
@@ -140,25 +183,15 @@ class ScanWriter:
 
     @property
     def n_frames(self) -> int:
-        return len(self._frames)
+        return len(self._cols.stamp_ns)
 
-    def _record(self, stamp_ns: int, T_world_camera: NDArray[np.float64], camera_id: str) -> dict[str, Any]:
+    def _record(self, stamp_ns: int, T_world_camera: NDArray[np.float64], camera_id: str) -> int:
         T = np.asarray(T_world_camera, dtype=np.float64)
         if T.shape != (4, 4):
             raise FormatError(f"scan {self.scan_id}: T_world_camera must be 4x4, got shape {T.shape}")
         if camera_id not in self._w._cameras:
             raise FormatError(f"scan {self.scan_id}: unknown camera_id {camera_id!r}; add it with add_camera first")
-        index = len(self._frames)
-        if self._archive is not None:
-            color_path = depth_path = self._archive_rel
-        else:
-            color_path = COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=index, ext=self._ext)
-            depth_path = DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=index)
-        rec = {"scan_id": self.scan_id, "frame_index": index, "stamp_ns": int(stamp_ns), "camera_id": camera_id,
-               "T_world_camera": T.reshape(16).tolist(), "color_path": color_path, "depth_path": depth_path,
-               "color_offset": None, "color_size": None, "depth_offset": None, "depth_size": None}
-        self._frames.append(rec)
-        return rec
+        return self._cols.append(int(stamp_ns), T, camera_id)
 
     def add_frame(
         self,
@@ -188,14 +221,14 @@ class ScanWriter:
             if depth_mm.shape != expect or depth_mm.dtype != np.uint16:
                 raise FormatError(f"scan {self.scan_id}: depth must be {expect[0]}x{expect[1]} uint16 mm, "
                                   f"got {depth_mm.shape} {depth_mm.dtype}")
-        rec = self._record(stamp_ns, T_world_camera, camera_id)
+        i = self._record(stamp_ns, T_world_camera, camera_id)
         pool = self._w._pool
         if pool is None:
-            self._store(rec, encode_color(color_rgb, self._w.color_encoding), encode_depth(depth_mm))
+            self._store(i, encode_color(color_rgb, self._w.color_encoding), encode_depth(depth_mm))
         else:
-            self._push(rec, pool.submit(encode_color, color_rgb, self._w.color_encoding),
+            self._push(i, pool.submit(encode_color, color_rgb, self._w.color_encoding),
                        pool.submit(encode_depth, depth_mm))
-        return rec["frame_index"]
+        return i
 
     def add_encoded_frame(
         self,
@@ -212,15 +245,15 @@ class ScanWriter:
         Both may be any bytes-like object (a ``memoryview`` of a message buffer is not copied
         more than once: straight into the archive's write buffer).
         """
-        rec = self._record(stamp_ns, T_world_camera, camera_id)
+        i = self._record(stamp_ns, T_world_camera, camera_id)
         if not self._queue:
-            self._store(rec, color_bytes, depth_png_bytes)
+            self._store(i, color_bytes, depth_png_bytes)
         else:  # behind frames still being encoded: keep a copy, the caller may reuse its buffers
-            self._push(rec, bytes(color_bytes), bytes(depth_png_bytes))
-        return rec["frame_index"]
+            self._push(i, bytes(color_bytes), bytes(depth_png_bytes))
+        return i
 
-    def _push(self, rec: dict[str, Any], color: Any, depth: Any) -> None:
-        self._queue.append((rec, color, depth))
+    def _push(self, i: int, color: Any, depth: Any) -> None:
+        self._queue.append((i, color, depth))
         while self._queue:
             _, c, d = self._queue[0]
             if len(self._queue) <= 2 * self._w._threads and (
@@ -228,22 +261,30 @@ class ScanWriter:
                 break
             self._store(*self._queue.popleft())
 
-    def _store(self, rec: dict[str, Any], color: Any, depth: Any) -> None:
+    def _store(self, i: int, color: Any, depth: Any) -> None:
         if isinstance(color, Future):
             color = color.result()
         if isinstance(depth, Future):
             depth = depth.result()
-        i = rec["frame_index"]
+        cols = self._cols
         if self._archive is not None:
-            mtime = rec["stamp_ns"] // 1_000_000_000
+            mtime = cols.stamp_ns[i] // 1_000_000_000
             cname, dname = ARCHIVE_MEMBER_TEMPLATES
-            rec["color_offset"] = self._archive.add(cname.format(frame_index=i, ext=self._ext), color, mtime)
-            rec["color_size"] = memoryview(color).nbytes
-            rec["depth_offset"] = self._archive.add(dname.format(frame_index=i), depth, mtime)
-            rec["depth_size"] = memoryview(depth).nbytes
+            cols.color_offset.append(self._archive.add(cname.format(frame_index=i, ext=self._ext), color, mtime))
+            cols.color_size.append(memoryview(color).nbytes)
+            cols.depth_offset.append(self._archive.add(dname.format(frame_index=i), depth, mtime))
+            cols.depth_size.append(memoryview(depth).nbytes)
         else:
-            for rel, data in ((rec["color_path"], color), (rec["depth_path"], depth)):
-                self._files[rel] = self._w._write_file(rel, data)
+            crel = COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i, ext=self._ext)
+            drel = DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i)
+            self._files[crel] = self._w._write_file(crel, color)
+            self._files[drel] = self._w._write_file(drel, depth)
+            cols.color_path.append(crel)
+            cols.depth_path.append(drel)
+
+    def frames_table(self) -> pa.Table:
+        """The scan's rows of ``frames`` (every frame stored)."""
+        return self._cols.table(self.scan_id, self._archive_rel if self._w.image_layout == "tar" else None)
 
     def abort(self) -> None:
         """Drop the scan: cancel pending encodings and stop its archive (the file stays partial)."""
@@ -258,20 +299,35 @@ class ScanWriter:
         self._w._open.discard(self)
 
     def close(self) -> None:
-        """Store pending frames, finish the archive, then register the scan with the dataset writer."""
+        """Store pending frames and finish the scan.
+
+        In the tar layout the archive's last buffers are still being hashed and written when this
+        returns; the scan is registered (and its resume record written) once they are done, at the
+        latest when the dataset writer needs it (next scan, :meth:`DatasetWriter.scan_record`,
+        close). Reading the next recording meanwhile keeps both cores busy.
+        """
         if self._done:
             return
         try:
             while self._queue:
                 self._store(*self._queue.popleft())
+            if not self.n_frames:
+                raise FormatError(f"scan {self.scan_id}: no frames were added")
             if self._archive is not None:
-                self._files[self._archive_rel] = self._archive.close()
-                self._archive = None
+                self._archive.finish()
         except BaseException:
             self.abort()
             raise
         self._done = True
         self._w._open.discard(self)
+        self._w._pending.append(self)
+        self._w._settle(block=False)
+
+    def _complete(self) -> None:
+        """Wait for the archive (tar layout) and register the scan with the dataset writer."""
+        if self._archive is not None:
+            self._files[self._archive_rel] = self._archive.result()
+            self._archive = None
         self._w._finish_scan(self)
 
 
@@ -360,12 +416,15 @@ class DatasetWriter:
         self._pool = ThreadPoolExecutor(max_workers=self._threads) if self._threads else None
         self._buffer_pool: BufferPool | None = None
         self._open: set[ScanWriter] = set()
+        self._pending: list[ScanWriter] = []
+        """Closed scans whose archives are still being written (see ScanWriter.close)."""
         self._cameras: dict[str, CameraIntrinsics] = {}
         self._tables: dict[str, pa.Table] = {}
         self._scans: dict[str, dict[str, Any]] = {}
-        self._frames: dict[str, list[dict[str, Any]]] = {}
+        self._frames: dict[str, pa.Table] = {}
         self._files: dict[str, tuple[int, str]] = {}
         """relative path -> (size, sha256) of every file written or adopted (hashed from memory)."""
+        self._scan_files: dict[str, dict[str, tuple[int, str]]] = {}
         self._closed = False
 
     # -- context manager -------------------------------------------------------------------
@@ -414,65 +473,84 @@ class DatasetWriter:
             raise FormatError(f"scan {scan_id!r} was already written")
         if not scan_id or "/" in scan_id or scan_id.startswith("."):
             raise FormatError(f"scan_id: {scan_id!r} must be a non-empty name without '/' and not start with '.'")
+        if any(sw.scan_id == scan_id for sw in (*self._open, *self._pending)):
+            raise FormatError(f"scan {scan_id!r} is already being written")
+        self._settle(block=False)
         shutil.rmtree(self.tmp / "images" / scan_id, ignore_errors=True)
         (self.tmp / ARCHIVE_PATH_TEMPLATE.format(scan_id=scan_id)).unlink(missing_ok=True)
         sw = ScanWriter(self, scan_id, source, split)
         self._open.add(sw)
         return sw
 
+    def _settle(self, block: bool) -> None:
+        """Register the closed scans whose archives are complete (all of them if ``block``)."""
+        while self._pending:
+            sw = self._pending[0]
+            if not block and sw._archive is not None and not sw._archive.done:
+                return
+            self._pending.pop(0)
+            sw._complete()
+
     def _buffers(self) -> BufferPool:
         if self._buffer_pool is None:
             self._buffer_pool = BufferPool()
         return self._buffer_pool
 
-    def completed_scans(self, trusted: Collection[str] = ()) -> dict[str, dict[str, Any]]:
+    def completed_scans(self) -> dict[str, dict[str, Any]]:
         """Scans of an interrupted write that are complete and whose images match their checksums.
 
-        Each value is the scan's stored record (``scan``, ``frames``, ``files``); pass it to
+        Each value is the scan's stored record (see :meth:`scan_record`); pass it to
         :meth:`adopt_scan` to keep the scan without rewriting it.
-
-        Args:
-            trusted: scan ids whose images were just written by this process or its workers (their
-                checksums were computed from memory while writing): their files are not re-read.
         """
-        trust = set(trusted)
         done: dict[str, dict[str, Any]] = {}
         for marker in sorted((self.tmp / _SCANS_DIR).glob("*.json")):
             try:
                 rec = json.loads(marker.read_text())
                 scan_id = rec["scan"]["scan_id"]
                 files = rec["files"]
-            except (OSError, json.JSONDecodeError, KeyError, TypeError):
+                frames = pq.read_table(marker.with_suffix(".parquet"))
+                if frames.num_rows != rec["n_frames"]:
+                    continue
+            except (OSError, json.JSONDecodeError, KeyError, TypeError, pa.ArrowException):
                 continue
-            if scan_id in trust:
-                ok = True
-            else:
-                ok = all((self.tmp / p).is_file() and (self.tmp / p).stat().st_size == n
-                         and sha256_file(self.tmp / p) == s for p, (n, s) in files.items())
-            if ok:
-                done[scan_id] = rec
+            if all((self.tmp / p).is_file() and (self.tmp / p).stat().st_size == n and sha256_file(self.tmp / p) == s
+                   for p, (n, s) in files.items()):
+                done[scan_id] = {"scan": rec["scan"], "frames": frames, "files": files}
         return done
 
+    def scan_record(self, scan_id: str) -> dict[str, Any]:
+        """A scan this writer finished: ``{"scan": row, "frames": Arrow table, "files": {path: [size,
+        sha256]}}`` (what :meth:`adopt_scan` takes, e.g. in the process merging its workers' scans)."""
+        if scan_id not in self._scans:
+            self._settle(block=True)
+        files = self._scan_files[scan_id]
+        return {"scan": self._scans[scan_id], "frames": self._frames[scan_id],
+                "files": {k: list(v) for k, v in files.items()}}
+
     def adopt_scan(self, record: Mapping[str, Any]) -> None:
-        """Keep a scan from :meth:`completed_scans` of an interrupted write."""
+        """Keep a scan from :meth:`completed_scans` of an interrupted write (or of a worker)."""
         scan_id = record["scan"]["scan_id"]
+        files = {p: (int(v[0]), str(v[1])) for p, v in record["files"].items()}
         self._scans[scan_id] = dict(record["scan"])
-        self._frames[scan_id] = list(record["frames"])
-        self._files.update({p: (int(v[0]), str(v[1])) for p, v in record["files"].items()})
+        self._frames[scan_id] = to_arrow("frames", record["frames"])
+        self._files.update(files)
+        self._scan_files[scan_id] = files
 
     def _finish_scan(self, sw: ScanWriter) -> None:
-        if not sw._frames:
-            raise FormatError(f"scan {sw.scan_id}: no frames were added")
-        stamps = [f["stamp_ns"] for f in sw._frames]
+        stamps = sw._cols.stamp_ns
         scan = {"scan_id": sw.scan_id, "start_stamp_ns": min(stamps), "end_stamp_ns": max(stamps),
                 "source": sw.source, "split": sw.split}
+        frames = sw.frames_table()
         self._scans[sw.scan_id] = scan
-        self._frames[sw.scan_id] = sw._frames
+        self._frames[sw.scan_id] = frames
         self._files.update(sw._files)
+        self._scan_files[sw.scan_id] = dict(sw._files)
+        # the record of a finished scan, for resuming: its frames, then the JSON that commits them
         markers = self.tmp / _SCANS_DIR
         markers.mkdir(exist_ok=True)
+        pq.write_table(frames, markers / f"{sw.scan_id}.parquet", compression="none")
         tmp = markers / f".{sw.scan_id}.json.tmp"
-        tmp.write_text(json.dumps({"scan": scan, "frames": sw._frames,
+        tmp.write_text(json.dumps({"scan": scan, "n_frames": frames.num_rows,
                                    "files": {k: list(v) for k, v in sw._files.items()}}))
         os.replace(tmp, markers / f"{sw.scan_id}.json")
 
@@ -496,9 +574,20 @@ class DatasetWriter:
 
     # -- finish -------------------------------------------------------------------------------
     def abort(self, keep_partial: bool = False) -> None:
-        """Stop writing; remove ``ROOT.partial`` unless ``keep_partial`` (to resume later)."""
+        """Stop writing; remove ``ROOT.partial`` unless ``keep_partial`` (to resume later).
+
+        Scans already closed are completed first (with ``keep_partial`` a resumed write keeps them).
+        """
         for sw in list(self._open):
             sw.abort()
+        try:
+            self._settle(block=True)
+        except Exception as exc:  # best effort: that scan is not registered and is redone on resume
+            log.warning("%s: a closed scan could not be completed (%s)", self.tmp, exc)
+            for sw in self._pending:
+                if sw._archive is not None:
+                    sw._archive.abort()
+            self._pending.clear()
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
         if self._buffer_pool is not None:
@@ -532,17 +621,19 @@ class DatasetWriter:
         if self._open:
             open_ids = ", ".join(sorted(sw.scan_id for sw in self._open))
             raise FormatError(f"{self.root}: scans still open ({open_ids}); close them before the dataset")
+        self._settle(block=True)
         if self._pool is not None:
             self._pool.shutdown(wait=True)
         if self._buffer_pool is not None:
             self._buffer_pool.close()
         scans = sorted(self._scans.values(), key=lambda s: (s["start_stamp_ns"], s["scan_id"]))
-        frames = [f for s in scans for f in self._frames[s["scan_id"]]]
+        frames = pa.concat_tables([self._frames[s["scan_id"]] for s in scans]) if scans else \
+            TABLES["frames"].schema.empty_table()
         tables: dict[str, pa.Table] = dict(self._tables)
         tables["cameras"] = to_arrow("cameras", [
             {**asdict(c), "distortion_coeffs": list(c.distortion_coeffs)} for c in self._cameras.values()])
         tables["scans"] = to_arrow("scans", scans)
-        tables["frames"] = to_arrow("frames", frames)
+        tables["frames"] = frames.combine_chunks()
         for name, spec in TABLES.items():
             if name == "files":
                 continue
@@ -557,7 +648,7 @@ class DatasetWriter:
         fpath = self.tmp / table_path("files")
         pq.write_table(files_table, fpath, compression="zstd")
         counts = {name: t.num_rows for name, t in sorted(tables.items())}
-        counts["images"] = 2 * len(frames)
+        counts["images"] = 2 * frames.num_rows
         info = DatasetInfo(name=self.name, timezone=self.timezone, color_encoding=self.color_encoding,
                            files_sha256=sha256_file(fpath), counts=counts,
                            created_by=f"psg-data {_package_version()}", extra=self.extra)
@@ -572,5 +663,5 @@ class DatasetWriter:
         else:
             self.root.parent.mkdir(parents=True, exist_ok=True)
             os.replace(self.tmp, self.root)
-        log.info("wrote %s (%d scans, %d frames)", self.root, len(scans), len(frames))
+        log.info("wrote %s (%d scans, %d frames)", self.root, len(scans), frames.num_rows)
         return self.root

@@ -1,14 +1,13 @@
 """The conversion's fast paths agree with the slow, general ones they replace.
 
-- ``parse_compressed_image`` (reads header, format and data of a serialized CompressedImage) vs
-  rosbags' serialiser/deserialiser, for ROS 1 and CDR, on arbitrary field values;
-- ``DatasetWriter.completed_scans(trusted=...)`` skips re-hashing only the trusted scans;
+- ``parse_compressed_image`` (reads header, format and data of a serialized CompressedImage) and
+  ``parse_tf_message`` (every transform of a TFMessage) vs rosbags' serialiser/deserialiser, for
+  ROS 1 and CDR, on arbitrary field values;
 - the worker set-up of ``--jobs`` limits OpenCV to one thread.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,11 +15,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from psg_data.loaders.raw import RosRecording, parse_compressed_image
+from psg_data.loaders.raw import RosRecording, parse_compressed_image, parse_tf_message
 from psg_data.synth._raw_export import export_raw
-from psg_data.writers import DatasetWriter
 
-from .conftest import CAMERA, images, make_dataset, pose
+from .conftest import make_dataset
 
 _STORES: dict[bool, object] = {}
 
@@ -29,7 +27,12 @@ def _store(ros1: bool):  # type: ignore[no-untyped-def]
     from rosbags.typesys import Stores, get_typestore
 
     if ros1 not in _STORES:
-        _STORES[ros1] = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+        ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+        if "tf2_msgs/msg/TFMessage" not in ts.types:  # not in rosbags' ROS 1 store
+            from rosbags.typesys import get_types_from_msg
+
+            ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+        _STORES[ros1] = ts
     return _STORES[ros1]
 
 
@@ -69,6 +72,49 @@ def test_truncated_or_foreign_bytes_give_none(ros1: bool, data: bytes, cut: int)
         assert parse_compressed_image(b"\x00\x00" + raw[2:], cdr=True) is None  # big-endian CDR: fall back
 
 
+_FRAME = st.text(alphabet=st.characters(blacklist_characters="\x00", blacklist_categories=("Cs",)), max_size=10)
+_FLOAT = st.floats(allow_nan=False, width=64)
+_TRANSFORM = st.tuples(st.integers(0, 2**31 - 1), st.integers(0, 999_999_999), _FRAME, _FRAME,
+                       st.tuples(_FLOAT, _FLOAT, _FLOAT), st.tuples(_FLOAT, _FLOAT, _FLOAT, _FLOAT))
+
+
+def _serialize_tf(ros1: bool, transforms: list) -> bytes:  # type: ignore[type-arg]
+    ts = _store(ros1)
+    T = ts.types  # type: ignore[attr-defined]
+    H = T["std_msgs/msg/Header"]
+    items = []
+    for sec, nsec, parent, child, t, q in transforms:
+        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+        h = H(seq=3, stamp=stamp, frame_id=parent) if ros1 else H(stamp=stamp, frame_id=parent)
+        tf = T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=t[0], y=t[1], z=t[2]),
+                                              rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
+        items.append(T["geometry_msgs/msg/TransformStamped"](header=h, child_frame_id=child, transform=tf))
+    msg = T["tf2_msgs/msg/TFMessage"](transforms=items)
+    typ = "tf2_msgs/msg/TFMessage"
+    return bytes(ts.serialize_ros1(msg, typ) if ros1 else ts.serialize_cdr(msg, typ))  # type: ignore[attr-defined]
+
+
+@settings(max_examples=150, deadline=None)
+@given(ros1=st.booleans(), transforms=st.lists(_TRANSFORM, max_size=4))
+def test_tf_parse_matches_rosbags(ros1: bool, transforms: list) -> None:  # type: ignore[type-arg]
+    raw = _serialize_tf(ros1, transforms)
+    got = parse_tf_message(raw, cdr=not ros1)
+    assert got is not None
+    typ = "tf2_msgs/msg/TFMessage"
+    ref = _store(ros1).deserialize_ros1(raw, typ) if ros1 else _store(ros1).deserialize_cdr(raw, typ)  # type: ignore[attr-defined]
+    assert len(got) == len(ref.transforms) == len(transforms)
+    for g, r, (sec, nsec, parent, child, t, q) in zip(got, ref.transforms, transforms):
+        assert g.stamp_ns == r.header.stamp.sec * 1_000_000_000 + r.header.stamp.nanosec == sec * 10**9 + nsec
+        assert (g.parent, g.child) == (r.header.frame_id, r.child_frame_id) == (parent, child)
+        assert g.translation == (r.transform.translation.x, r.transform.translation.y, r.transform.translation.z) == t
+        assert g.rotation_xyzw == (r.transform.rotation.x, r.transform.rotation.y, r.transform.rotation.z,
+                                   r.transform.rotation.w) == q
+    if raw[4:]:
+        assert parse_tf_message(raw + b"\x00" * 5, cdr=not ros1) is None  # trailing bytes
+    if transforms:
+        assert parse_tf_message(raw[:-9], cdr=not ros1) is None  # truncated
+
+
 @pytest.mark.parametrize("fmt", ["ros1", "ros2-sqlite3", "ros2-mcap"])
 def test_recording_fast_path_equals_deserialize(tmp_path: Path, fmt: str) -> None:
     canon = make_dataset(tmp_path / "canon", n_scans=1, n_frames=3)
@@ -86,35 +132,14 @@ def test_recording_fast_path_equals_deserialize(tmp_path: Path, fmt: str) -> Non
             assert (fast.frame_id, fast.format) == (msg.header.frame_id, msg.format)
             assert bytes(fast.data) == bytes(msg.data)
             n += 1
-    assert n == 6
-
-
-def _interrupted_write(root: Path) -> Path:
-    w = DatasetWriter(root, threads=1)
-    w.add_camera(CAMERA)
-    for s in range(2):
-        with w.scan(f"scan_{s}") as sw:
-            for i in range(2):
-                c, d = images(i, s)
-                sw.add_frame(1_000 + i, pose(i, s), c, d, CAMERA.camera_id)
-    w.abort(keep_partial=True)
-    return root.with_name(root.name + ".partial")
-
-
-def test_completed_scans_trusted_skips_only_the_trusted_checksums(tmp_path: Path) -> None:
-    tmp = _interrupted_write(tmp_path / "ds")
-    for s in range(2):  # corrupt one image of each scan (same size, other bytes)
-        p = tmp / "images" / f"scan_{s}.tar"
-        data = bytearray(p.read_bytes())
-        data[600] ^= 0xFF
-        p.write_bytes(bytes(data))
-    w = DatasetWriter(tmp_path / "ds", resume=True, threads=1)
-    assert w.completed_scans() == {}
-    got = w.completed_scans(trusted={"scan_1"})
-    assert set(got) == {"scan_1"}
-    marker = json.loads((tmp / ".scans" / "scan_1.json").read_text())
-    assert got["scan_1"]["files"] == marker["files"] and list(marker["files"]) == ["images/scan_1.tar"]
-    w.abort()
+        for conn, _, raw in rec.raw_messages({"/tf", "/tf_static"}):
+            assert parse_tf_message(raw, cdr=fmt != "ros1") is not None  # the fast path was taken
+            msg = rec.deserialize(raw, conn.msgtype, conn.topic)
+            fast_tf = rec.tf_transforms(raw, conn.topic)
+            assert [(s.parent, s.child) for s in fast_tf] == [(t.header.frame_id, t.child_frame_id)
+                                                               for t in msg.transforms]
+            n += 1
+    assert n == 6 + 3 + 1
 
 
 def test_worker_init_limits_opencv_threads() -> None:

@@ -174,3 +174,36 @@ def test_tf_tree_composition_and_no_path() -> None:
     assert tf.lookup("map", "cam", 250) is None  # beyond the last sample
     with pytest.raises(ConversionError, match="no path from 'map' to 'elsewhere'"):
         tf.lookup("map", "elsewhere", 0, "bag")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.booleans(), quats, quats,
+                          st.lists(st.floats(-5, 5), min_size=3, max_size=3)), min_size=1, max_size=5),
+       st.floats(0, 1))
+def test_tf_lookup_equals_brute_force_chain(edges: list, a: float) -> None:  # type: ignore[type-arg]
+    """A chain f0 - f1 - ... of static/dynamic edges stored in either direction, looked up at a time
+    between the two samples of every dynamic edge, against composing scipy-slerped matrices."""
+    from scipy.spatial.transform import Slerp
+
+    tf = TfBuffer(max_gap_ns=1000, tolerance_ns=0)
+    expected = np.eye(4)
+    t_query = int(round(a * 1000))
+    for k, (static, stored_forward, q0, q1, t) in enumerate(edges):
+        parent, child = (f"f{k}", f"f{k + 1}") if stored_forward else (f"f{k + 1}", f"f{k}")
+        q0 = np.array(q0) / np.linalg.norm(q0)
+        q1 = np.array(q1) / np.linalg.norm(q1)
+        if static:
+            tf.add(parent, child, 0, t, q0, static=True)
+            E = make_transform(t, q0)
+        else:
+            t1 = np.array(t) + 1.0
+            tf.add(parent, child, 0, t, q0, static=False)
+            tf.add(parent, child, 1000, t1, q1, static=False)
+            w = t_query / 1000
+            E = np.eye(4)
+            E[:3, :3] = Slerp([0, 1], Rotation.from_quat([q0, q1]))(w).as_matrix()
+            E[:3, 3] = (1 - w) * np.array(t) + w * t1
+        expected = expected @ (E if stored_forward else np.linalg.inv(E))
+    got = tf.lookup("f0", f"f{len(edges)}", t_query)
+    np.testing.assert_allclose(got, expected, atol=1e-7)
+    np.testing.assert_allclose(tf.lookup(f"f{len(edges)}", "f0", t_query), np.linalg.inv(expected), atol=1e-6)

@@ -198,11 +198,11 @@ def test_resume_after_interruption(tmp_path: Path, tiny_dataset: Path, monkeypat
     real = pl.run_task
     calls: list[str] = []
 
-    def flaky(task, progress=None):  # type: ignore[no-untyped-def]
+    def flaky(task, progress=None, writer=None):  # type: ignore[no-untyped-def]
         calls.append(task.scan_id)
         if task.scan_id == "scan_001":
             raise KeyboardInterrupt
-        return real(task, progress)
+        return real(task, progress, writer)
 
     monkeypatch.setattr(pl, "run_task", flaky)
     with pytest.raises(KeyboardInterrupt):
@@ -210,7 +210,7 @@ def test_resume_after_interruption(tmp_path: Path, tiny_dataset: Path, monkeypat
     assert not (tmp_path / "out").exists() and (tmp_path / "out.partial").is_dir()
     monkeypatch.setattr(pl, "run_task", real)
     calls.clear()
-    monkeypatch.setattr(pl, "run_task", lambda t, p=None: (calls.append(t.scan_id), real(t, p))[1])
+    monkeypatch.setattr(pl, "run_task", lambda t, p=None, w=None: (calls.append(t.scan_id), real(t, p, w))[1])
     rep = convert(raw, tmp_path / "out")
     assert calls == ["scan_001"] and rep.resumed == ["scan_000"]
     assert not (tmp_path / "out.partial").exists()
@@ -224,10 +224,10 @@ def test_resume_redoes_a_corrupted_scan(tmp_path: Path, tiny_dataset: Path, monk
     raw = export_raw(tiny_dataset, tmp_path / "raw", "ros1")
     real = pl.run_task
 
-    def flaky(task, progress=None):  # type: ignore[no-untyped-def]
+    def flaky(task, progress=None, writer=None):  # type: ignore[no-untyped-def]
         if task.scan_id == "scan_001":
             raise KeyboardInterrupt
-        return real(task, progress)
+        return real(task, progress, writer)
 
     monkeypatch.setattr(pl, "run_task", flaky)
     with pytest.raises(KeyboardInterrupt):

@@ -7,17 +7,19 @@ Message types are normalised to ROS 2 names (``sensor_msgs/msg/Image``) for both
 
 from __future__ import annotations
 
+import functools
 import logging
 import sqlite3
 import struct
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 from psg_data.errors import ConversionError
+from psg_data.loaders.raw._wire import CompressedFields, TfSample, parse_compressed_image, parse_tf_message
 
 __all__ = ["RosRecording", "recording_format", "find_recordings", "RECORDING_FORMATS", "CompressedFields",
-           "parse_compressed_image"]
+           "parse_compressed_image", "parse_tf_message", "TfSample"]
 
 log = logging.getLogger(__name__)
 
@@ -62,72 +64,162 @@ def find_recordings(directory: str | Path) -> list[tuple[Path, str]]:
     return found
 
 
-class CompressedFields(NamedTuple):
-    """The fields of a ``sensor_msgs/CompressedImage`` the converter needs."""
+@functools.lru_cache(maxsize=256)
+def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
+    """A typestore holding ``msgtype`` as the recording defines it (cached across recordings).
 
-    stamp_ns: int
-    """``header.stamp`` as int64 nanoseconds."""
-    frame_id: str
-    format: str
-    data: memoryview
-    """The encoded image: a zero-copy view of the serialized message."""
+    Built only for the types a conversion deserialises; checked against the connection's MD5 sum.
+    """
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+    ts = get_typestore(Stores.EMPTY)
+    ts.register(get_types_from_msg(msgdef, msgtype))
+    have = ts.generate_msgdef(msgtype)[1]
+    if digest and have != digest:
+        raise ValueError(f"message definition of {msgtype} has MD5 {have}, the connection says {digest}")
+    return ts
 
 
 _U32 = struct.Struct("<I")
-_STAMP = struct.Struct("<iI")
+_OP_MSGDATA, _OP_CONNECTION = 2, 7
+_MADV_POPULATE_READ = 22
+"""Linux >= 5.14: populate the page tables of a range (not exported by Python's mmap module)."""
 
 
-def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFields | None:
-    """Read header stamp, frame id, format and data of a serialized ``CompressedImage`` directly.
+def _record_op(header: bytes) -> int:
+    """The ``op`` field of a ROS 1 record header (fields: uint32 length, then ``name=value``)."""
+    i, n = 0, len(header)
+    while i + 4 <= n:
+        (flen,) = _U32.unpack_from(header, i)
+        if header[i + 4:i + 7] == b"op=" and flen == 4:
+            return header[i + 7]
+        i += 4 + flen
+    raise ValueError("record header without an op field")
 
-    Skips the generic deserialiser (which builds the whole message object); the image bytes stay a
-    view of ``raw``. Returns None whenever the bytes do not follow the expected layout exactly (the
-    caller then falls back to the full deserialiser, which reports errors).
 
-    Args:
-        raw: one serialized message: ROS 1 (``cdr=False``) or little-endian CDR with its 4-byte
-            encapsulation header (``cdr=True``).
-        cdr: serialization of ``raw``.
+class _Ros1Reader:
+    """A ROS 1 bag: opened and indexed by ``rosbags.rosbag1.Reader``, messages read zero-copy.
+
+    Two costs of rosbags' own ROS 1 path are avoided:
+
+    * AnyReader parses the message definition of every connection into a new typestore each time
+      a bag is opened, then compiles deserialisers for it: here types are built only when a
+      message of that type is deserialised, once per definition for all recordings of a process.
+    * ``Reader.messages`` copies every message twice (chunk into a BytesIO, record out of it) and
+      merges the index in Python-level comparisons. Here the bag is memory-mapped and each message
+      is a ``memoryview`` of the mapping (uncompressed chunks) or of the decompressed chunk, in the
+      same order (rosbags' index, merged by time with ties in connection order). Pages of chunks
+      already read are released from the mapping, so resident memory stays bounded.
+
+    If rosbags' parsed index does not look as expected (another rosbags version), the messages
+    come from ``Reader.messages`` instead.
     """
-    mv = memoryview(raw)
-    n = len(mv)
-    try:
-        if cdr:
-            if n < 4 or mv[0] != 0 or mv[1] != 1:  # CDR_LE / PL_CDR_LE only
-                return None
-            b = mv[4:]
-            n -= 4
-            sec, nsec = _STAMP.unpack_from(b, 0)
-            (ln,) = _U32.unpack_from(b, 8)
-            if ln < 1 or 12 + ln > n:
-                return None
-            frame_id = bytes(b[12:12 + ln - 1]).decode()
-            o = (12 + ln + 3) & ~3
-            (ln,) = _U32.unpack_from(b, o)
-            if ln < 1 or o + 4 + ln > n:
-                return None
-            fmt = bytes(b[o + 4:o + 3 + ln]).decode()
-            o = (o + 4 + ln + 3) & ~3
-        else:
-            b = mv
-            _, sec, nsec = struct.unpack_from("<III", b, 0)
-            (ln,) = _U32.unpack_from(b, 12)
-            if 16 + ln > n:
-                return None
-            frame_id = bytes(b[16:16 + ln]).decode()
-            o = 16 + ln
-            (ln,) = _U32.unpack_from(b, o)
-            if o + 4 + ln > n:
-                return None
-            fmt = bytes(b[o + 4:o + 4 + ln]).decode()
-            o += 4 + ln
-        (ln,) = _U32.unpack_from(b, o)
-        end = o + 4 + ln
-        if end > n or n - end > 3:  # CDR may pad the end to 4 bytes; nothing else may follow
+
+    is2 = False
+
+    def __init__(self, path: Path) -> None:
+        from rosbags.rosbag1 import Reader
+
+        self.path = path
+        self._bag = Reader(path)
+        self.connections: list[Any] = []
+        self._by_type: dict[str, Any] = {}
+        self._mm: Any = None
+
+    def open(self) -> None:
+        self._bag.open()
+        self.connections = list(self._bag.connections)
+        for c in self.connections:
+            self._by_type.setdefault(c.msgtype, c)
+
+    def close(self) -> None:
+        if self._mm is not None:
+            try:
+                self._mm.close()
+            except BufferError:  # views of it still alive: unmapped when they are gone
+                pass
+            self._mm = None
+        self._bag.close()
+
+    def _index(self, connections: Collection[Any]) -> list[tuple[int, int, int, int, int, Any]] | None:
+        try:
+            indexes, chunks = self._bag.indexes, self._bag.chunks
+            entries = [(e.time, k, j, e.chunk_pos, e.offset, c)
+                       for k, c in enumerate(connections) for j, e in enumerate(indexes[c.id])]
+            for _, _, _, pos, _, _ in entries[:1]:
+                ch = chunks[pos]
+                _ = (ch.datapos, ch.datasize, ch.decompressor)
+        except (AttributeError, KeyError, TypeError):
             return None
-        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), frame_id, fmt, b[o + 4:end])
-    except (struct.error, UnicodeDecodeError):
-        return None
+        entries.sort()  # (time, connection order, index order): rosbags' merge order, ties included
+        return entries
+
+    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any]]:
+        import mmap
+
+        conns = list(connections) or self.connections
+        entries = self._index(conns)
+        if entries is None:
+            yield from self._bag.messages(connections=conns)
+            return
+        if not entries:
+            return
+        if self._mm is None:
+            with open(self.path, "rb") as fh:
+                self._mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        whole = memoryview(self._mm)
+        from rosbags.rosbag1.reader import decompressors
+
+        identity = decompressors.get("none")
+        chunks = self._bag.chunks
+        page = mmap.PAGESIZE
+        release = getattr(self._mm, "madvise", None)
+        cur_pos, cur, cur_span = -1, whole, (0, 0)
+        populate = True
+        u32 = _U32.unpack_from
+        try:
+            for time_ns, _, _, pos, offset, conn in entries:
+                if pos != cur_pos:
+                    if release is not None and cur_span[1] > cur_span[0]:
+                        release(mmap.MADV_DONTNEED, *cur_span)
+                    ch = chunks[pos]
+                    end = ch.datapos + ch.datasize
+                    if end > len(whole):
+                        raise ValueError(f"chunk at byte {pos} ends beyond the end of the file")
+                    if ch.decompressor is identity:
+                        cur = whole[ch.datapos:end]
+                        start = ch.datapos - ch.datapos % page
+                        cur_span = (start, end - start)
+                        if populate and release is not None:  # map the chunk's pages at once, not a fault each
+                            try:
+                                release(_MADV_POPULATE_READ, *cur_span)
+                            except OSError:  # kernels before 5.14 do not know it
+                                populate = False
+                    else:
+                        cur = memoryview(ch.decompressor(bytes(whole[ch.datapos:end])))
+                        cur_span = (0, 0)
+                    cur_pos = pos
+                o = offset
+                while True:  # skip connection records that precede the message in the chunk
+                    (hlen,) = u32(cur, o)
+                    op = _record_op(bytes(cur[o + 4:o + 4 + hlen]))
+                    o += 4 + hlen
+                    (dlen,) = u32(cur, o)
+                    o += 4
+                    if o + dlen > len(cur):
+                        raise ValueError(f"message record at chunk offset {offset} is truncated")
+                    if op == _OP_MSGDATA:
+                        break
+                    if op != _OP_CONNECTION:
+                        raise ValueError(f"expected message data at chunk offset {offset}, found record op {op}")
+                    o += dlen
+                yield conn, time_ns, cur[o:o + dlen]
+        finally:
+            del cur, whole
+
+    def deserialize(self, raw: Any, msgtype: str) -> Any:
+        c = self._by_type[msgtype]
+        return _ros1_typestore(msgtype, c.digest, c.msgdef.data).deserialize_ros1(bytes(raw), msgtype)
 
 
 def _wrap(path: Path, exc: BaseException) -> ConversionError:
@@ -172,9 +264,11 @@ class RosRecording:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
 
-        default = get_typestore(Stores.ROS1_NOETIC if self.format == "ros1" else Stores.ROS2_HUMBLE)
         try:
-            self._reader = AnyReader([self.path], default_typestore=default)
+            if self.format == "ros1":
+                self._reader = _Ros1Reader(self.path)
+            else:
+                self._reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
             self._reader.open()
         except ConversionError:
             raise
@@ -233,6 +327,24 @@ class RosRecording:
         h = msg.header
         return CompressedFields(int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec), str(h.frame_id),
                                 str(msg.format), memoryview(msg.data))
+
+    def tf_transforms(self, raw: bytes, topic: str) -> list[TfSample]:
+        """The transforms of a serialized ``tf2_msgs/TFMessage``.
+
+        Uses :func:`parse_tf_message` and falls back to the full deserialiser.
+        """
+        fast = parse_tf_message(raw, self._reader.is2)
+        if fast is not None:
+            return fast
+        msg = self.deserialize(raw, "tf2_msgs/msg/TFMessage", topic)
+        out = []
+        for tr in msg.transforms:
+            t, q = tr.transform.translation, tr.transform.rotation
+            out.append(TfSample(str(tr.header.frame_id), str(tr.child_frame_id),
+                                int(tr.header.stamp.sec) * 1_000_000_000 + int(tr.header.stamp.nanosec),
+                                (float(t.x), float(t.y), float(t.z)),
+                                (float(q.x), float(q.y), float(q.z), float(q.w))))
+        return out
 
     def messages(self, topics: Collection[str] = ()) -> Iterator[tuple[str, str, int, Any]]:
         """``(topic, msgtype, log_time_ns, message)`` in log-time order."""

@@ -7,9 +7,11 @@ Conventions: quaternions are ``(x, y, z, w)`` (ROS order), transforms are 4x4 ``
 from __future__ import annotations
 
 import bisect
+import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,18 +28,94 @@ __all__ = [
 ]
 
 
+def _rot9(x: float, y: float, z: float, w: float) -> tuple[float, ...] | None:
+    """Row-major 3x3 rotation of a (not necessarily unit) quaternion; None if degenerate or non-finite."""
+    n = x * x + y * y + z * z + w * w
+    if not math.isfinite(n) or n < 1e-12:
+        return None
+    s = 2.0 / n
+    return (1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w),
+            s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w),
+            s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y))
+
+
+def _transform(t: tuple[float, ...], q: tuple[float, ...]) -> NDArray[np.float64]:
+    r = _rot9(*q)
+    if r is None:
+        r = (math.nan,) * 9
+    return np.array(((r[0], r[1], r[2], t[0]), (r[3], r[4], r[5], t[1]), (r[6], r[7], r[8], t[2]),
+                     (0.0, 0.0, 0.0, 1.0)))
+
+
+Pose7 = tuple[float, float, float, float, float, float, float]
+"""A rigid transform as plain floats ``(tx, ty, tz, qx, qy, qz, qw)`` with a unit quaternion."""
+
+_NAN7: Pose7 = (math.nan,) * 7  # type: ignore[assignment]
+
+
+def _pose7(t: Iterable[float], q: Iterable[float]) -> Pose7:
+    """Translation and (normalised) quaternion as a Pose7; all NaN if the quaternion is degenerate."""
+    tx, ty, tz = t
+    x, y, z, w = q
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not math.isfinite(n) or n < 1e-6:
+        return _NAN7
+    return (float(tx), float(ty), float(tz), x / n, y / n, z / n, w / n)
+
+
+def _compose(a: Pose7, b: Pose7) -> Pose7:
+    """``a @ b`` for Pose7 transforms (translation a.t + R_a b.t, quaternion product a.q b.q)."""
+    ax, ay, az, aw = a[3], a[4], a[5], a[6]
+    bx, by, bz = b[0], b[1], b[2]
+    # R_a b.t = b.t + 2 w (u x b.t) + 2 u x (u x b.t), u = a's vector part
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    dx, dy, dz = ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx
+    qx, qy, qz, qw = b[3], b[4], b[5], b[6]
+    return (a[0] + bx + 2.0 * (aw * cx + dx), a[1] + by + 2.0 * (aw * cy + dy), a[2] + bz + 2.0 * (aw * cz + dz),
+            aw * qx + ax * qw + ay * qz - az * qy,
+            aw * qy - ax * qz + ay * qw + az * qx,
+            aw * qz + ax * qy - ay * qx + az * qw,
+            aw * qw - ax * qx - ay * qy - az * qz)
+
+
+def _inverse(a: Pose7) -> Pose7:
+    conj: Pose7 = (0.0, 0.0, 0.0, -a[3], -a[4], -a[5], a[6])
+    t = _compose(conj, (a[0], a[1], a[2], 0.0, 0.0, 0.0, 1.0))
+    return (-t[0], -t[1], -t[2], -a[3], -a[4], -a[5], a[6])
+
+
+def _matrix(a: Pose7) -> NDArray[np.float64]:
+    x, y, z, w = a[3], a[4], a[5], a[6]
+    return np.array(((1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), a[0]),
+                     (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), a[1]),
+                     (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), a[2]),
+                     (0.0, 0.0, 0.0, 1.0)))
+
+
+def _interpolate(p: Pose7, r: Pose7, a: float) -> Pose7:
+    """Lerp of the translations and slerp (shortest arc) of the unit quaternions, ``a`` in [0, 1]."""
+    px, py, pz, pw = p[3], p[4], p[5], p[6]
+    rx, ry, rz, rw = r[3], r[4], r[5], r[6]
+    d = px * rx + py * ry + pz * rz + pw * rw
+    if d < 0:
+        rx, ry, rz, rw, d = -rx, -ry, -rz, -rw, -d
+    if d > 0.9995:  # nearly parallel: normalised lerp
+        qx, qy, qz, qw = px + a * (rx - px), py + a * (ry - py), pz + a * (rz - pz), pw + a * (rw - pw)
+        n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+        qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    else:
+        th = math.acos(min(d, 1.0))
+        st = math.sin(th)
+        s0, s1 = math.sin((1 - a) * th) / st, math.sin(a * th) / st
+        qx, qy, qz, qw = s0 * px + s1 * rx, s0 * py + s1 * ry, s0 * pz + s1 * rz, s0 * pw + s1 * rw
+    return (p[0] + a * (r[0] - p[0]), p[1] + a * (r[1] - p[1]), p[2] + a * (r[2] - p[2]), qx, qy, qz, qw)
+
+
 def quat_xyzw_to_matrix(q: Iterable[float]) -> NDArray[np.float64]:
     """3x3 rotation of a (not necessarily unit) quaternion ``(x, y, z, w)``."""
-    x, y, z, w = np.asarray(list(q), dtype=np.float64)
-    n = x * x + y * y + z * z + w * w
-    if not np.isfinite(n) or n < 1e-12:
-        return np.full((3, 3), np.nan)
-    s = 2.0 / n
-    return np.array([
-        [1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
-        [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
-        [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)],
-    ])
+    x, y, z, w = (float(v) for v in q)
+    r = _rot9(x, y, z, w)
+    return np.full((3, 3), np.nan) if r is None else np.array(r).reshape(3, 3)
 
 
 def matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -62,47 +140,42 @@ def matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def make_transform(translation: Iterable[float], quat_xyzw: Iterable[float]) -> NDArray[np.float64]:
     """4x4 transform from a translation (metres) and a quaternion ``(x, y, z, w)``."""
-    T = np.eye(4)
-    T[:3, :3] = quat_xyzw_to_matrix(quat_xyzw)
-    T[:3, 3] = np.asarray(list(translation), dtype=np.float64)
-    return T
+    return _transform(tuple(float(v) for v in translation), tuple(float(v) for v in quat_xyzw))
 
 
 def slerp(q0: NDArray[np.float64], q1: NDArray[np.float64], a: float) -> NDArray[np.float64]:
     """Spherical linear interpolation between unit quaternions (shortest arc), ``a`` in [0, 1]."""
-    q0 = np.asarray(q0, float) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, float) / np.linalg.norm(q1)
-    d = float(np.dot(q0, q1))
-    if d < 0:
-        q1, d = -q1, -d
-    if d > 0.9995:
-        q = q0 + a * (q1 - q0)
-        return q / np.linalg.norm(q)
-    th = np.arccos(min(d, 1.0))
-    return (np.sin((1 - a) * th) * q0 + np.sin(a * th) * q1) / np.sin(th)
+    p, r = _pose7((0, 0, 0), q0), _pose7((0, 0, 0), q1)
+    return np.array(_interpolate(p, r, float(a))[3:])
 
 
 @dataclass
 class PoseSeries:
     """Time series of one transform, looked up with interpolation.
 
-    Samples may arrive slightly out of order; they are kept sorted by stamp.
+    Samples may arrive slightly out of order; they are kept sorted by stamp. Each sample is kept
+    as a :data:`Pose7` of plain floats: a lookup interpolates in Python floats, which for one pose
+    costs less than the small numpy operations it replaces.
     """
 
     stamps: list[int] = field(default_factory=list)
-    translations: list[NDArray[np.float64]] = field(default_factory=list)
-    quats: list[NDArray[np.float64]] = field(default_factory=list)
+    samples: list[Pose7] = field(default_factory=list)
 
     def add(self, stamp_ns: int, translation: Iterable[float], quat_xyzw: Iterable[float]) -> None:
-        t = np.asarray(list(translation), dtype=np.float64)
-        q = np.asarray(list(quat_xyzw), dtype=np.float64)
-        i = bisect.bisect_right(self.stamps, stamp_ns)
-        if i > 0 and self.stamps[i - 1] == stamp_ns:  # republished sample: last one wins
-            self.translations[i - 1], self.quats[i - 1] = t, q
+        self.add7(int(stamp_ns), _pose7(translation, quat_xyzw))
+
+    def add7(self, stamp_ns: int, sample: Pose7) -> None:
+        s = self.stamps
+        if not s or stamp_ns > s[-1]:  # the usual case: in order
+            s.append(stamp_ns)
+            self.samples.append(sample)
             return
-        self.stamps.insert(i, int(stamp_ns))
-        self.translations.insert(i, t)
-        self.quats.insert(i, q)
+        i = bisect.bisect_right(s, stamp_ns)
+        if i > 0 and s[i - 1] == stamp_ns:  # republished sample: last one wins
+            self.samples[i - 1] = sample
+            return
+        s.insert(i, stamp_ns)
+        self.samples.insert(i, sample)
 
     def __len__(self) -> int:
         return len(self.stamps)
@@ -115,7 +188,23 @@ class PoseSeries:
         """Drop samples older than the last one at or before ``stamp_ns`` (bounded memory)."""
         i = bisect.bisect_right(self.stamps, stamp_ns) - 1
         if i > 0:
-            del self.stamps[:i], self.translations[:i], self.quats[:i]
+            del self.stamps[:i], self.samples[:i]
+
+    def at7(self, stamp_ns: int, max_gap_ns: int, tolerance_ns: int) -> Pose7 | None:
+        """The transform at ``stamp_ns`` as a :data:`Pose7`, or None (see :meth:`at`)."""
+        s = self.stamps
+        if not s:
+            return None
+        i = bisect.bisect_left(s, stamp_ns)
+        n = len(s)
+        if i < n and s[i] == stamp_ns:
+            return self.samples[i]
+        if 0 < i < n and s[i] - s[i - 1] <= max_gap_ns:
+            return _interpolate(self.samples[i - 1], self.samples[i], (stamp_ns - s[i - 1]) / (s[i] - s[i - 1]))
+        best = i - 1 if i == n or (i > 0 and stamp_ns - s[i - 1] <= s[i] - stamp_ns) else i
+        if abs(s[best] - stamp_ns) <= tolerance_ns:
+            return self.samples[best]
+        return None
 
     def at(self, stamp_ns: int, max_gap_ns: int, tolerance_ns: int) -> NDArray[np.float64] | None:
         """4x4 transform at ``stamp_ns`` or None.
@@ -124,20 +213,8 @@ class PoseSeries:
         most ``max_gap_ns`` apart; otherwise uses the nearest sample if it is within
         ``tolerance_ns``.
         """
-        s = self.stamps
-        if not s:
-            return None
-        i = bisect.bisect_left(s, stamp_ns)
-        if i < len(s) and s[i] == stamp_ns:
-            return make_transform(self.translations[i], self.quats[i])
-        if 0 < i < len(s) and s[i] - s[i - 1] <= max_gap_ns:
-            a = (stamp_ns - s[i - 1]) / (s[i] - s[i - 1])
-            t = (1 - a) * self.translations[i - 1] + a * self.translations[i]
-            return make_transform(t, slerp(self.quats[i - 1], self.quats[i], a))
-        best = min((j for j in (i - 1, i) if 0 <= j < len(s)), key=lambda j: abs(s[j] - stamp_ns))
-        if abs(s[best] - stamp_ns) <= tolerance_ns:
-            return make_transform(self.translations[best], self.quats[best])
-        return None
+        p = self.at7(stamp_ns, max_gap_ns, tolerance_ns)
+        return None if p is None else _matrix(p)
 
 
 class TfBuffer:
@@ -152,8 +229,11 @@ class TfBuffer:
         self.max_gap_ns = int(max_gap_ns)
         self.tolerance_ns = int(tolerance_ns)
         self.static: dict[tuple[str, str], NDArray[np.float64]] = {}
+        self._static7: dict[tuple[str, str], Pose7] = {}
         self.dynamic: dict[tuple[str, str], PoseSeries] = {}
         self._paths: dict[tuple[str, str], list[tuple[str, str, bool]] | None] = {}
+        self._plans: dict[tuple[str, str], list[Any]] = {}
+        """(source, target) -> the path with runs of static edges multiplied out (see lookup)."""
 
     @staticmethod
     def _norm(frame: str) -> str:
@@ -161,13 +241,26 @@ class TfBuffer:
 
     def add(self, parent: str, child: str, stamp_ns: int, translation: Iterable[float],
             quat_xyzw: Iterable[float], *, static: bool) -> None:
+        if not static:
+            series = self.dynamic.get((parent, child))
+            if series is not None:  # the usual case: a known dynamic edge with normalised names
+                series.add7(int(stamp_ns), _pose7(translation, quat_xyzw))
+                return
         key = (self._norm(parent), self._norm(child))
         if key not in self.static and key not in self.dynamic:
             self._paths.clear()
+            self._plans.clear()
+        pose = _pose7(translation, quat_xyzw)
         if static:
+            if self._static7.get(key) != pose:
+                self._plans.clear()
+            self._static7[key] = pose
             self.static[key] = make_transform(translation, quat_xyzw)
         else:
-            self.dynamic.setdefault(key, PoseSeries()).add(stamp_ns, translation, quat_xyzw)
+            series = self.dynamic.get(key)
+            if series is None:
+                series = self.dynamic[key] = PoseSeries()
+            series.add7(int(stamp_ns), pose)
 
     @property
     def frames(self) -> list[str]:
@@ -215,22 +308,43 @@ class TfBuffer:
         Raises:
             ConversionError: the tree has no path between the two frames.
         """
-        edges = self.path(source, target)
-        if edges is None:
-            raise ConversionError(
-                f"{where}/tf: TF tree has no path from {source!r} to {target!r}; frames present: "
-                f"{', '.join(self.frames) or 'none'} (ROS 2 bags often lack /tf_static: add it with "
-                f"'static_transforms' in the config file)")
-        T = np.eye(4)
-        for p, c, forward in edges:
-            if (p, c) in self.static:
-                E = self.static[(p, c)]
+        key = (source, target)
+        plan = self._plans.get(key)
+        if plan is None:
+            edges = self.path(source, target)
+            if edges is None:
+                raise ConversionError(
+                    f"{where}/tf: TF tree has no path from {source!r} to {target!r}; frames present: "
+                    f"{', '.join(self.frames) or 'none'} (ROS 2 bags often lack /tf_static: add it with "
+                    f"'static_transforms' in the config file)")
+            plan = self._plans[key] = self._plan(edges)
+        T: Pose7 | None = None
+        for step in plan:
+            if len(step) == 7:
+                E = step
             else:
-                E = self.dynamic[(p, c)].at(stamp_ns, self.max_gap_ns, self.tolerance_ns)
+                p, c, forward = step
+                E = self.dynamic[(p, c)].at7(stamp_ns, self.max_gap_ns, self.tolerance_ns)
                 if E is None:
                     return None
-            T = T @ (E if forward else invert(E))
-        return T
+                if not forward:
+                    E = _inverse(E)
+            T = E if T is None else _compose(T, E)
+        return np.eye(4) if T is None else _matrix(T)
+
+    def _plan(self, edges: list[tuple[str, str, bool]]) -> list[Any]:
+        """The path as steps: products of consecutive static edges (Pose7) and dynamic edges."""
+        plan: list[Any] = []
+        for p, c, forward in edges:
+            if (p, c) in self._static7:
+                E = self._static7[(p, c)] if forward else _inverse(self._static7[(p, c)])
+                if plan and len(plan[-1]) == 7:
+                    plan[-1] = _compose(plan[-1], E)
+                else:
+                    plan.append(E)
+            else:
+                plan.append((p, c, forward))
+        return plan
 
     def last_dynamic_stamp(self) -> int | None:
         """Smallest over dynamic edges of their newest sample (None if no dynamic edge)."""
