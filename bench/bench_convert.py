@@ -202,16 +202,18 @@ def _rm(*paths: Path) -> None:
         shutil.rmtree(p.with_name(p.name + ".partial"), ignore_errors=True)
 
 
-def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat: int) -> dict[str, object]:
+def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat: int,
+                   cases: tuple[str, ...] = ("compressed", "raw")) -> dict[str, object]:
     w, h = (640, 480) if size_mb >= 500 else (320, 240)
     per = bytes_per_frame(tmp, w, h)
     n_cmp = max(4, round(size_mb * 1e6 / per["compressed"] / n_rec))
     n_raw = max(4, round(size_mb * 1e6 / per["raw"] / n_rec))
     print(f"building {n_rec} recordings x {n_cmp} frames (compressed) and x {n_raw} frames (raw), {w}x{h}, "
           f"in {tmp} ...", file=sys.stderr)
-    rec_cmp = build_recordings(tmp, "rec_cmp", n_rec, n_cmp, w, h, "compressed")
-    rec_raw = build_recordings(tmp, "rec_raw", n_rec, n_raw, w, h, "raw")
-    mb_cmp, mb_raw = dir_size(rec_cmp) / 1e6, dir_size(rec_raw) / 1e6
+    rec_cmp = build_recordings(tmp, "rec_cmp", n_rec, n_cmp, w, h, "compressed") if "compressed" in cases else None
+    rec_raw = build_recordings(tmp, "rec_raw", n_rec, n_raw, w, h, "raw") if "raw" in cases else None
+    mb_cmp = dir_size(rec_cmp) / 1e6 if rec_cmp else 0.0
+    mb_raw = dir_size(rec_raw) / 1e6 if rec_raw else 0.0
     o = out_dir
     reps: list[dict[str, float]] = []
     import cv2
@@ -219,18 +221,20 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
     cv2.setNumThreads(1)  # the minimal loops and --jobs 1 run on one core
     for k in range(repeat):
         r: dict[str, float] = {}
-        r["iterate"] = iterate_raw(rec_cmp)
-        r["convert_cmp"] = timed_convert(rec_cmp, o / "out_cmp", 1)
-        _rm(o / "out_cmp")
-        r["iterate_lowlevel"] = iterate_raw_lowlevel(rec_cmp)
-        r["minimal_cmp"] = passthrough_minimal(rec_cmp, o / "minimal_cmp")
-        _rm(o / "minimal_cmp")
-        r["minimal_raw"] = minimal_raw_loop(rec_raw, o / "minimal")
-        _rm(o / "minimal")
-        r["convert_raw_j1"] = timed_convert(rec_raw, o / "out_raw1", 1)
-        _rm(o / "out_raw1")
-        r["convert_raw_j2"] = timed_convert(rec_raw, o / "out_raw2", 2)
-        _rm(o / "out_raw2")
+        if rec_cmp is not None:
+            r["iterate"] = iterate_raw(rec_cmp)
+            r["convert_cmp"] = timed_convert(rec_cmp, o / "out_cmp", 1)
+            _rm(o / "out_cmp")
+            r["iterate_lowlevel"] = iterate_raw_lowlevel(rec_cmp)
+            r["minimal_cmp"] = passthrough_minimal(rec_cmp, o / "minimal_cmp")
+            _rm(o / "minimal_cmp")
+        if rec_raw is not None:
+            r["minimal_raw"] = minimal_raw_loop(rec_raw, o / "minimal")
+            _rm(o / "minimal")
+            r["convert_raw_j1"] = timed_convert(rec_raw, o / "out_raw1", 1)
+            _rm(o / "out_raw1")
+            r["convert_raw_j2"] = timed_convert(rec_raw, o / "out_raw2", 2)
+            _rm(o / "out_raw2")
         reps.append(r)
         print(f"repeat {k + 1}/{repeat}: " + ", ".join(f"{n} {v:.2f}s" for n, v in r.items()), file=sys.stderr)
     rows = []
@@ -241,6 +245,8 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
         ("raw: convert vs minimal loop", mb_raw, "convert_raw_j1", "minimal_raw", 0.7),
         ("raw: --jobs 2 vs --jobs 1", mb_raw, "convert_raw_j2", "convert_raw_j1", 1.6),
     ):
+        if conv not in reps[0]:
+            continue
         ratios = [r[base] / r[conv] for r in reps]
         rows.append({"case": name, "mb": mb, "convert_s": [r[conv] for r in reps], "base_s": [r[base] for r in reps],
                      "ratios": ratios, "target": tgt})
@@ -280,6 +286,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=None, help="repeats of each comparison (default 1 small, 3 full)")
     ap.add_argument("--memory-mb", type=float, default=None, help="run only the memory test on a recording this big")
     ap.add_argument("--jobs", type=int, default=1, help="--jobs of the memory test")
+    ap.add_argument("--cases", default="compressed,raw", help="comparisons to run: compressed, raw or both")
     ap.add_argument("--tmp", type=Path, default=None, help="where to build the recordings (default: system tmp)")
     ap.add_argument("--out-dir", type=Path, default=None, help="where conversions write (default: beside inputs)")
     args = ap.parse_args()
@@ -292,7 +299,8 @@ def main() -> None:
             res = run_memory(tmp, out_dir, args.memory_mb, args.jobs)
         else:
             repeat = args.repeat or (3 if args.size_mb >= 500 else 1)
-            res = run_comparison(tmp, out_dir, args.size_mb, args.recordings, repeat)
+            res = run_comparison(tmp, out_dir, args.size_mb, args.recordings, repeat,
+                                 tuple(c.strip() for c in args.cases.split(",") if c.strip()))
         print(json.dumps(res))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

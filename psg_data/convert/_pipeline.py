@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import shutil
+import sys
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -29,6 +30,10 @@ __all__ = ["convert", "ConversionReport", "plan_sources", "plan_parallelism"]
 log = logging.getLogger(__name__)
 
 _STATE_FILE = "state.json"
+_SWITCH_INTERVAL_S = 0.001
+"""GIL switch interval while converting (Python's default is 5 ms): the archive's hashing and
+writing threads need the GIL briefly per 16 MiB buffer, and the reading thread rarely releases it,
+so with the default each of those hand-offs can stall a stage for up to 5 ms."""
 _FORMAT_FAMILY = {"ros1": "ros1", "ros2-sqlite3": "ros2", "ros2-mcap": "ros2", "mcap": "mcap",
                   "tum": "tum", "scannet": "scannet"}
 
@@ -154,6 +159,7 @@ def _init_worker() -> None:
     from psg_data.writers._tar_archive import reuse_buffers
 
     reuse_buffers().__enter__()  # for the life of the worker: its tasks reuse write buffers
+    sys.setswitchinterval(_SWITCH_INTERVAL_S)
 
 def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
     import multiprocessing
@@ -188,8 +194,9 @@ def _run_here(tasks: list[ScanTask], progress: Callable[..., Any] | None) -> lis
 
     from psg_data.writers._tar_archive import reuse_buffers
 
-    before = cv2.getNumThreads()
+    before, switch = cv2.getNumThreads(), sys.getswitchinterval()
     cv2.setNumThreads(1)
+    sys.setswitchinterval(_SWITCH_INTERVAL_S)
     try:
         with reuse_buffers():
             writer = open_task_writer(tasks[0])
@@ -202,6 +209,7 @@ def _run_here(tasks: list[ScanTask], progress: Callable[..., Any] | None) -> lis
         return results
     finally:
         cv2.setNumThreads(before)
+        sys.setswitchinterval(switch)
 
 
 def plan_parallelism(jobs: int, n_tasks: int, threads: int | None = None) -> tuple[int, int]:

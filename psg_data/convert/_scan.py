@@ -36,6 +36,7 @@ from psg_data.loaders.raw._images import (
     inspect_encoded,
 )
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform
+from psg_data.schemas._image_headers import parse_image_header_end
 from psg_data.schemas._records import CameraIntrinsics
 
 __all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
@@ -161,12 +162,16 @@ def discover_topics(topics: dict[str, str], cfg: ConvertConfig, where: str) -> d
 
 
 class _Payload:
-    """A colour or depth image as it arrived: a message, encoded bytes or a file."""
+    """A colour or depth image as it arrived: a message, encoded bytes or a file.
 
-    __slots__ = ("kind", "obj", "fmt")
+    ``span``: where encoded bytes lie in the recording file (a FileRange), when they are stored
+    there as they are: passed through, they are then read straight into the archive buffer.
+    """
 
-    def __init__(self, kind: str, obj: Any, fmt: str = "") -> None:
-        self.kind, self.obj, self.fmt = kind, obj, fmt
+    __slots__ = ("kind", "obj", "fmt", "span")
+
+    def __init__(self, kind: str, obj: Any, fmt: str = "", span: Any = None) -> None:
+        self.kind, self.obj, self.fmt, self.span = kind, obj, fmt, span
 
 
 def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> CameraIntrinsics:
@@ -341,14 +346,27 @@ class _FrameWriter:
         self.depth_scale_m = depth_scale_m
         self.scale_is_mm = abs(depth_scale_m - 0.001) < 1e-12
         self.where = where
+        self._headers: dict[str, tuple[bytes, EncodedInfo]] = {}
         self.passthrough: Counter[str] = Counter()
+
+    def _inspect(self, slot: str, data: Any) -> EncodedInfo | None:
+        """inspect_encoded, skipping the parse when the header bytes equal the previous image's."""
+        prev = self._headers.get(slot)
+        if prev is not None and bytes(data[:len(prev[0])]) == prev[0]:
+            return prev[1]
+        try:
+            info, end = parse_image_header_end(data)
+        except ValueError:
+            return None
+        self._headers[slot] = (bytes(data[:end]), info)
+        return info
 
     def color(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
         if p.kind == "bytes":  # pass-through fast path: checks on the header only
-            info = inspect_encoded(p.obj)
+            info = self._inspect("color", p.obj)
             if info is not None and _passthrough_ok(info, self.encoding):
                 self.passthrough["color"] += 1
-                return p.obj, None, (info.width, info.height)
+                return (p.obj if p.span is None else p.span), None, (info.width, info.height)
         where = f"{self.where}: {topic}"
         if p.kind == "msg":
             arr = decode_color_image(p.obj, where)
@@ -372,13 +390,16 @@ class _FrameWriter:
         png, src = data, "16UC1"
         if "compresseddepth" in fmt.lower():
             png, src, _ = compressed_depth_png(data, fmt, where)
-        info = inspect_encoded(png)
+        info = self._inspect("depth", png)
         if info is None:
             raise ConversionError(f"{where}: unknown depth image format {fmt or 'file'!r}; expected a 16-bit PNG "
                                   f"('16UC1; compressedDepth png')")
         if scale_ok and src.upper() in ("16UC1", "MONO16") and info.kind == "png" and info.bit_depth == 16 \
                 and info.channels == 1:
             self.passthrough["depth"] += 1
+            if p.span is not None:  # the PNG is the tail of the payload (after the compressedDepth header)
+                skip = len(data) - len(png)
+                return p.span._replace(offset=p.span.offset + skip, size=len(png)), None, (info.width, info.height)
             return png, None, (info.width, info.height)
         if info.kind == "png" and info.bit_depth != 16:
             raise ConversionError(f"{where}: depth PNG is {info.bit_depth}-bit; expected 16-bit depth")
@@ -608,7 +629,9 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                 if topic == color_t or topic == depth_t:
                     if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
                         ci = rec.compressed_image(raw, topic)
-                        stamp, frame_id, payload = ci.stamp_ns, ci.frame_id, _Payload("bytes", ci.data, ci.format)
+                        span = None if ci.data_offset is None else rec.file_range(ci.data_offset, len(ci.data))
+                        stamp, frame_id = ci.stamp_ns, ci.frame_id
+                        payload = _Payload("bytes", ci.data, ci.format, span)
                     else:
                         msg = rec.deserialize(raw, conn.msgtype, topic)
                         stamp, frame_id, payload = _stamp(msg.header), str(msg.header.frame_id), _Payload("msg", msg)

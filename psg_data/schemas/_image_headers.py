@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ImageHeader", "parse_image_header", "read_image_header"]
+__all__ = ["ImageHeader", "parse_image_header", "parse_image_header_end", "read_image_header"]
 
 _PNG_SIG = b"\x89PNG\r\n\x1a\n"
 _PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
@@ -35,8 +35,8 @@ class ImageHeader:
         return "uint16" if self.bit_depth == 16 else "uint8"
 
 
-def _jpeg_frame_header(head: bytes) -> ImageHeader | None:
-    """SOFn segment of a JPEG; None when ``head`` ends before it."""
+def _jpeg_frame_header(head: bytes) -> tuple[ImageHeader, int] | None:
+    """SOFn segment of a JPEG and the offset just past it; None when ``head`` ends before it."""
     i = 2
     n = len(head)
     while i + 1 < n:
@@ -56,7 +56,7 @@ def _jpeg_frame_header(head: bytes) -> ImageHeader | None:
             if i + 10 > n:
                 return None
             bits, height, width, comps = struct.unpack_from(">BHHB", head, i + 4)
-            return ImageHeader("jpeg", width, height, comps, bits)
+            return ImageHeader("jpeg", width, height, comps, bits), i + 10
         if marker == 0xD9 or seglen < 2:
             raise ValueError("JPEG without a frame header")
         i += 2 + seglen
@@ -72,13 +72,19 @@ def parse_image_header(data: Any) -> ImageHeader:
     Raises:
         ValueError: not a PNG or JPEG, or a truncated or corrupt header.
     """
+    return parse_image_header_end(data)[0]
+
+
+def parse_image_header_end(data: Any) -> tuple[ImageHeader, int]:
+    """:func:`parse_image_header` and the number of leading bytes it depends on: images whose first
+    that many bytes are equal have the same header (a stream of frames can skip the parse)."""
     mv = memoryview(data).cast("B") if not isinstance(data, bytes) else data
     head = bytes(mv[:1024])
     if head.startswith(_PNG_SIG):
         if len(head) < 33 or head[12:16] != b"IHDR":
             raise ValueError("truncated PNG header")
         width, height, bit_depth, color_type = struct.unpack_from(">IIBB", head, 16)
-        return ImageHeader("png", width, height, _PNG_CHANNELS.get(color_type, 0), bit_depth)
+        return ImageHeader("png", width, height, _PNG_CHANNELS.get(color_type, 0), bit_depth), 33
     if head.startswith(b"\xff\xd8"):
         hdr = _jpeg_frame_header(head)
         if hdr is None and len(mv) > len(head):

@@ -41,7 +41,7 @@ from psg_data.schemas._tables import (
     TABLES,
     table_path,
 )
-from psg_data.writers._tar_archive import BufferPool, TarArchiveWriter
+from psg_data.writers._tar_archive import BufferPool, FileRange, TarArchiveWriter
 
 __all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "encode_color", "encode_depth", "PNG_LEVEL", "JPEG_QUALITY"]
 
@@ -242,14 +242,15 @@ class ScanWriter:
 
         ``color_bytes`` must be in the dataset's colour encoding (PNG or JPEG) and
         ``depth_png_bytes`` a 16-bit single-channel PNG in millimetres; the caller checks that.
-        Both may be any bytes-like object (a ``memoryview`` of a message buffer is not copied
-        more than once: straight into the archive's write buffer).
+        Both may be any bytes-like object (a ``memoryview`` of a message buffer is copied once,
+        straight into the archive's write buffer) or a :class:`~psg_data.writers._tar_archive.FileRange`
+        of an open file (read straight into the write buffer).
         """
         i = self._record(stamp_ns, T_world_camera, camera_id)
         if not self._queue:
             self._store(i, color_bytes, depth_png_bytes)
         else:  # behind frames still being encoded: keep a copy, the caller may reuse its buffers
-            self._push(i, bytes(color_bytes), bytes(depth_png_bytes))
+            self._push(i, _owned(color_bytes), _owned(depth_png_bytes))
         return i
 
     def _push(self, i: int, color: Any, depth: Any) -> None:
@@ -271,10 +272,11 @@ class ScanWriter:
             mtime = cols.stamp_ns[i] // 1_000_000_000
             cname, dname = ARCHIVE_MEMBER_TEMPLATES
             cols.color_offset.append(self._archive.add(cname.format(frame_index=i, ext=self._ext), color, mtime))
-            cols.color_size.append(memoryview(color).nbytes)
+            cols.color_size.append(_nbytes(color))
             cols.depth_offset.append(self._archive.add(dname.format(frame_index=i), depth, mtime))
-            cols.depth_size.append(memoryview(depth).nbytes)
+            cols.depth_size.append(_nbytes(depth))
         else:
+            color, depth = (x.read() if isinstance(x, FileRange) else x for x in (color, depth))
             crel = COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i, ext=self._ext)
             drel = DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i)
             self._files[crel] = self._w._write_file(crel, color)
@@ -329,6 +331,15 @@ class ScanWriter:
             self._files[self._archive_rel] = self._archive.result()
             self._archive = None
         self._w._finish_scan(self)
+
+
+def _nbytes(data: Any) -> int:
+    return data.size if isinstance(data, FileRange) else memoryview(data).nbytes
+
+
+def _owned(data: Any) -> Any:
+    """``data`` as bytes of its own (a FileRange's file may be closed before it is stored)."""
+    return data.read() if isinstance(data, FileRange) else bytes(data)
 
 
 def encode_color(rgb: NDArray[np.uint8], encoding: str) -> bytes:

@@ -207,3 +207,20 @@ def test_tf_lookup_equals_brute_force_chain(edges: list, a: float) -> None:  # t
     got = tf.lookup("f0", f"f{len(edges)}", t_query)
     np.testing.assert_allclose(got, expected, atol=1e-7)
     np.testing.assert_allclose(tf.lookup(f"f{len(edges)}", "f0", t_query), np.linalg.inv(expected), atol=1e-6)
+
+
+def test_header_cache_sees_every_change_of_header() -> None:
+    """The converter skips re-parsing a header whose bytes equal the previous image's; a change of
+    size, channels or codec in the stream must still be seen."""
+    from psg_data.convert._scan import _FrameWriter
+    from psg_data.loaders.raw._images import inspect_encoded
+
+    rng = np.random.default_rng(3)
+    fw = _FrameWriter("jpeg", 0.001, "t")
+    imgs = [rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), rng.integers(0, 255, (48, 64, 3), dtype=np.uint8),
+            rng.integers(0, 255, (24, 32, 3), dtype=np.uint8), rng.integers(0, 255, (48, 64), dtype=np.uint8)]
+    for img in imgs + imgs[::-1]:
+        for ext in (".jpg", ".png"):
+            data = memoryview(cv2.imencode(ext, img)[1].tobytes())
+            assert fw._inspect("color", data) == inspect_encoded(data)
+    assert fw._inspect("color", memoryview(b"not an image at all")) is None

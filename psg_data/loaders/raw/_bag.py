@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
 import sqlite3
 import struct
 from collections.abc import Collection, Iterator
@@ -82,8 +83,6 @@ def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
 
 _U32 = struct.Struct("<I")
 _OP_MSGDATA, _OP_CONNECTION = 2, 7
-_MADV_POPULATE_READ = 22
-"""Linux >= 5.14: populate the page tables of a range (not exported by Python's mmap module)."""
 
 
 def _record_op(header: bytes) -> int:
@@ -125,9 +124,15 @@ class _Ros1Reader:
         self.connections: list[Any] = []
         self._by_type: dict[str, Any] = {}
         self._mm: Any = None
+        self.fd: int | None = None
+        """The bag file, open for reading while the reader is (for FileRange payloads)."""
+        self.last_offset: int | None = None
+        """File offset of the message last yielded by :meth:`messages`; None if it came from a
+        compressed chunk (then it lives in memory only)."""
 
     def open(self) -> None:
         self._bag.open()
+        self.fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
         self.connections = list(self._bag.connections)
         for c in self.connections:
             self._by_type.setdefault(c.msgtype, c)
@@ -139,6 +144,9 @@ class _Ros1Reader:
             except BufferError:  # views of it still alive: unmapped when they are gone
                 pass
             self._mm = None
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
         self._bag.close()
 
     def _index(self, connections: Collection[Any]) -> list[tuple[int, int, int, int, int, Any]] | None:
@@ -174,8 +182,7 @@ class _Ros1Reader:
         chunks = self._bag.chunks
         page = mmap.PAGESIZE
         release = getattr(self._mm, "madvise", None)
-        cur_pos, cur, cur_span = -1, whole, (0, 0)
-        populate = True
+        cur_pos, cur, cur_span, base = -1, whole, (0, 0), None
         u32 = _U32.unpack_from
         try:
             for time_ns, _, _, pos, offset, conn in entries:
@@ -187,16 +194,11 @@ class _Ros1Reader:
                     if end > len(whole):
                         raise ValueError(f"chunk at byte {pos} ends beyond the end of the file")
                     if ch.decompressor is identity:
-                        cur = whole[ch.datapos:end]
+                        cur, base = whole[ch.datapos:end], ch.datapos
                         start = ch.datapos - ch.datapos % page
                         cur_span = (start, end - start)
-                        if populate and release is not None:  # map the chunk's pages at once, not a fault each
-                            try:
-                                release(_MADV_POPULATE_READ, *cur_span)
-                            except OSError:  # kernels before 5.14 do not know it
-                                populate = False
                     else:
-                        cur = memoryview(ch.decompressor(bytes(whole[ch.datapos:end])))
+                        cur, base = memoryview(ch.decompressor(bytes(whole[ch.datapos:end]))), None
                         cur_span = (0, 0)
                     cur_pos = pos
                 o = offset
@@ -213,6 +215,7 @@ class _Ros1Reader:
                     if op != _OP_CONNECTION:
                         raise ValueError(f"expected message data at chunk offset {offset}, found record op {op}")
                     o += dlen
+                self.last_offset = None if base is None else base + o
                 yield conn, time_ns, cur[o:o + dlen]
         finally:
             del cur, whole
@@ -326,7 +329,19 @@ class RosRecording:
         msg = self.deserialize(raw, "sensor_msgs/msg/CompressedImage", topic)
         h = msg.header
         return CompressedFields(int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec), str(h.frame_id),
-                                str(msg.format), memoryview(msg.data))
+                                str(msg.format), memoryview(msg.data), None)
+
+    def file_range(self, offset_in_message: int, size: int) -> Any:
+        """Bytes ``offset_in_message`` ... ``+ size`` of the message last yielded by
+        :meth:`raw_messages`, as a :class:`~psg_data.writers._tar_archive.FileRange` of the
+        recording file; None if that message is not stored as is in the file (a compressed ROS 1
+        chunk, ROS 2 storage)."""
+        offset = getattr(self._reader, "last_offset", None)
+        if offset is None:
+            return None
+        from psg_data.writers._tar_archive import FileRange
+
+        return FileRange(self._reader.fd, offset + offset_in_message, size)
 
     def tf_transforms(self, raw: bytes, topic: str) -> list[TfSample]:
         """The transforms of a serialized ``tf2_msgs/TFMessage``.

@@ -24,6 +24,8 @@ class CompressedFields(NamedTuple):
     format: str
     data: memoryview
     """The encoded image: a zero-copy view of the serialized message."""
+    data_offset: int | None = None
+    """Offset of ``data`` in the serialized message (None if it is not a view of it)."""
 
 
 class TfSample(NamedTuple):
@@ -72,6 +74,7 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
                 return None
             fmt = bytes(b[o + 4:o + 3 + ln]).decode()
             o = (o + 4 + ln + 3) & ~3
+            base = 4
         else:
             b = mv
             _, sec, nsec = _STAMP1.unpack_from(b, 0)
@@ -85,11 +88,12 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
                 return None
             fmt = bytes(b[o + 4:o + 4 + ln]).decode()
             o += 4 + ln
+            base = 0
         (ln,) = _U32.unpack_from(b, o)
         end = o + 4 + ln
         if end > n or n - end > 3:  # CDR may pad the end to 4 bytes; nothing else may follow
             return None
-        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), frame_id, fmt, b[o + 4:end])
+        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), frame_id, fmt, b[o + 4:end], base + o + 4)
     except (struct.error, UnicodeDecodeError):
         return None
 
