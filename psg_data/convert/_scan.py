@@ -36,8 +36,10 @@ from psg_data.loaders.raw._images import (
     inspect_encoded,
 )
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform
+from psg_data.loaders.raw._wire import parse_compressed_image, parse_tf_message
 from psg_data.schemas._image_headers import parse_image_header_end
 from psg_data.schemas._records import CameraIntrinsics
+from psg_data.writers._tar_archive import FileRange
 
 __all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
 
@@ -622,14 +624,17 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
             if info_t != color_t and info_t != depth_t and info_t != poses.odom_topic:
                 wanted.discard(info_t)
             read_bytes = 0
-            for conn, log_t, raw in rec.raw_messages(wanted):
+            fd, cdr = rec.fd, rec.is_cdr
+            for conn, log_t, raw, foff in rec.located_messages(wanted):
                 topic = conn.topic
-                pending_bytes += len(raw)
-                read_bytes += len(raw)
+                n_raw = len(raw)
+                pending_bytes += n_raw
+                read_bytes += n_raw
                 if topic == color_t or topic == depth_t:
                     if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
-                        ci = rec.compressed_image(raw, topic)
-                        span = None if ci.data_offset is None else rec.file_range(ci.data_offset, len(ci.data))
+                        ci = parse_compressed_image(raw, cdr) or rec.compressed_image(raw, topic)
+                        span = None if foff is None or ci.data_offset is None else \
+                            FileRange(fd, foff + ci.data_offset, len(ci.data))
                         stamp, frame_id = ci.stamp_ns, ci.frame_id
                         payload = _Payload("bytes", ci.data, ci.format, span)
                     else:
@@ -645,7 +650,8 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                     continue
                 if conn.msgtype == _TF:
                     static = topic in static_t
-                    for smp in rec.tf_transforms(raw, topic):  # header, frames and 7 floats: no full message
+                    samples = parse_tf_message(raw, cdr)  # header, frames and 7 floats: no full message
+                    for smp in (rec.tf_transforms(raw, topic) if samples is None else samples):
                         tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
                     emit(log_t - window)
                     continue

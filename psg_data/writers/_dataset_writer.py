@@ -166,6 +166,9 @@ class ScanWriter:
         self._ext = "jpg" if writer.color_encoding == "jpeg" else "png"
         self._archive: TarArchiveWriter | None = None
         self._archive_rel = ARCHIVE_PATH_TEMPLATE.format(scan_id=scan_id)
+        cname, dname = ARCHIVE_MEMBER_TEMPLATES  # as %-templates: formatted twice per frame
+        self._color_member = cname.replace("{frame_index:06d}", "%06d").replace("{ext}", self._ext)
+        self._depth_member = dname.replace("{frame_index:06d}", "%06d")
         if writer.image_layout == "tar":
             path = writer.tmp / self._archive_rel
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -270,10 +273,9 @@ class ScanWriter:
         cols = self._cols
         if self._archive is not None:
             mtime = cols.stamp_ns[i] // 1_000_000_000
-            cname, dname = ARCHIVE_MEMBER_TEMPLATES
-            cols.color_offset.append(self._archive.add(cname.format(frame_index=i, ext=self._ext), color, mtime))
+            cols.color_offset.append(self._archive.add(self._color_member % i, color, mtime))
             cols.color_size.append(_nbytes(color))
-            cols.depth_offset.append(self._archive.add(dname.format(frame_index=i), depth, mtime))
+            cols.depth_offset.append(self._archive.add(self._depth_member % i, depth, mtime))
             cols.depth_size.append(_nbytes(depth))
         else:
             color, depth = (x.read() if isinstance(x, FileRange) else x for x in (color, depth))

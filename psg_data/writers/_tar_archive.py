@@ -103,6 +103,11 @@ def _header_template() -> tuple[bytearray, int]:
 _TEMPLATE, _TEMPLATE_SUM = _header_template()
 
 
+_HEAD_MODE = bytes(_TEMPLATE[100:124])  # mode, uid, gid
+_HEAD_TAIL = bytes(_TEMPLATE[156:512])  # type, link name, magic, version, owner, devices, prefix
+_NAME_PAD = [bytes(100 - k) for k in range(101)]
+
+
 def ustar_header(name: str, size: int, mtime: int = 0) -> bytes:
     """512-byte ustar header of a regular file ``name`` (ASCII, at most 100 bytes) of ``size`` bytes."""
     raw = name.encode("utf-8")
@@ -111,11 +116,8 @@ def ustar_header(name: str, size: int, mtime: int = 0) -> bytes:
     if not 0 <= size < 8 ** 11:
         raise ValueError(f"tar member {name!r}: size {size} does not fit an ustar header")
     st = b"%011o\0%011o\0" % (size, max(0, min(int(mtime), 8 ** 11 - 1)))  # size and mtime fields
-    h = _TEMPLATE.copy()
-    h[0:len(raw)] = raw
-    h[124:148] = st
-    h[148:156] = b"%06o\0 " % (_TEMPLATE_SUM + sum(raw) + sum(st))
-    return bytes(h)
+    return (raw + _NAME_PAD[len(raw)] + _HEAD_MODE + st
+            + b"%06o\0 " % (_TEMPLATE_SUM + sum(raw) + sum(st)) + _HEAD_TAIL)
 
 
 class BufferPool:
@@ -320,10 +322,13 @@ class TarArchiveWriter:
         pad = -size % TAR_BLOCK
         n = self._n
         end = n + TAR_BLOCK + size + pad
-        if src is not None and end <= self._pool.buffer_bytes:  # the usual case: it fits the buffer
+        if end <= self._pool.buffer_bytes:  # the usual case: the member fits the current buffer
             mv = self._mv
             mv[n:n + TAR_BLOCK] = hdr
-            mv[n + TAR_BLOCK:end - pad] = src
+            if src is not None:
+                mv[n + TAR_BLOCK:end - pad] = src
+            elif size and os.preadv(data.fd, [mv[n + TAR_BLOCK:end - pad]], data.offset) != size:
+                raise OSError(f"file ends before byte {data.offset + size} (truncated?)")
             if pad:
                 mv[end - pad:end] = _ZEROS[:pad]
             offset = self._size + TAR_BLOCK

@@ -125,10 +125,7 @@ class _Ros1Reader:
         self._by_type: dict[str, Any] = {}
         self._mm: Any = None
         self.fd: int | None = None
-        """The bag file, open for reading while the reader is (for FileRange payloads)."""
-        self.last_offset: int | None = None
-        """File offset of the message last yielded by :meth:`messages`; None if it came from a
-        compressed chunk (then it lives in memory only)."""
+        """The bag file, open for reading while the reader is (message locations refer to it)."""
 
     def open(self) -> None:
         self._bag.open()
@@ -162,13 +159,16 @@ class _Ros1Reader:
         entries.sort()  # (time, connection order, index order): rosbags' merge order, ties included
         return entries
 
-    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any]]:
+    def messages(self, connections: Collection[Any] = (), located: bool = False) -> Iterator[tuple[Any, ...]]:
+        """``(connection, time_ns, view)``; with ``located``, ``(connection, time_ns, view, offset)``
+        where ``offset`` is the message's byte offset in the file (None from a compressed chunk)."""
         import mmap
 
         conns = list(connections) or self.connections
         entries = self._index(conns)
         if entries is None:
-            yield from self._bag.messages(connections=conns)
+            for c, t, raw in self._bag.messages(connections=conns):
+                yield (c, t, raw, None) if located else (c, t, raw)
             return
         if not entries:
             return
@@ -215,8 +215,10 @@ class _Ros1Reader:
                     if op != _OP_CONNECTION:
                         raise ValueError(f"expected message data at chunk offset {offset}, found record op {op}")
                     o += dlen
-                self.last_offset = None if base is None else base + o
-                yield conn, time_ns, cur[o:o + dlen]
+                if located:
+                    yield conn, time_ns, cur[o:o + dlen], (None if base is None else base + o)
+                else:
+                    yield conn, time_ns, cur[o:o + dlen]
         finally:
             del cur, whole
 
@@ -312,6 +314,26 @@ class RosRecording:
                 raise _wrap(self.path, exc) from exc
             raise
 
+    def located_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Any, int, Any, int | None]]:
+        """:meth:`raw_messages` with each message's byte offset in the file (:attr:`fd`): a view
+        that is stored as is there (uncompressed ROS 1 chunk) can be read from it directly. The
+        offset is None where the message is not stored as is (compressed chunk, ROS 2 storage)."""
+        conns = [c for c in self._reader.connections if not topics or c.topic in topics]
+        if topics and not conns:
+            return
+        try:
+            if isinstance(self._reader, _Ros1Reader):
+                yield from self._reader.messages(connections=conns, located=True)
+            else:
+                for c, t, raw in self._reader.messages(connections=conns):
+                    yield c, t, raw, None
+        except (OSError, EOFError, struct.error, sqlite3.DatabaseError, AssertionError, KeyError, ValueError) as exc:
+            raise _wrap(self.path, exc) from exc
+        except Exception as exc:
+            if type(exc).__module__.startswith("rosbags"):
+                raise _wrap(self.path, exc) from exc
+            raise
+
     def deserialize(self, raw: bytes, msgtype: str, topic: str) -> Any:
         try:
             return self._reader.deserialize(raw, msgtype)
@@ -331,17 +353,15 @@ class RosRecording:
         return CompressedFields(int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec), str(h.frame_id),
                                 str(msg.format), memoryview(msg.data), None)
 
-    def file_range(self, offset_in_message: int, size: int) -> Any:
-        """Bytes ``offset_in_message`` ... ``+ size`` of the message last yielded by
-        :meth:`raw_messages`, as a :class:`~psg_data.writers._tar_archive.FileRange` of the
-        recording file; None if that message is not stored as is in the file (a compressed ROS 1
-        chunk, ROS 2 storage)."""
-        offset = getattr(self._reader, "last_offset", None)
-        if offset is None:
-            return None
-        from psg_data.writers._tar_archive import FileRange
+    @property
+    def is_cdr(self) -> bool:
+        """Whether messages are CDR (ROS 2) rather than ROS 1 serialized."""
+        return bool(self._reader.is2)
 
-        return FileRange(self._reader.fd, offset + offset_in_message, size)
+    @property
+    def fd(self) -> int | None:
+        """The recording file open for reading (ROS 1 bags; what ``located_messages`` offsets refer to)."""
+        return getattr(self._reader, "fd", None)
 
     def tf_transforms(self, raw: bytes, topic: str) -> list[TfSample]:
         """The transforms of a serialized ``tf2_msgs/TFMessage``.

@@ -67,13 +67,11 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
             (ln,) = _U32.unpack_from(b, 8)
             if ln < 1 or 12 + ln > n:
                 return None
-            frame_id = bytes(b[12:12 + ln - 1]).decode()
-            o = (12 + ln + 3) & ~3
-            (ln,) = _U32.unpack_from(b, o)
-            if ln < 1 or o + 4 + ln > n:
+            start, o = 8, (12 + ln + 3) & ~3
+            (ln2,) = _U32.unpack_from(b, o)
+            if ln2 < 1 or o + 4 + ln2 > n:
                 return None
-            fmt = bytes(b[o + 4:o + 3 + ln]).decode()
-            o = (o + 4 + ln + 3) & ~3
+            o2 = (o + 4 + ln2 + 3) & ~3
             base = 4
         else:
             b = mv
@@ -81,21 +79,34 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
             (ln,) = _U32.unpack_from(b, 12)
             if 16 + ln > n:
                 return None
-            frame_id = bytes(b[16:16 + ln]).decode()
-            o = 16 + ln
-            (ln,) = _U32.unpack_from(b, o)
-            if o + 4 + ln > n:
+            start, o = 12, 16 + ln
+            (ln2,) = _U32.unpack_from(b, o)
+            if o + 4 + ln2 > n:
                 return None
-            fmt = bytes(b[o + 4:o + 4 + ln]).decode()
-            o += 4 + ln
+            o2 = o + 4 + ln2
             base = 0
+        key = (cdr, bytes(b[start:o2]))  # both strings with their lengths: the same in every message of a topic
+        names = _CI_STRINGS.get(key)
+        if names is None:
+            if cdr:
+                names = bytes(b[12:12 + ln - 1]).decode(), bytes(b[o + 4:o + 3 + ln2]).decode()
+            else:
+                names = bytes(b[16:16 + ln]).decode(), bytes(b[o + 4:o + 4 + ln2]).decode()
+            if len(_CI_STRINGS) >= 64:
+                _CI_STRINGS.clear()
+            _CI_STRINGS[key] = names
+        o = o2
         (ln,) = _U32.unpack_from(b, o)
         end = o + 4 + ln
         if end > n or n - end > 3:  # CDR may pad the end to 4 bytes; nothing else may follow
             return None
-        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), frame_id, fmt, b[o + 4:end], base + o + 4)
+        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), names[0], names[1], b[o + 4:end], base + o + 4)
     except (struct.error, UnicodeDecodeError):
         return None
+
+
+_CI_STRINGS: dict[tuple[bool, bytes], tuple[str, str]] = {}
+"""Decoded (frame_id, format) of recent CompressedImage messages, by their serialized bytes."""
 
 
 def _string(b: memoryview | bytes, o: int, n: int, cdr: bool) -> tuple[str, int] | None:
@@ -110,30 +121,79 @@ def _string(b: memoryview | bytes, o: int, n: int, cdr: bool) -> tuple[str, int]
     return bytes(b[o:o + ln]).decode(), o + ln
 
 
+class _TfLayout:
+    """Where the numbers of one TF message shape are: for the next message of the same length whose
+    other bytes (counts, frame names, padding) are equal, a single struct unpack reads them all."""
+
+    __slots__ = ("fixed", "numbers", "frames")
+
+    def __init__(self, raw: bytes, numeric: list[tuple[int, str]], frames: list[tuple[str, str]]) -> None:
+        fmt, pos, fixed = "<", 0, []
+        for off, code in numeric:  # (offset in raw, struct code; "4x": changing bytes to skip), in order
+            if off > pos:
+                fmt += f"{off - pos}x"
+                fixed.append((pos, raw[pos:off]))
+            fmt += code
+            pos = off + struct.calcsize("<" + code)
+        if pos < len(raw):
+            fixed.append((pos, raw[pos:]))
+        self.fixed = [(a, a + len(v), v) for a, v in fixed]
+        self.numbers = struct.Struct(fmt)
+        self.frames = frames
+
+    def read(self, mv: memoryview) -> list[TfSample] | None:
+        for a, e, v in self.fixed:
+            if bytes(mv[a:e]) != v:  # (faster than comparing the memoryview)
+                return None
+        vals = self.numbers.unpack_from(mv, 0)
+        out = []
+        for k, (parent, child) in enumerate(self.frames):
+            sec, nsec, tx, ty, tz, qx, qy, qz, qw = vals[9 * k:9 * k + 9]
+            out.append(TfSample(parent, child, sec * 1_000_000_000 + nsec, (tx, ty, tz), (qx, qy, qz, qw)))
+        return out
+
+
+_TF_LAYOUTS: dict[tuple[bool, int], _TfLayout] = {}
+"""Recent TF message shapes by (CDR, length): a stream repeats one or two of them."""
+
+
 def parse_tf_message(raw: bytes | memoryview, cdr: bool) -> list[TfSample] | None:
     """The transforms of a serialized ``tf2_msgs/TFMessage`` (ROS 1 or little-endian CDR).
 
     Returns None when ``raw`` does not have exactly the expected layout (see the module docstring).
+    A message with the shape of a recent one (same length, same bytes outside the stamps and the
+    numbers: same frames) is read with one struct unpack.
     """
     b = memoryview(raw)
     n = len(b)
+    layout = _TF_LAYOUTS.get((cdr, n))
+    if layout is not None:
+        got = layout.read(b)
+        if got is not None:
+            return got
     try:
+        base = 0
         if cdr:
             if n < 8 or b[0] != 0 or b[1] != 1:
                 return None
             b = b[4:]
             n -= 4
+            base = 4
         (count,) = _U32.unpack_from(b, 0)
         if count > n // 60:  # each transform takes at least 60 bytes: reject garbage counts early
             return None
         o = 4
         out: list[TfSample] = []
+        numeric: list[tuple[int, str]] = []
         for _ in range(count):
             if cdr:
                 sec, nsec = _STAMP.unpack_from(b, o)
+                numeric.append((base + o, "iI"))
                 o += 8
             else:
                 _, sec, nsec = _STAMP1.unpack_from(b, o)
+                numeric.append((base + o, "4x"))  # the ROS 1 header's seq counts up: skipped, not compared
+                numeric.append((base + o + 4, "II"))
                 o += 12
             r = _string(b, o, n, cdr)
             if r is None:
@@ -148,10 +208,15 @@ def parse_tf_message(raw: bytes | memoryview, cdr: bool) -> list[TfSample] | Non
             if o + 56 > n:
                 return None
             tx, ty, tz, qx, qy, qz, qw = _SEVEN_DOUBLES.unpack_from(b, o)
+            numeric.append((base + o, "7d"))
             o += 56
             out.append(TfSample(parent, child, int(sec) * 1_000_000_000 + int(nsec), (tx, ty, tz), (qx, qy, qz, qw)))
         if n - o > (3 if cdr else 0):
             return None
+        layout = _TfLayout(bytes(raw), numeric, [(t.parent, t.child) for t in out])
+        if len(_TF_LAYOUTS) >= 8:
+            _TF_LAYOUTS.clear()
+        _TF_LAYOUTS[(cdr, len(raw))] = layout
         return out
     except (struct.error, UnicodeDecodeError):
         return None
