@@ -5,6 +5,7 @@ See docs/RAW_FORMATS.md for the inputs, topics, side files, configuration and ex
 
 from __future__ import annotations
 
+import gc
 import json
 import logging
 import shutil
@@ -160,6 +161,7 @@ def _init_worker() -> None:
 
     reuse_buffers().__enter__()  # for the life of the worker: its tasks reuse write buffers
     sys.setswitchinterval(_SWITCH_INTERVAL_S)
+    gc.freeze()
 
 def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
     import multiprocessing
@@ -197,6 +199,7 @@ def _run_here(tasks: list[ScanTask], progress: Callable[..., Any] | None) -> lis
     before, switch = cv2.getNumThreads(), sys.getswitchinterval()
     cv2.setNumThreads(1)
     sys.setswitchinterval(_SWITCH_INTERVAL_S)
+    gc.freeze()  # the objects alive now (modules, typestores) need no scanning by the collections to come
     try:
         with reuse_buffers():
             writer = open_task_writer(tasks[0])
@@ -210,6 +213,7 @@ def _run_here(tasks: list[ScanTask], progress: Callable[..., Any] | None) -> lis
     finally:
         cv2.setNumThreads(before)
         sys.setswitchinterval(switch)
+        gc.unfreeze()
 
 
 def plan_parallelism(jobs: int, n_tasks: int, threads: int | None = None) -> tuple[int, int]:
