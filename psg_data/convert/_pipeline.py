@@ -21,7 +21,7 @@ from psg_data._cpus import available_cpus
 from psg_data.convert._config import ConvertConfig
 from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, open_task_writer, run_task
 from psg_data.errors import ConversionError, DatasetExistsError, PsgDataError
-from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format
+from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format, release_kept
 from psg_data.loaders.raw._folders import folder_format
 from psg_data.loaders.raw._images import inspect_encoded
 from psg_data.loaders.raw._side import SideData, read_side_files
@@ -125,15 +125,18 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
         return "jpeg" if first and first[0][1].lower().endswith((".jpg", ".jpeg")) else "png"
     if kind == "scannet":
         return "jpeg" if any((src / "color").glob("*.jpg")) else "png"
-    with RosRecording(src) as rec:
+    rec = RosRecording(src)
+    rec.open()
+    try:
         topics = discover_topics(rec.topics, cfg, str(src))
         if topics["color_type"] != "sensor_msgs/msg/CompressedImage":
             return "png"
         for conn, _, raw in rec.raw_messages({topics["color"]}):
-            msg = rec.deserialize(raw, conn.msgtype, conn.topic)
-            info = inspect_encoded(bytes(memoryview(msg.data)[:65536]))
+            info = inspect_encoded(rec.compressed_image(raw, conn.topic).data)
             return "jpeg" if info is not None and info.kind == "jpeg" else "png"
-    return "png"
+        return "png"
+    finally:
+        rec.close(keep=True)  # the first task converts this recording: it takes the open reader
 
 
 def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None]:
@@ -267,6 +270,14 @@ def convert(
             left behind.
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
     """
+    try:
+        return _convert(input_path, out, config, overwrite, jobs, threads, progress)
+    finally:
+        release_kept()
+
+
+def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | None, overwrite: bool, jobs: int,
+             threads: int | None, progress: Callable[..., Any] | None) -> ConversionReport:
     from psg_data.writers import DatasetWriter
 
     t_start = time.perf_counter()

@@ -27,6 +27,7 @@ from psg_data.convert._config import ConvertConfig, parse_keyframes, parse_pose_
 from psg_data.errors import ConversionError
 from psg_data.loaders.raw._folders import FolderRecording, read_scannet_folder, read_tum_folder, read_tum_poses
 from psg_data.loaders.raw._images import (
+    COMPRESSED_DEPTH_HEADER_SIZE,
     EncodedInfo,
     compressed_depth_png,
     decode_color_image,
@@ -57,6 +58,7 @@ SKIP_REASONS = {
     "out_of_order": "colour frame older than one already written",
 }
 
+_PNG_MAGIC8 = b"\x89PNG\r\n\x1a\n"
 _IMAGE = "sensor_msgs/msg/Image"
 _COMPRESSED = "sensor_msgs/msg/CompressedImage"
 _INFO = "sensor_msgs/msg/CameraInfo"
@@ -291,6 +293,8 @@ class _PoseSource:
         elif topics is not None and not topics["tf"] and topics["odom"]:
             self.kind, self.odom_topic = "odom", topics["odom"][0]
         self.optical = ""
+        self._resolved: tuple[Any, ...] | None = None
+        self._plan: tuple[str, bool] = ("", False)
 
     def resolve_auto(self) -> None:
         if self.kind is None:
@@ -317,15 +321,21 @@ class _PoseSource:
         return self.series.last_stamp
 
     def at(self, stamp: int) -> NDArray[np.float64] | None:
-        self.resolve_auto()
-        target = self.frame or self.optical
+        key = (self.kind, self.frame, self.optical)
+        if self._resolved != key:  # what to look up, decided again whenever the frames change
+            self.resolve_auto()
+            target = self.frame or self.optical
+            extra = bool(target and self.optical and target.lstrip("/") != self.optical.lstrip("/"))
+            self._plan = (target, extra)
+            self._resolved = (self.kind, self.frame, self.optical)
+        target, extra = self._plan
         if self.kind == "tf":
             T = self.tf.lookup(self.world, target, stamp, self.where)
         else:
             T = self.series.at(stamp, self.max_gap, self.tol)
         if T is None:
             return None
-        if target and self.optical and target.lstrip("/") != self.optical.lstrip("/"):
+        if extra:
             E = self.tf.lookup(target, self.optical, stamp, self.where)
             if E is None:
                 return None
@@ -349,6 +359,8 @@ class _FrameWriter:
         self.scale_is_mm = abs(depth_scale_m - 0.001) < 1e-12
         self.where = where
         self._headers: dict[str, tuple[bytes, EncodedInfo]] = {}
+        self._cd_formats: set[str] = set()
+        """compressedDepth formats seen to hold a 16UC1 PNG after the ConfigHeader (fast path)."""
         self.passthrough: Counter[str] = Counter()
 
     def _inspect(self, slot: str, data: Any) -> EncodedInfo | None:
@@ -382,6 +394,17 @@ class _FrameWriter:
         return None, arr, (arr.shape[1], arr.shape[0])
 
     def depth(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
+        if p.kind == "bytes" and self.scale_is_mm and p.fmt in self._cd_formats:  # pass-through fast path
+            data = p.obj
+            png = data[COMPRESSED_DEPTH_HEADER_SIZE:]
+            if png[:8] == _PNG_MAGIC8:
+                info = self._inspect("depth", png)
+                if info is not None and info.kind == "png" and info.bit_depth == 16 and info.channels == 1:
+                    self.passthrough["depth"] += 1
+                    span = p.span
+                    if span is not None:
+                        png = FileRange(span.fd, span.offset + COMPRESSED_DEPTH_HEADER_SIZE, len(png))
+                    return png, None, (info.width, info.height)
         where = f"{self.where}: {topic}"
         scale_ok = self.scale_is_mm
         if p.kind == "msg":
@@ -398,6 +421,8 @@ class _FrameWriter:
                                   f"('16UC1; compressedDepth png')")
         if scale_ok and src.upper() in ("16UC1", "MONO16") and info.kind == "png" and info.bit_depth == 16 \
                 and info.channels == 1:
+            if "compresseddepth" in fmt.lower() and len(data) - len(png) == COMPRESSED_DEPTH_HEADER_SIZE:
+                self._cd_formats.add(fmt)  # this format's payloads: 12-byte header, then a 16-bit PNG
             self.passthrough["depth"] += 1
             if p.span is not None:  # the PNG is the tail of the payload (after the compressedDepth header)
                 skip = len(data) - len(png)
@@ -513,7 +538,7 @@ class _ScanSink:
         if T is None:
             self.skipped["no_pose"] += 1
             return
-        if not math.isfinite(T.sum()):  # NaN and inf propagate into the sum
+        if not math.isfinite(sum(T.ravel().tolist())):  # NaN and inf propagate into the sum
             self.skipped["nonfinite_pose"] += 1
             return
         if not self._keep(T):

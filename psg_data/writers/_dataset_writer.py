@@ -189,7 +189,9 @@ class ScanWriter:
         return len(self._cols.stamp_ns)
 
     def _record(self, stamp_ns: int, T_world_camera: NDArray[np.float64], camera_id: str) -> int:
-        T = np.asarray(T_world_camera, dtype=np.float64)
+        T = T_world_camera
+        if type(T) is not np.ndarray or T.dtype != np.float64:
+            T = np.asarray(T, dtype=np.float64)
         if T.shape != (4, 4):
             raise FormatError(f"scan {self.scan_id}: T_world_camera must be 4x4, got shape {T.shape}")
         if camera_id not in self._w._cameras:
@@ -266,10 +268,11 @@ class ScanWriter:
             self._store(*self._queue.popleft())
 
     def _store(self, i: int, color: Any, depth: Any) -> None:
-        if isinstance(color, Future):
-            color = color.result()
-        if isinstance(depth, Future):
-            depth = depth.result()
+        if self._w._pool is not None:
+            if isinstance(color, Future):
+                color = color.result()
+            if isinstance(depth, Future):
+                depth = depth.result()
         cols = self._cols
         if self._archive is not None:
             mtime = cols.stamp_ns[i] // 1_000_000_000
@@ -521,7 +524,9 @@ class DatasetWriter:
                 rec = json.loads(marker.read_text())
                 scan_id = rec["scan"]["scan_id"]
                 files = rec["files"]
-                frames = pq.read_table(marker.with_suffix(".parquet"))
+                import pyarrow.feather as feather
+
+                frames = feather.read_table(marker.with_suffix(".arrow"))
                 if frames.num_rows != rec["n_frames"]:
                     continue
             except (OSError, json.JSONDecodeError, KeyError, TypeError, pa.ArrowException):
@@ -561,7 +566,9 @@ class DatasetWriter:
         # the record of a finished scan, for resuming: its frames, then the JSON that commits them
         markers = self.tmp / _SCANS_DIR
         markers.mkdir(exist_ok=True)
-        pq.write_table(frames, markers / f"{sw.scan_id}.parquet", compression="none")
+        import pyarrow.feather as feather
+
+        feather.write_feather(frames, markers / f"{sw.scan_id}.arrow", compression="uncompressed")
         tmp = markers / f".{sw.scan_id}.json.tmp"
         tmp.write_text(json.dumps({"scan": scan, "n_frames": frames.num_rows,
                                    "files": {k: list(v) for k, v in sw._files.items()}}))

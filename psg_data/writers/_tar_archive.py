@@ -148,7 +148,13 @@ class BufferPool:
             with _spare_lock:
                 if _spare:
                     return _spare.pop()
-        return mmap.mmap(-1, self.buffer_bytes)
+        buf = mmap.mmap(-1, self.buffer_bytes)
+        if hasattr(mmap, "MADV_HUGEPAGE"):  # transparent huge pages where enabled: cheaper copies into it
+            try:
+                buf.madvise(mmap.MADV_HUGEPAGE)
+            except OSError:
+                pass
+        return buf
 
     def give(self, buf: mmap.mmap) -> None:
         with self._cond:

@@ -65,6 +65,20 @@ def find_recordings(directory: str | Path) -> list[tuple[Path, str]]:
     return found
 
 
+_KEPT: dict[tuple[str, int, int], Any] = {}
+"""Readers kept open by ``RosRecording.close(keep=True)``, by (path, size, mtime)."""
+
+
+def release_kept() -> None:
+    """Close the readers kept open for reuse (a conversion calls this when it ends)."""
+    while _KEPT:
+        _, reader = _KEPT.popitem()
+        try:
+            reader.close()
+        except Exception:  # pragma: no cover - closing is best effort
+            log.debug("closing a kept reader failed", exc_info=True)
+
+
 @functools.lru_cache(maxsize=256)
 def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
     """A typestore holding ``msgtype`` as the recording defines it (cached across recordings).
@@ -269,6 +283,10 @@ class RosRecording:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
 
+        kept = _KEPT.pop(self._key(), None)
+        if kept is not None:  # opened (and indexed) moments ago by another RosRecording of this file
+            self._reader = kept
+            return
         try:
             if self.format == "ros1":
                 self._reader = _Ros1Reader(self.path)
@@ -281,12 +299,25 @@ class RosRecording:
             self._reader = None
             raise _wrap(self.path, exc) from exc
 
-    def close(self) -> None:
+    def close(self, keep: bool = False) -> None:
+        """Close the recording; with ``keep``, hand the open reader to the next RosRecording of the
+        same file in this process instead (see :func:`release_kept`)."""
         if self._reader is not None:
+            if keep:
+                old = _KEPT.pop(self._key(), None)
+                if old is not None:
+                    old.close()
+                _KEPT[self._key()] = self._reader
+                self._reader = None
+                return
             try:
                 self._reader.close()
             finally:
                 self._reader = None
+
+    def _key(self) -> tuple[str, int, int]:
+        st = self.path.stat()
+        return str(self.path.resolve()), st.st_size, st.st_mtime_ns
 
     @property
     def topics(self) -> dict[str, str]:

@@ -86,10 +86,10 @@ def _inverse(a: Pose7) -> Pose7:
 
 def _matrix(a: Pose7) -> NDArray[np.float64]:
     x, y, z, w = a[3], a[4], a[5], a[6]
-    return np.array(((1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), a[0]),
-                     (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), a[1]),
-                     (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), a[2]),
-                     (0.0, 0.0, 0.0, 1.0)))
+    return np.array((1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), a[0],
+                     2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), a[1],
+                     2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), a[2],
+                     0.0, 0.0, 0.0, 1.0)).reshape(4, 4)
 
 
 def _interpolate(p: Pose7, r: Pose7, a: float) -> Pose7:
