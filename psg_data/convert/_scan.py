@@ -13,6 +13,7 @@ import bisect
 import json
 import logging
 import math
+import os
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -59,6 +60,7 @@ SKIP_REASONS = {
 }
 
 _PNG_MAGIC8 = b"\x89PNG\r\n\x1a\n"
+_PREADV = hasattr(os, "preadv")  # FileRange payloads need os.preadv (not on Windows)
 _IMAGE = "sensor_msgs/msg/Image"
 _COMPRESSED = "sensor_msgs/msg/CompressedImage"
 _INFO = "sensor_msgs/msg/CameraInfo"
@@ -658,7 +660,7 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                 if topic == color_t or topic == depth_t:
                     if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
                         ci = parse_compressed_image(raw, cdr) or rec.compressed_image(raw, topic)
-                        span = None if foff is None or ci.data_offset is None else \
+                        span = None if foff is None or ci.data_offset is None or not _PREADV else \
                             FileRange(fd, foff + ci.data_offset, len(ci.data))
                         stamp, frame_id = ci.stamp_ns, ci.frame_id
                         payload = _Payload("bytes", ci.data, ci.format, span)

@@ -331,19 +331,13 @@ class RosRecording:
             out[c.topic] = out.get(c.topic, 0) + int(c.msgcount)
         return out
 
-    def raw_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Any, int, bytes]]:
-        """``(connection, log_time_ns, serialized bytes)`` in log-time order (no deserialisation)."""
-        conns = [c for c in self._reader.connections if not topics or c.topic in topics]
-        if topics and not conns:
-            return
-        try:
-            yield from self._reader.messages(connections=conns)
-        except (OSError, EOFError, struct.error, sqlite3.DatabaseError, AssertionError, KeyError, ValueError) as exc:
-            raise _wrap(self.path, exc) from exc
-        except Exception as exc:
-            if type(exc).__module__.startswith("rosbags"):
-                raise _wrap(self.path, exc) from exc
-            raise
+    def raw_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Any, int, Any]]:
+        """``(connection, log_time_ns, serialized bytes)`` in log-time order (no deserialisation).
+
+        The bytes are a ``memoryview`` of the recording where it allows (ROS 1 bags), else ``bytes``.
+        """
+        for conn, t, raw, _ in self.located_messages(topics):
+            yield conn, t, raw
 
     def located_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Any, int, Any, int | None]]:
         """:meth:`raw_messages` with each message's byte offset in the file (:attr:`fd`): a view
