@@ -201,7 +201,7 @@ class _Ros1Reader:
         try:
             for time_ns, _, _, pos, offset, conn in entries:
                 if pos != cur_pos:
-                    if release is not None and cur_span[1] > cur_span[0]:
+                    if release is not None and cur_span[1] > 0:  # (start, length) of the chunk left
                         release(mmap.MADV_DONTNEED, *cur_span)
                     ch = chunks[pos]
                     end = ch.datapos + ch.datasize
