@@ -524,7 +524,7 @@ class _ScanSink:
         return bool(np.linalg.norm(dT[:3, 3]) >= a or ang >= b)
 
     def frame(self, stamp: int, T: NDArray[np.float64] | None, cp: _Payload, dp: _Payload, nbytes: int) -> None:
-        scan_id = self._scan_for(stamp)
+        scan_id = self.task.scan_id if self.split is None else self._scan_for(stamp)
         self.last_stamp = stamp
         if scan_id != self.scan_id:
             self._close_scan()
@@ -543,7 +543,7 @@ class _ScanSink:
         if not math.isfinite(sum(T.ravel().tolist())):  # NaN and inf propagate into the sum
             self.skipped["nonfinite_pose"] += 1
             return
-        if not self._keep(T):
+        if self.keyframes is not None and not self._keep(T):
             self.kf_dropped += 1
             return
         self.last_key_T = T
@@ -564,7 +564,8 @@ class _ScanSink:
         if csize != (cam.width, cam.height):
             raise ConversionError(f"{self.task.source}: {self.names[0]}: images are {csize[0]}x{csize[1]} but "
                                   f"CameraInfo says {cam.width}x{cam.height}; expected the colour camera's camera_info")
-        T = np.asarray(T, dtype=np.float64)
+        if type(T) is not np.ndarray or T.dtype != np.float64:
+            T = np.asarray(T, dtype=np.float64)
         if cb is not None and db is not None:
             self.sw.add_encoded_frame(stamp, T, cb, db, cam.camera_id)
         elif ca is not None and da is not None:
@@ -673,14 +674,16 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                             poses.optical = cfg.camera_frame or frame_id.lstrip("/")
                     else:
                         asm.add_depth(stamp, payload)
-                    emit(log_t - window)
+                    if colors and colors[0][0] < log_t - window:
+                        emit(log_t - window)
                     continue
                 if conn.msgtype == _TF:
                     static = topic in static_t
                     samples = parse_tf_message(raw, cdr)  # header, frames and 7 floats: no full message
                     for smp in (rec.tf_transforms(raw, topic) if samples is None else samples):
                         tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
-                    emit(log_t - window)
+                    if colors and colors[0][0] < log_t - window:
+                        emit(log_t - window)
                     continue
                 if topic == poses.odom_topic:
                     poses.add_odom(rec.deserialize(raw, conn.msgtype, topic))
