@@ -16,8 +16,8 @@ import json
 import logging
 import os
 import shutil
-from collections.abc import Iterable, Mapping
 from collections import deque
+from collections.abc import Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, fields, is_dataclass
 from pathlib import Path
@@ -52,7 +52,8 @@ PNG_LEVEL = 1
 JPEG_QUALITY = 95
 _PARTIAL_SUFFIX = ".partial"
 _SCANS_DIR = ".scans"
-"""Inside ``ROOT.partial``: one JSON record per completed scan (what a resumed write adopts)."""
+"""Inside ``ROOT.partial``: per completed scan, its frames (``ID.arrow``) and a JSON record
+(``ID.json``, written last) with the scan row and file checksums: what a resumed write adopts."""
 _WRITE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0)
 
 
