@@ -28,25 +28,6 @@ __all__ = [
 ]
 
 
-def _rot9(x: float, y: float, z: float, w: float) -> tuple[float, ...] | None:
-    """Row-major 3x3 rotation of a (not necessarily unit) quaternion; None if degenerate or non-finite."""
-    n = x * x + y * y + z * z + w * w
-    if not math.isfinite(n) or n < 1e-12:
-        return None
-    s = 2.0 / n
-    return (1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w),
-            s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w),
-            s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y))
-
-
-def _transform(t: tuple[float, ...], q: tuple[float, ...]) -> NDArray[np.float64]:
-    r = _rot9(*q)
-    if r is None:
-        r = (math.nan,) * 9
-    return np.array(((r[0], r[1], r[2], t[0]), (r[3], r[4], r[5], t[1]), (r[6], r[7], r[8], t[2]),
-                     (0.0, 0.0, 0.0, 1.0)))
-
-
 Pose7 = tuple[float, float, float, float, float, float, float]
 """A rigid transform as plain floats ``(tx, ty, tz, qx, qy, qz, qw)`` with a unit quaternion."""
 
@@ -112,10 +93,8 @@ def _interpolate(p: Pose7, r: Pose7, a: float) -> Pose7:
 
 
 def quat_xyzw_to_matrix(q: Iterable[float]) -> NDArray[np.float64]:
-    """3x3 rotation of a (not necessarily unit) quaternion ``(x, y, z, w)``."""
-    x, y, z, w = (float(v) for v in q)
-    r = _rot9(x, y, z, w)
-    return np.full((3, 3), np.nan) if r is None else np.array(r).reshape(3, 3)
+    """3x3 rotation of a (not necessarily unit) quaternion ``(x, y, z, w)`` (NaN if degenerate)."""
+    return _matrix(_pose7((0.0, 0.0, 0.0), tuple(q)))[:3, :3]
 
 
 def matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -140,7 +119,7 @@ def matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def make_transform(translation: Iterable[float], quat_xyzw: Iterable[float]) -> NDArray[np.float64]:
     """4x4 transform from a translation (metres) and a quaternion ``(x, y, z, w)``."""
-    return _transform(tuple(float(v) for v in translation), tuple(float(v) for v in quat_xyzw))
+    return _matrix(_pose7(tuple(translation), tuple(quat_xyzw)))
 
 
 def slerp(q0: NDArray[np.float64], q1: NDArray[np.float64], a: float) -> NDArray[np.float64]:
@@ -228,8 +207,7 @@ class TfBuffer:
     def __init__(self, max_gap_ns: int, tolerance_ns: int) -> None:
         self.max_gap_ns = int(max_gap_ns)
         self.tolerance_ns = int(tolerance_ns)
-        self.static: dict[tuple[str, str], NDArray[np.float64]] = {}
-        self._static7: dict[tuple[str, str], Pose7] = {}
+        self.static: dict[tuple[str, str], Pose7] = {}
         self.dynamic: dict[tuple[str, str], PoseSeries] = {}
         self._paths: dict[tuple[str, str], list[tuple[str, str, bool]] | None] = {}
         self._plans: dict[tuple[str, str], list[Any]] = {}
@@ -252,10 +230,9 @@ class TfBuffer:
             self._plans.clear()
         pose = _pose7(translation, quat_xyzw)
         if static:
-            if self._static7.get(key) != pose:
+            if self.static.get(key) != pose:
                 self._plans.clear()
-            self._static7[key] = pose
-            self.static[key] = make_transform(translation, quat_xyzw)
+            self.static[key] = pose
         else:
             series = self.dynamic.get(key)
             if series is None:
@@ -336,8 +313,8 @@ class TfBuffer:
         """The path as steps: products of consecutive static edges (Pose7) and dynamic edges."""
         plan: list[Any] = []
         for p, c, forward in edges:
-            if (p, c) in self._static7:
-                E = self._static7[(p, c)] if forward else _inverse(self._static7[(p, c)])
+            if (p, c) in self.static:
+                E = self.static[(p, c)] if forward else _inverse(self.static[(p, c)])
                 if plan and len(plan[-1]) == 7:
                     plan[-1] = _compose(plan[-1], E)
                 else:
