@@ -37,10 +37,11 @@ from psg_data.loaders.raw._images import (
     decode_depth_image,
     inspect_encoded,
 )
-from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform
+from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer
 from psg_data.loaders.raw._wire import parse_compressed_image, parse_tf_message
 from psg_data.schemas._image_headers import parse_image_header_end
 from psg_data.schemas._records import CameraIntrinsics
+from psg_data.writers._dataset_writer import encode_color, encode_depth
 from psg_data.writers._tar_archive import FileRange
 
 __all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
@@ -437,19 +438,6 @@ class _FrameWriter:
         return None, arr, (arr.shape[1], arr.shape[0])
 
 
-def _encode(arr: NDArray[Any], encoding: str) -> bytes:
-    import cv2
-
-    from psg_data.writers._dataset_writer import JPEG_QUALITY, PNG_LEVEL
-
-    if arr.ndim == 3:
-        bgr = cv2.cvtColor(arr, cv2.COLOR_RGB2BGR)
-        if encoding == "jpeg":
-            return cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1].tobytes()
-        return cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
-    return cv2.imencode(".png", arr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
-
-
 class _ScanSink:
     """Receives complete frames; splits them into scans, applies keyframes, writes them."""
 
@@ -571,8 +559,8 @@ class _ScanSink:
         elif ca is not None and da is not None:
             self.sw.add_frame(stamp, T, ca, da, cam.camera_id)
         else:
-            self.sw.add_encoded_frame(stamp, T, cb if cb is not None else _encode(ca, self.fw.encoding),
-                                      db if db is not None else _encode(da, "png"), cam.camera_id)
+            self.sw.add_encoded_frame(stamp, T, cb if cb is not None else encode_color(ca, self.fw.encoding),
+                                      db if db is not None else encode_depth(da), cam.camera_id)
         if self.progress is not None:
             self.progress(1, nbytes)
 
@@ -768,6 +756,3 @@ def make_static(parent: str, child: str, T: NDArray[np.float64]) -> dict[str, An
 
     return {"parent": parent, "child": child, "translation": [float(v) for v in T[:3, 3]],
             "rotation_xyzw": [float(v) for v in matrix_to_quat_xyzw(T[:3, :3])]}
-
-
-_ = make_transform

@@ -6,7 +6,8 @@ image bytes padded to 512, then the end-of-archive zero blocks, padded with zero
 4 KiB. The byte offset of every member's data is returned to the caller, who stores it in the
 ``frames`` table: a reader then fetches one image with a single ``pread`` of a known range.
 
-Writing is a pipeline: the caller copies image bytes into page-aligned 16 MiB buffers; full
+Writing is a pipeline: the caller copies image bytes into page-aligned 16 MiB buffers (or has them
+read straight from a file into them: :class:`FileRange`); full
 buffers go to two threads, one hashing (SHA-256 of the archive, for ``files.parquet``) and one
 writing, which both release the GIL. Where the file system supports it the archive is written with
 ``O_DIRECT``: the bytes go from the buffers to the device without first being copied into newly
@@ -63,6 +64,7 @@ def reuse_buffers() -> Iterator[None]:
                 for b in _spare:
                     b.close()
                 _spare.clear()
+
 
 _ZEROS = bytes(ARCHIVE_ALIGN)
 
@@ -352,11 +354,6 @@ class TarArchiveWriter:
         if pad:
             self._put(_ZEROS[:pad])
         return offset
-
-    @property
-    def size(self) -> int:
-        """Bytes appended so far (before the end-of-archive blocks)."""
-        return self._size
 
     def finish(self) -> None:
         """Append the end of the archive and hand the last buffer over; returns without waiting

@@ -173,22 +173,21 @@ class _Ros1Reader:
         entries.sort()  # (time, connection order, index order): rosbags' merge order, ties included
         return entries
 
-    def messages(self, connections: Collection[Any] = (), located: bool = False) -> Iterator[tuple[Any, ...]]:
-        """``(connection, time_ns, view)``; with ``located``, ``(connection, time_ns, view, offset)``
-        where ``offset`` is the message's byte offset in the file (None from a compressed chunk)."""
+    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any, int | None]]:
+        """``(connection, time_ns, view, offset)``: ``offset`` is the message's byte offset in the
+        file, None for a message from a compressed chunk."""
         import mmap
 
         conns = list(connections) or self.connections
         entries = self._index(conns)
         if entries is None:
             for c, t, raw in self._bag.messages(connections=conns):
-                yield (c, t, raw, None) if located else (c, t, raw)
+                yield c, t, raw, None
             return
         if not entries:
             return
         if self._mm is None:
-            with open(self.path, "rb") as fh:
-                self._mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+            self._mm = mmap.mmap(self.fd, 0, access=mmap.ACCESS_READ)
         whole = memoryview(self._mm)
         from rosbags.rosbag1.reader import decompressors
 
@@ -229,10 +228,7 @@ class _Ros1Reader:
                     if op != _OP_CONNECTION:
                         raise ValueError(f"expected message data at chunk offset {offset}, found record op {op}")
                     o += dlen
-                if located:
-                    yield conn, time_ns, cur[o:o + dlen], (None if base is None else base + o)
-                else:
-                    yield conn, time_ns, cur[o:o + dlen]
+                yield conn, time_ns, cur[o:o + dlen], (None if base is None else base + o)
         finally:
             del cur, whole
 
@@ -348,7 +344,7 @@ class RosRecording:
             return
         try:
             if isinstance(self._reader, _Ros1Reader):
-                yield from self._reader.messages(connections=conns, located=True)
+                yield from self._reader.messages(connections=conns)
             else:
                 for c, t, raw in self._reader.messages(connections=conns):
                     yield c, t, raw, None
