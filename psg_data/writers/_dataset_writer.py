@@ -439,9 +439,10 @@ class DatasetWriter:
         self._tables: dict[str, pa.Table] = {}
         self._scans: dict[str, dict[str, Any]] = {}
         self._frames: dict[str, pa.Table] = {}
-        self._files: dict[str, tuple[int, str]] = {}
-        """relative path -> (size, sha256) of every file written or adopted (hashed from memory)."""
+        self._table_files: dict[str, tuple[int, str]] = {}
+        """relative path -> (size, sha256) of each table written."""
         self._scan_files: dict[str, dict[str, tuple[int, str]]] = {}
+        """scan id -> its image files: relative path -> (size, sha256), hashed from memory."""
         self._closed = False
 
     # -- context manager -------------------------------------------------------------------
@@ -519,14 +520,14 @@ class DatasetWriter:
         Each value is the scan's stored record (see :meth:`scan_record`); pass it to
         :meth:`adopt_scan` to keep the scan without rewriting it.
         """
+        import pyarrow.feather as feather
+
         done: dict[str, dict[str, Any]] = {}
         for marker in sorted((self.tmp / _SCANS_DIR).glob("*.json")):
             try:
                 rec = json.loads(marker.read_text())
                 scan_id = rec["scan"]["scan_id"]
                 files = rec["files"]
-                import pyarrow.feather as feather
-
                 frames = feather.read_table(marker.with_suffix(".arrow"))
                 if frames.num_rows != rec["n_frames"]:
                     continue
@@ -552,7 +553,6 @@ class DatasetWriter:
         files = {p: (int(v[0]), str(v[1])) for p, v in record["files"].items()}
         self._scans[scan_id] = dict(record["scan"])
         self._frames[scan_id] = to_arrow("frames", record["frames"])
-        self._files.update(files)
         self._scan_files[scan_id] = files
 
     def _finish_scan(self, sw: ScanWriter) -> None:
@@ -562,7 +562,6 @@ class DatasetWriter:
         frames = sw.frames_table()
         self._scans[sw.scan_id] = scan
         self._frames[sw.scan_id] = frames
-        self._files.update(sw._files)
         self._scan_files[sw.scan_id] = dict(sw._files)
         # the record of a finished scan, for resuming: its frames, then the JSON that commits them
         markers = self.tmp / _SCANS_DIR
@@ -621,16 +620,16 @@ class DatasetWriter:
         path = self.tmp / table_path(name)
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, path, compression="zstd")
-        self._files[table_path(name)] = (path.stat().st_size, sha256_file(path))
+        self._table_files[table_path(name)] = (path.stat().st_size, sha256_file(path))
 
-    def _remove_stale_images(self) -> None:
+    def _remove_stale_images(self, keep: Mapping[str, Any]) -> None:
         """Delete image files left by an interrupted run that no scan of this dataset uses."""
         images = self.tmp / "images"
         if not images.is_dir():
             return
         for p in sorted(images.rglob("*"), reverse=True):
             rel = p.relative_to(self.tmp).as_posix()
-            if p.is_file() and rel not in self._files:
+            if p.is_file() and rel not in keep:
                 p.unlink()
             elif p.is_dir() and not any(p.iterdir()):
                 p.rmdir()
@@ -663,8 +662,11 @@ class DatasetWriter:
         for name, table in tables.items():
             self._write_table(name, table)
         shutil.rmtree(self.tmp / _SCANS_DIR, ignore_errors=True)
-        self._remove_stale_images()
-        files = sorted(self._files.items())
+        all_files = dict(self._table_files)
+        for scan_files in self._scan_files.values():
+            all_files.update(scan_files)
+        self._remove_stale_images(all_files)
+        files = sorted(all_files.items())
         files_table = to_arrow("files", [{"path": p, "size_bytes": n, "sha256": s} for p, (n, s) in files])
         fpath = self.tmp / table_path("files")
         pq.write_table(files_table, fpath, compression="zstd")
