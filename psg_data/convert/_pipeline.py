@@ -354,6 +354,8 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
         cameras: dict[str, dict[str, Any]] = {}
         skipped: Counter[str] = Counter()
         passthrough: Counter[str] = Counter()
+        import pyarrow as pa
+
         from psg_data.schemas._records import CameraIntrinsics
 
         for scan_id, rec in sorted(completed.items()):
@@ -370,9 +372,7 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
             if cid not in cameras:
                 cameras[cid] = cam
                 writer.add_camera(CameraIntrinsics(**cam))
-            import pyarrow as pa
-
-            frames = rec["frames"]
+            frames = rec["frames"]  # the camera id this dataset gives that camera
             frames = frames.set_column(frames.schema.get_field_index("camera_id"), frames.schema.field("camera_id"),
                                        pa.array([cid] * frames.num_rows, pa.string()))
             writer.adopt_scan({**rec, "frames": frames})

@@ -28,14 +28,12 @@ from psg_data.convert._config import ConvertConfig, parse_keyframes, parse_pose_
 from psg_data.errors import ConversionError
 from psg_data.loaders.raw._folders import FolderRecording, read_scannet_folder, read_tum_folder, read_tum_poses
 from psg_data.loaders.raw._images import (
-    COMPRESSED_DEPTH_HEADER_SIZE,
     EncodedInfo,
     compressed_depth_png,
     decode_color_image,
     decode_compressed_color,
     decode_compressed_depth,
     decode_depth_image,
-    inspect_encoded,
 )
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer
 from psg_data.loaders.raw._wire import parse_compressed_image, parse_tf_message
@@ -60,7 +58,6 @@ SKIP_REASONS = {
     "out_of_order": "colour frame older than one already written",
 }
 
-_PNG_MAGIC8 = b"\x89PNG\r\n\x1a\n"
 _PREADV = hasattr(os, "preadv")  # FileRange payloads need os.preadv (not on Windows)
 _IMAGE = "sensor_msgs/msg/Image"
 _COMPRESSED = "sensor_msgs/msg/CompressedImage"
@@ -362,8 +359,9 @@ class _FrameWriter:
         self.scale_is_mm = abs(depth_scale_m - 0.001) < 1e-12
         self.where = where
         self._headers: dict[str, tuple[bytes, EncodedInfo]] = {}
-        self._cd_formats: set[str] = set()
-        """compressedDepth formats seen to hold a 16UC1 PNG after the ConfigHeader (fast path)."""
+        self._cd_formats: dict[str, bool] = {}
+        """format string -> whether it names a compressedDepth payload."""
+        self._wheres: dict[str, str] = {}
         self.passthrough: Counter[str] = Counter()
 
     def _inspect(self, slot: str, data: Any) -> EncodedInfo | None:
@@ -378,63 +376,51 @@ class _FrameWriter:
         self._headers[slot] = (bytes(data[:end]), info)
         return info
 
+    def _where(self, topic: str) -> str:
+        where = self._wheres.get(topic)
+        if where is None:
+            where = self._wheres[topic] = f"{self.where}: {topic}"
+        return where
+
     def color(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
-        if p.kind == "bytes":  # pass-through fast path: checks on the header only
-            info = self._inspect("color", p.obj)
-            if info is not None and _passthrough_ok(info, self.encoding):
-                self.passthrough["color"] += 1
-                return (p.obj if p.span is None else p.span), None, (info.width, info.height)
-        where = f"{self.where}: {topic}"
         if p.kind == "msg":
-            arr = decode_color_image(p.obj, where)
+            arr = decode_color_image(p.obj, self._where(topic))
             return None, arr, (arr.shape[1], arr.shape[0])
-        data = memoryview(p.obj) if p.kind == "bytes" else Path(p.obj).read_bytes()  # no copy of a message
-        info = inspect_encoded(data)
+        data = p.obj if p.kind == "bytes" else Path(p.obj).read_bytes()  # bytes: a view of the message
+        info = self._inspect("color", data)
         if info is not None and _passthrough_ok(info, self.encoding):
             self.passthrough["color"] += 1
-            return data, None, (info.width, info.height)
-        arr = decode_compressed_color(data, p.fmt or "file", where)
+            return (data if p.span is None else p.span), None, (info.width, info.height)
+        arr = decode_compressed_color(data, p.fmt or "file", self._where(topic))
         return None, arr, (arr.shape[1], arr.shape[0])
 
     def depth(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
-        if p.kind == "bytes" and self.scale_is_mm and p.fmt in self._cd_formats:  # pass-through fast path
-            data = p.obj
-            png = data[COMPRESSED_DEPTH_HEADER_SIZE:]
-            if png[:8] == _PNG_MAGIC8:
-                info = self._inspect("depth", png)
-                if info is not None and info.kind == "png" and info.bit_depth == 16 and info.channels == 1:
-                    self.passthrough["depth"] += 1
-                    span = p.span
-                    if span is not None:
-                        png = FileRange(span.fd, span.offset + COMPRESSED_DEPTH_HEADER_SIZE, len(png))
-                    return png, None, (info.width, info.height)
-        where = f"{self.where}: {topic}"
-        scale_ok = self.scale_is_mm
+        where = self._where(topic)
         if p.kind == "msg":
             arr = decode_depth_image(p.obj, where, self.depth_scale_m)
             return None, arr, (arr.shape[1], arr.shape[0])
         fmt = p.fmt
-        data = memoryview(p.obj) if p.kind == "bytes" else Path(p.obj).read_bytes()  # no copy of a message
+        data = p.obj if p.kind == "bytes" else Path(p.obj).read_bytes()  # bytes: a view of the message
+        compressed_depth = self._cd_formats.get(fmt)
+        if compressed_depth is None:
+            compressed_depth = self._cd_formats[fmt] = "compresseddepth" in fmt.lower()
         png, src = data, "16UC1"
-        if "compresseddepth" in fmt.lower():
+        if compressed_depth:
             png, src, _ = compressed_depth_png(data, fmt, where)
         info = self._inspect("depth", png)
         if info is None:
             raise ConversionError(f"{where}: unknown depth image format {fmt or 'file'!r}; expected a 16-bit PNG "
                                   f"('16UC1; compressedDepth png')")
-        if scale_ok and src.upper() in ("16UC1", "MONO16") and info.kind == "png" and info.bit_depth == 16 \
+        if self.scale_is_mm and src.upper() in ("16UC1", "MONO16") and info.kind == "png" and info.bit_depth == 16 \
                 and info.channels == 1:
-            if "compresseddepth" in fmt.lower() and len(data) - len(png) == COMPRESSED_DEPTH_HEADER_SIZE:
-                self._cd_formats.add(fmt)  # this format's payloads: 12-byte header, then a 16-bit PNG
             self.passthrough["depth"] += 1
             if p.span is not None:  # the PNG is the tail of the payload (after the compressedDepth header)
                 skip = len(data) - len(png)
-                return p.span._replace(offset=p.span.offset + skip, size=len(png)), None, (info.width, info.height)
+                return FileRange(p.span.fd, p.span.offset + skip, len(png)), None, (info.width, info.height)
             return png, None, (info.width, info.height)
         if info.kind == "png" and info.bit_depth != 16:
             raise ConversionError(f"{where}: depth PNG is {info.bit_depth}-bit; expected 16-bit depth")
-        arr = decode_compressed_depth(data, fmt if "compresseddepth" in fmt.lower() else "png", where,
-                                      self.depth_scale_m)
+        arr = decode_compressed_depth(data, fmt if compressed_depth else "png", where, self.depth_scale_m)
         return None, arr, (arr.shape[1], arr.shape[0])
 
 
