@@ -395,17 +395,14 @@ def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str,
 
 
 def _tar_member(block: bytes) -> tuple[str, int] | None:
-    """(name, size) of a ustar regular-file header block with a valid checksum, else None."""
-    if len(block) != 512 or block[257:262] != b"ustar" or block[156:157] not in (b"0", b"\0"):
-        return None
+    """(name, size) of a regular-file tar header block with a valid checksum (``tarfile``), else None."""
+    import tarfile
+
     try:
-        stored = int(block[148:156].split(b"\0")[0].strip() or b"-1", 8)
-        size = int(block[124:136].split(b"\0")[0].strip() or b"0", 8)
-    except ValueError:
+        info = tarfile.TarInfo.frombuf(block, "utf-8", "surrogateescape")
+    except tarfile.HeaderError:
         return None
-    if stored != sum(block[:148]) + 8 * ord(" ") + sum(block[156:]):
-        return None
-    return block[:100].split(b"\0")[0].decode("utf-8", "replace"), size
+    return (info.name, info.size) if info.isreg() else None
 
 
 def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bounds: dict[str, tuple[int, int]]) -> None:
