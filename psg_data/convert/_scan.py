@@ -416,7 +416,8 @@ class _FrameWriter:
             self.passthrough["depth"] += 1
             if p.span is not None:  # the PNG is the tail of the payload (after the compressedDepth header)
                 skip = len(data) - len(png)
-                return FileRange(p.span.fd, p.span.offset + skip, len(png)), None, (info.width, info.height)
+                sp = p.span
+                return FileRange(sp.fd, sp.offset + skip, len(png), sp.owner), None, (info.width, info.height)
             return png, None, (info.width, info.height)
         if info.kind == "png" and info.bit_depth != 16:
             raise ConversionError(f"{where}: depth PNG is {info.bit_depth}-bit; expected 16-bit depth")
@@ -626,7 +627,7 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
             if info_t != color_t and info_t != depth_t and info_t != poses.odom_topic:
                 wanted.discard(info_t)
             read_bytes = 0
-            fd, cdr = rec.fd, rec.is_cdr
+            src_file, cdr = rec.file, rec.is_cdr
             for conn, log_t, raw, foff in rec.located_messages(wanted):
                 topic = conn.topic
                 n_raw = len(raw)
@@ -636,7 +637,7 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                     if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
                         ci = parse_compressed_image(raw, cdr) or rec.compressed_image(raw, topic)
                         span = None if foff is None or ci.data_offset is None or not _PREADV else \
-                            FileRange(fd, foff + ci.data_offset, len(ci.data))
+                            FileRange(src_file.fd, foff + ci.data_offset, len(ci.data), src_file)
                         stamp, frame_id = ci.stamp_ns, ci.frame_id
                         payload = _Payload("bytes", ci.data, ci.format, span)
                     else:

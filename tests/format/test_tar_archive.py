@@ -141,9 +141,84 @@ def test_file_range_members_equal_bytes_members(tmp_path_factory, sizes: list[in
         assert a == b and (d / "a.tar").read_bytes() == (d / "b.tar").read_bytes()
         _check(d / "b.tar", members, *b)
         w = TarArchiveWriter(d / "c.tar", pool)
-        with pytest.raises(OSError, match="file ends before byte"):
-            w.add("x", FileRange(fd, len(blob) - 10, 20))
-        w.abort()
+        w.add("x", FileRange(fd, len(blob) - 10, 20))  # read later, by the hashing thread
+        with pytest.raises(OSError, match=r"c\.tar: writing the image archive failed: file ends before byte"):
+            w.close()
         pool.close()
     finally:
         os.close(fd)
+
+
+def test_file_ranges_read_by_either_thread_in_any_file_order(tmp_path: Path, monkeypatch) -> None:
+    """FileRange members are read by the hashing thread or, when it is behind, by the caller at
+    dispatch; ranges out of file order (depth stored before colour) and gaps between them give the
+    same archive as the bytes in memory."""
+    import threading
+    import time
+
+    import psg_data.writers._tar_archive as ta
+
+    rng = np.random.default_rng(3)
+    blob = rng.bytes(400_000)
+    (tmp_path / "src.bin").write_bytes(blob)
+    spans = []
+    o = 10
+    for n in rng.integers(1, 9000, 60):
+        spans.append((o, int(n)))
+        o += int(n) + int(rng.integers(0, 300))
+    order = [k ^ 1 for k in range(len(spans))]  # pairs swapped: every other range goes backwards in the file
+    members = [(f"color/{i:06d}.jpg", blob[spans[k][0]:spans[k][0] + spans[k][1]], i) for i, k in enumerate(order)]
+
+    readers: list[int] = []
+    real_read, real_hash = ta._read_ranges, ta.TarArchiveWriter._hash
+
+    def read_ranges(mv, copies, scratch):
+        readers.append(threading.get_ident())
+        return real_read(mv, copies, scratch)
+
+    def slow_hash(self, buf, n, copies):
+        time.sleep(0.01)  # the hashing thread falls behind: later buffers are read by the caller
+        return real_hash(self, buf, n, copies)
+
+    monkeypatch.setattr(ta, "_read_ranges", read_ranges)
+    monkeypatch.setattr(ta.TarArchiveWriter, "_hash", slow_hash)
+    pool = BufferPool(16 * 1024, max_buffers=6)
+    a = _write(tmp_path / "a.tar", members, pool)
+    sf = ta.SharedFd(tmp_path / "src.bin")
+    ranges = [(name, ta.FileRange(sf.fd, spans[k][0], spans[k][1], sf), i)
+              for (name, _, i), k in zip(members, order)]
+    del sf
+    b = _write(tmp_path / "b.tar", ranges, pool)
+    assert a == b and (tmp_path / "a.tar").read_bytes() == (tmp_path / "b.tar").read_bytes()
+    _check(tmp_path / "b.tar", members, *b)
+    me = threading.get_ident()
+    assert me in readers and any(t != me for t in readers)
+    pool.close()
+
+
+def test_shared_fd_stays_open_while_a_range_of_it_waits(tmp_path: Path) -> None:
+    """The caller may drop its file (close the recording) right after adding: the archive's
+    FileRange keeps it open until read, and the file is closed once the last range is read."""
+    import gc
+
+    from psg_data.writers._tar_archive import FileRange, SharedFd
+
+    (tmp_path / "src.bin").write_bytes(b"0123456789" * 100)
+    ino = (tmp_path / "src.bin").stat().st_ino
+    pool = BufferPool(8 * 1024)
+    w = TarArchiveWriter(tmp_path / "a.tar", pool)
+    sf = SharedFd(tmp_path / "src.bin")
+    fd = sf.fd
+    w.add("color/000000.jpg", FileRange(fd, 5, 100, sf))
+    del sf
+    gc.collect()
+    assert os.fstat(fd).st_ino == ino  # still open: the pending range holds it
+    size, sha = w.close()
+    with tarfile.open(tmp_path / "a.tar") as tf:
+        assert tf.extractfile("color/000000.jpg").read() == (b"0123456789" * 11)[5:105]
+    try:
+        reopened = os.fstat(fd).st_ino == ino
+    except OSError:
+        reopened = False
+    assert not reopened  # closed with the last range
+    pool.close()

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import os
 import sqlite3
 import struct
 from collections.abc import Collection, Iterator
@@ -96,6 +95,8 @@ def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
 
 
 _U32 = struct.Struct("<I")
+_RELEASE_BYTES = 8 << 20
+"""Pages of chunks already read are released from the bag's memory map once this many have gathered."""
 _OP_MSGDATA, _OP_CONNECTION = 2, 7
 
 
@@ -138,12 +139,19 @@ class _Ros1Reader:
         self.connections: list[Any] = []
         self._by_type: dict[str, Any] = {}
         self._mm: Any = None
-        self.fd: int | None = None
-        """The bag file, open for reading while the reader is (message locations refer to it)."""
+        self.file: Any = None
+        """The bag file (a SharedFd), open for reading while the reader is or a FileRange of it
+        lives (message locations refer to it)."""
+
+    @property
+    def fd(self) -> int | None:
+        return None if self.file is None else self.file.fd
 
     def open(self) -> None:
+        from psg_data.writers._tar_archive import SharedFd
+
         self._bag.open()
-        self.fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+        self.file = SharedFd(self.path)
         self.connections = list(self._bag.connections)
         for c in self.connections:
             self._by_type.setdefault(c.msgtype, c)
@@ -155,9 +163,7 @@ class _Ros1Reader:
             except BufferError:  # views of it still alive: unmapped when they are gone
                 pass
             self._mm = None
-        if self.fd is not None:
-            os.close(self.fd)
-            self.fd = None
+        self.file = None  # closed now, or when the last FileRange of it is read
         self._bag.close()
 
     def _index(self, connections: Collection[Any]) -> list[tuple[int, int, int, int, int, Any]] | None:
@@ -196,12 +202,17 @@ class _Ros1Reader:
         page = mmap.PAGESIZE
         release = getattr(self._mm, "madvise", None)
         cur_pos, cur, cur_span, base = -1, whole, (0, 0), None
+        lo = hi = 0  # pages of chunks left and not yet released: [lo, hi)
         u32 = _U32.unpack_from
         try:
             for time_ns, _, _, pos, offset, conn in entries:
                 if pos != cur_pos:
                     if release is not None and cur_span[1] > 0:  # (start, length) of the chunk left
-                        release(mmap.MADV_DONTNEED, *cur_span)
+                        s0, s1 = cur_span[0], cur_span[0] + cur_span[1]
+                        lo, hi = (s0, s1) if hi == 0 else (min(lo, s0), max(hi, s1))
+                        if hi - lo >= _RELEASE_BYTES:  # in batches: each call costs a TLB shootdown
+                            release(mmap.MADV_DONTNEED, lo, hi - lo)
+                            lo = hi = 0
                     ch = chunks[pos]
                     end = ch.datapos + ch.datasize
                     if end > len(whole):
@@ -383,6 +394,11 @@ class RosRecording:
     def fd(self) -> int | None:
         """The recording file open for reading (ROS 1 bags; what ``located_messages`` offsets refer to)."""
         return getattr(self._reader, "fd", None)
+
+    @property
+    def file(self) -> Any:
+        """:attr:`fd` as a :class:`~psg_data.writers._tar_archive.SharedFd` (the ``owner`` of FileRanges of it)."""
+        return getattr(self._reader, "file", None)
 
     def tf_transforms(self, raw: bytes, topic: str) -> list[TfSample]:
         """The transforms of a serialized ``tf2_msgs/TFMessage``.
