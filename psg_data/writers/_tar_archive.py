@@ -6,14 +6,18 @@ image bytes padded to 512, then the end-of-archive zero blocks, padded with zero
 4 KiB. The byte offset of every member's data is returned to the caller, who stores it in the
 ``frames`` table: a reader then fetches one image with a single ``pread`` of a known range.
 
-Writing is a pipeline: the caller copies image bytes into page-aligned 16 MiB buffers (or has them
-read straight from a file into them: :class:`FileRange`); full
-buffers go to two threads, one hashing (SHA-256 of the archive, for ``files.parquet``) and one
-writing, which both release the GIL. Where the file system supports it the archive is written with
-``O_DIRECT``: the bytes go from the buffers to the device without first being copied into newly
-allocated page-cache pages (on the development VM that copy made buffered writing 2-10x slower
-and erratic; BENCHMARKS.md). Buffers are reused from a :class:`BufferPool`, so a conversion touches
-a bounded, constant amount of memory whatever the recording size.
+Writing is a pipeline: the caller puts member headers and in-memory bytes into page-aligned 16 MiB
+buffers; members given as a :class:`FileRange` of an open file only reserve their place. Full
+buffers go to a hashing thread, which first reads the buffer's file ranges into it (in file order,
+nearby ranges in one ``os.preadv``), then passes the buffer to a writing thread and computes the
+archive's SHA-256 (for ``files.parquet``) while it is written; both release the GIL. When the
+hashing thread is behind, the caller reads the ranges itself before handing the buffer over, so
+the copying goes to whichever core has time. Where the file system supports it the archive is
+written with ``O_DIRECT``: the bytes go from the buffers to the device without first being copied
+into newly allocated page-cache pages (on the development VM that copy made buffered writing
+2-10x slower and erratic; BENCHMARKS.md). Buffers are private anonymous memory (transparent huge
+pages where enabled) reused from a :class:`BufferPool`, so a conversion touches a bounded,
+constant amount of memory whatever the recording size.
 """
 
 from __future__ import annotations

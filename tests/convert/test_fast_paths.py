@@ -254,3 +254,54 @@ def test_ros1_loop_releases_the_pages_it_read(tmp_path: Path) -> None:
         grown = _rss_file_kib() - before
     assert n >= 48 << 20
     assert grown < 12 * 1024, f"{grown} KiB of the bag still resident"
+
+
+def test_bag_stays_readable_for_archive_ranges_after_the_recording_closes(tmp_path: Path, monkeypatch) -> None:
+    """The converter adds image bytes as FileRanges of the bag and closes the recording while the
+    archive's hashing thread may still have to read them: the bag's descriptor outlives the
+    recording until the last range is read, then closes."""
+    import threading
+
+    from rosbags.rosbag1 import Writer
+
+    import psg_data.writers._tar_archive as ta
+
+    bag = tmp_path / "r.bag"
+    rng = np.random.default_rng(2)
+    payloads = [rng.bytes(int(n)) for n in rng.integers(100, 5000, 20)]
+    with Writer(bag) as w:
+        c = w.add_connection("/x", "std_msgs/msg/String", typestore=_store(True))
+        for i, p in enumerate(payloads):
+            w.write(c, 1000 + i, p)
+    gate = threading.Event()
+    real_hash = ta.TarArchiveWriter._hash
+
+    def gated_hash(self, buf, n, copies):  # type: ignore[no-untyped-def]
+        gate.wait(10)
+        return real_hash(self, buf, n, copies)
+
+    monkeypatch.setattr(ta.TarArchiveWriter, "_hash", gated_hash)
+    pool = ta.BufferPool(1 << 20)
+    arch = ta.TarArchiveWriter(tmp_path / "a.tar", pool)
+    with RosRecording(bag) as rec:
+        f = rec.file
+        fd = f.fd
+        expected = []
+        for k, (_, _, d, off) in enumerate(rec.located_messages()):
+            arch.add(f"m/{k:06d}", ta.FileRange(f.fd, off, len(d), f))
+            expected.append(bytes(d))
+        del f
+    arch.finish()  # the only buffer now waits for the (gated) hashing thread, which must read the bag
+    assert os.fstat(fd).st_size == bag.stat().st_size  # the recording is closed, its file is not
+    gate.set()
+    arch.result()
+    import tarfile
+
+    with tarfile.open(tmp_path / "a.tar") as tf:
+        assert [tf.extractfile(m).read() for m in tf.getmembers()] == expected
+    try:
+        still = os.fstat(fd).st_ino == bag.stat().st_ino
+    except OSError:
+        still = False
+    assert not still  # closed with the last range
+    pool.close()
