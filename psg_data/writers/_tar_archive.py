@@ -116,8 +116,16 @@ class FileRange(NamedTuple):
         return data
 
 
-_IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") and "SC_IOV_MAX" in getattr(
-    os, "sysconf_names", {}) else 16
+def _iov_max() -> int:
+    """Buffers one ``preadv`` call may take (POSIX guarantees at least 16)."""
+    try:
+        n = os.sysconf("SC_IOV_MAX")
+    except (AttributeError, ValueError, OSError):
+        return 16
+    return min(1024, n) if n >= 16 else 16
+
+
+_IOV_MAX = _iov_max()
 _GAP_MAX = 1 << 20
 """Ranges of one file at most this far apart are read in one ``preadv`` (the gap goes to scratch)."""
 
