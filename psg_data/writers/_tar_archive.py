@@ -73,25 +73,6 @@ def reuse_buffers() -> Iterator[None]:
 _ZEROS = bytes(ARCHIVE_ALIGN)
 
 
-class SharedFd:
-    """A read-only file descriptor, closed when the last reference to this object goes.
-
-    An archive reads :class:`FileRange` members after :meth:`TarArchiveWriter.add` returns (in its
-    hashing thread); a FileRange whose ``owner`` is a SharedFd keeps the file open until then, so
-    the caller may drop its own reference (close the recording) at any time.
-    """
-
-    __slots__ = ("fd",)
-
-    def __init__(self, path: str | os.PathLike[str]) -> None:
-        self.fd = os.open(path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
-
-    def __del__(self, _close: Any = os.close) -> None:
-        fd, self.fd = getattr(self, "fd", -1), -1
-        if fd >= 0:
-            _close(fd)
-
-
 class FileRange(NamedTuple):
     """``size`` bytes at ``offset`` of the open file ``fd``, as a member's content.
 
@@ -99,8 +80,9 @@ class FileRange(NamedTuple):
     straight into the write buffer just before hashing it (``os.preadv``, one call for a run of
     nearby ranges, the GIL released), so the copy runs beside the caller's work. The converter
     passes images stored uncompressed in a recording this way. ``fd`` must stay open until the
-    archive has read the range: give an ``owner`` that keeps it open while referenced (a
-    :class:`SharedFd`), or keep the file open until :meth:`TarArchiveWriter.result` returns.
+    archive has read the range: give an ``owner`` that keeps it open while referenced (the
+    converter gives the ROS 1 reader's ``SharedFd``), or keep the file open until
+    :meth:`TarArchiveWriter.result` returns.
     """
 
     fd: int
@@ -333,18 +315,22 @@ class TarArchiveWriter:
     def _hash(self, buf: mmap.mmap, n: int, copies: list[tuple[int, FileRange]]) -> None:
         """Read the buffer's file ranges into it, pass it on to the writer, and hash it meanwhile."""
         try:
-            with memoryview(buf) as mv:
-                if copies:
-                    if self._scratch is None:
-                        self._scratch = memoryview(bytearray(_GAP_MAX))
-                    _read_ranges(mv, copies, self._scratch)
-                    copies.clear()  # the ranges' owners: their files may close now
+            if copies:
+                with memoryview(buf) as mv:
+                    self._read(mv, copies)
+                copies.clear()  # the ranges' owners: their files may close now
         finally:  # the writer gets every buffer (also after an error: the caller discards the archive)
             with self._lock:
                 self._refs[id(buf)] = 2  # released by this stage and by the writer
             self._writer.q.put((buf, n, copies))
         with memoryview(buf) as mv:
             self._sha.update(mv[:n])
+
+    def _read(self, mv: memoryview, copies: list[tuple[int, FileRange]]) -> None:
+        """Read a buffer's file ranges into it (either thread; the scratch takes gaps, never read)."""
+        if self._scratch is None:
+            self._scratch = memoryview(bytearray(_GAP_MAX))
+        _read_ranges(mv, copies, self._scratch)
 
     def _write(self, buf: mmap.mmap, n: int, copies: list[tuple[int, FileRange]]) -> None:
         with memoryview(buf) as whole:
@@ -386,9 +372,7 @@ class TarArchiveWriter:
     def _dispatch(self) -> None:
         self._check()
         if self._copies and self._hasher.q.qsize():  # the hashing thread is behind: read them here
-            if self._scratch is None:
-                self._scratch = memoryview(bytearray(_GAP_MAX))
-            _read_ranges(self._mv, self._copies, self._scratch)
+            self._read(self._mv, self._copies)
             self._copies = []
         self._hasher.q.put((self._buf, self._n, self._copies))
         self._buf = self._pool.take()

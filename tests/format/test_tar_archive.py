@@ -184,7 +184,9 @@ def test_file_ranges_read_by_either_thread_in_any_file_order(tmp_path: Path, mon
     monkeypatch.setattr(ta.TarArchiveWriter, "_hash", slow_hash)
     pool = BufferPool(16 * 1024, max_buffers=6)
     a = _write(tmp_path / "a.tar", members, pool)
-    sf = ta.SharedFd(tmp_path / "src.bin")
+    from psg_data.loaders.raw._bag import SharedFd
+
+    sf = SharedFd(tmp_path / "src.bin")
     ranges = [(name, ta.FileRange(sf.fd, spans[k][0], spans[k][1], sf), i)
               for (name, _, i), k in zip(members, order)]
     del sf
@@ -201,7 +203,8 @@ def test_shared_fd_stays_open_while_a_range_of_it_waits(tmp_path: Path) -> None:
     FileRange keeps it open until read, and the file is closed once the last range is read."""
     import gc
 
-    from psg_data.writers._tar_archive import FileRange, SharedFd
+    from psg_data.loaders.raw._bag import SharedFd
+    from psg_data.writers._tar_archive import FileRange
 
     (tmp_path / "src.bin").write_bytes(b"0123456789" * 100)
     ino = (tmp_path / "src.bin").stat().st_ino

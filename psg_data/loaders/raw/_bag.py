@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
 import sqlite3
 import struct
 from collections.abc import Collection, Iterator
@@ -94,6 +95,25 @@ def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
     return ts
 
 
+class SharedFd:
+    """A read-only file descriptor, closed when the last reference to this object goes.
+
+    The converter hands image bytes to the archive writer as ``FileRange`` objects of the bag, which the
+    archive reads after ``add`` returns (in its hashing thread); a range whose ``owner`` is the
+    bag's SharedFd keeps the file open until then, so the recording may close at any time.
+    """
+
+    __slots__ = ("fd",)
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.fd = os.open(path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+
+    def __del__(self, _close: Any = os.close) -> None:
+        fd, self.fd = getattr(self, "fd", -1), -1
+        if fd >= 0:
+            _close(fd)
+
+
 _U32 = struct.Struct("<I")
 _RELEASE_BYTES = 8 << 20
 """Pages of chunks already read are released from the bag's memory map once this many have gathered."""
@@ -148,8 +168,6 @@ class _Ros1Reader:
         return None if self.file is None else self.file.fd
 
     def open(self) -> None:
-        from psg_data.writers._tar_archive import SharedFd
-
         self._bag.open()
         self.file = SharedFd(self.path)
         self.connections = list(self._bag.connections)
@@ -397,7 +415,7 @@ class RosRecording:
 
     @property
     def file(self) -> Any:
-        """:attr:`fd` as a :class:`~psg_data.writers._tar_archive.SharedFd` (the ``owner`` of FileRanges of it)."""
+        """:attr:`fd` as a :class:`SharedFd` (the ``owner`` of FileRanges of it)."""
         return getattr(self._reader, "file", None)
 
     def tf_transforms(self, raw: bytes, topic: str) -> list[TfSample]:
