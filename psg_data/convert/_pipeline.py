@@ -400,6 +400,10 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     except KeyboardInterrupt:
         writer.abort(keep_partial=True)
         raise
+    except OSError as exc:  # disk full, permissions, a file gone mid-run: scans done so far are kept
+        writer.abort(keep_partial=True)
+        raise ConversionError(f"{out}: conversion stopped: {exc}; fix that and rerun the same command to "
+                              f"resume") from exc
     except BaseException:
         writer.abort(keep_partial=False)
         raise

@@ -261,3 +261,36 @@ def test_export_overwrite_and_side_files(tmp_path: Path, tiny_dataset: Path) -> 
     assert site["cameras"] == [{"camera_id": "cam0", "frame_id": "camera_color_optical_frame"}]
     assert {r["receptacle_id"] for r in site["receptacles"]} == {"table1", "shelf1"}
     assert (out / "schedule.csv").read_text().splitlines()[0] == "scan_id,object_id,receptacle_id"
+
+
+def test_write_failure_is_one_line_and_resumable(tmp_path: Path, tiny_dataset: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """An OS error while writing (here: the disk fills up during the second scan's archive) ends
+    the CLI with one ``error:`` line and exit code 1, keeps the finished scans, and a rerun resumes."""
+    import errno
+
+    from click.testing import CliRunner
+
+    import psg_data.writers._tar_archive as ta
+    from psg_data.cli.psg_data_cmd import main
+
+    raw = export_raw(tiny_dataset, tmp_path / "raw", "ros1")
+    real_write = ta.TarArchiveWriter._write
+
+    def full_disk(self, buf, n, copies):  # type: ignore[no-untyped-def]
+        if self.path.endswith("scan_001.tar"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_write(self, buf, n, copies)
+
+    monkeypatch.setattr(ta.TarArchiveWriter, "_write", full_disk)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(main, ["convert", str(raw), str(out), "-q", "-j", "1"])
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.exit_code == 1 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert lines[0].startswith("error: ") and "scan_001.tar" in lines[0] and "No space left" in lines[0]
+    assert "rerun the same command to resume" in lines[0]
+    assert not out.exists() and (tmp_path / "out.partial").is_dir()
+    monkeypatch.setattr(ta.TarArchiveWriter, "_write", real_write)
+    rep = convert(raw, out)
+    assert rep.resumed == ["scan_000"]
+    assert_same_dataset(tiny_dataset, out)
