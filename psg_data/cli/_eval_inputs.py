@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ast
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,22 +26,46 @@ class EstimatorSpec:
     settings: tuple[tuple[str, Any], ...] = ()
 
 
-def _literal(text: str) -> Any:
-    try:
-        return ast.literal_eval(text)
-    except (ValueError, SyntaxError):
-        return text
-
-
 def parse_estimator_spec(text: str) -> EstimatorSpec:
-    name, _, rest = text.partition(":")
+    """``NAME`` or ``NAME:key=value,...`` with each value parsed and checked by the estimator's declarations.
+
+    Runs before any data is read: an unknown name, an unknown setting, a value of the wrong type or
+    out of range, or an empty setting list (``NAME:``) raise :class:`EstimatorError` naming it.
+    """
+    from psg_data.estimators import get_factory
+    from psg_data.estimators._params import declared, parse_setting
+
+    name, colon, rest = text.partition(":")
+    name = name.strip()
+    factory = get_factory(name)
+    parts = [p.strip() for p in rest.split(",")] if colon else []
+    if colon and not any(parts):
+        raise EstimatorError(f"--estimator {text!r}: no settings after ':'; expected NAME or NAME:key=value[,key=value]")
+    declarations = declared(factory)
+    valid = _setting_names(factory)
     settings = []
-    for part in filter(None, (p.strip() for p in rest.split(","))):
+    for part in parts:
         key, eq, value = part.partition("=")
         if not eq or not key.strip().isidentifier():
             raise EstimatorError(f"--estimator {text!r}: expected NAME or NAME:key=value[,key=value], got {part!r}")
-        settings.append((key.strip(), _literal(value.strip())))
-    return EstimatorSpec(text, name.strip(), tuple(settings))
+        settings.append((key.strip(), parse_setting(f"--estimator {text!r}", declarations, key.strip(), value, valid)))
+    return EstimatorSpec(text, name, tuple(settings))
+
+
+def _setting_names(factory: Any) -> list[str] | None:
+    """The keyword settings ``factory`` accepts (None when it takes ``**kwargs`` we cannot see)."""
+    names = getattr(factory, "_param_names", None)
+    if callable(names):
+        return list(names())
+    import inspect
+
+    try:
+        params = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return None
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return None
+    return [k for k, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY or p.default is not p.empty]
 
 
 def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
@@ -64,8 +87,8 @@ def check_estimators(specs: list[EstimatorSpec]) -> None:
     for spec in specs:
         try:
             get_estimator(spec.name, **dict(spec.settings))
-        except EstimatorError:
-            raise
+        except EstimatorError as exc:
+            raise EstimatorError(f"--estimator {spec.label!r}: {exc}") from None
         except TypeError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: bad settings ({exc})") from None
 

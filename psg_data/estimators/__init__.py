@@ -3,7 +3,9 @@
 Built-ins (``list_estimators()``): ``perpetua_star`` (FreMEn switching prior; ``prior=`` selects
 "fremen", "oracle", "schedule" or "none"), ``perpetua_star_schedule``, ``perpetua_star_oracle``,
 ``perpetua``, ``persistence_filter``, ``fremen``, ``last_seen``, ``always_present``,
-``time_of_week_frequency``. Plugins register in the entry-point group ``psg_data.estimators``.
+``time_of_week_frequency``. Plugins register in the entry-point group ``psg_data.estimators``
+and may declare their settings (``_parameters = {"alpha": Real(0, 1)}``, see :class:`Param`) so
+that ``set_params`` and ``psg-eval -e NAME:alpha=...`` check them before any work.
 
 Example::
 
@@ -34,7 +36,14 @@ from psg_data.estimators._priors import (
     parse_llm_schedule,
     render_llm_prompt,
 )
-from psg_data.estimators._registry import ENTRY_POINT_GROUP, get_estimator, list_estimators, register_estimator
+from psg_data.estimators._params import Boolean, Integral, Options, Pair, Param, Real
+from psg_data.estimators._registry import (
+    ENTRY_POINT_GROUP,
+    get_estimator,
+    get_factory,
+    list_estimators,
+    register_estimator,
+)
 from psg_data.estimators._simple import (
     AlwaysPresentEstimator,
     LastSeenEstimator,
@@ -50,6 +59,13 @@ __all__ = [
     "EdgeFilter",
     "PersistenceEstimator",
     "get_estimator",
+    "get_factory",
+    "Param",
+    "Real",
+    "Integral",
+    "Options",
+    "Boolean",
+    "Pair",
     "list_estimators",
     "register_estimator",
     "ENTRY_POINT_GROUP",

@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import inspect
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError, NotFittedError
 from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.estimators._params import Integral, Options, Param, Real, check_params
 from psg_data.estimators._survival import SurvivalMixture
 from psg_data.estimators._training import EdgeDurations, fit_lognormal_mixture
 
-__all__ = ["BaseEstimator", "BaseFilter", "edge_to_json", "edge_from_json", "fit_survivals", "streams_by_edge"]
+__all__ = ["BaseEstimator", "BaseFilter", "TRAINING_PARAMETERS", "edge_to_json", "edge_from_json", "fit_survivals", "streams_by_edge"]
 
 
 def edge_to_json(edge: EdgeKey) -> list[str]:
@@ -23,6 +24,16 @@ def edge_to_json(edge: EdgeKey) -> list[str]:
 
 def edge_from_json(v: Sequence[str]) -> EdgeKey:
     return (str(v[0]), str(v[1]))
+
+
+_E = TypeVar("_E", bound="BaseEstimator")
+
+
+def _same(a: Any, b: Any) -> bool:
+    try:
+        return bool(a == b) and type(a) is type(b)
+    except Exception:  # arrays and other objects without a plain ==
+        return a is b
 
 
 def streams_by_edge(streams: Sequence[EdgeStream] | None) -> dict[EdgeKey, list[EdgeStream]]:
@@ -35,22 +46,62 @@ def streams_by_edge(streams: Sequence[EdgeStream] | None) -> dict[EdgeKey, list[
 
 
 class BaseEstimator:
-    """scikit-learn style base: keyword-only settings stored unchanged, learned attributes end in ``_``."""
+    """scikit-learn style base: keyword-only settings stored unchanged, learned attributes end in ``_``.
+
+    Subclasses declare their settings in ``_parameters`` (name -> :class:`~psg_data.estimators._params.Param`);
+    :meth:`set_params` and :meth:`validate_params` check values against them, and ``psg-eval``
+    parses command-line settings with them. ``sklearn.base.clone`` works on every subclass.
+    """
 
     name: str = "base"
+    _parameters: ClassVar[Mapping[str, Param]] = {}
 
-    def get_params(self) -> dict[str, Any]:
-        for cls in type(self).__mro__:
-            init = cls.__dict__.get("__init__")
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        for klass in cls.__mro__:
+            init = klass.__dict__.get("__init__")
             if init is None:
                 continue
             params = inspect.signature(init).parameters
             if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-                return {k: getattr(self, k) for k in params if k != "self"}
-        return {}
+                return [k for k in params if k != "self"]
+        return []
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The keyword-only settings (``deep`` is accepted for scikit-learn; no setting is an estimator)."""
+        return {k: getattr(self, k) for k in self._param_names()}
+
+    def set_params(self: _E, **params: Any) -> _E:
+        """Set settings by name (checked against the declarations); return self.
+
+        Raises:
+            EstimatorError: an unknown setting (the valid ones are listed) or a value out of range.
+        """
+        valid = self._param_names()
+        for key, value in params.items():
+            if key not in valid:
+                raise EstimatorError(f"{self.name}: unknown setting {key!r}; valid settings: {', '.join(valid) or 'none'}")
+            if key in self._parameters:
+                self._parameters[key].check(self.name, key, value)
+        for key, value in params.items():
+            setattr(self, key, value)
+        return self
+
+    def validate_params(self) -> None:
+        """Check every declared setting's current value; raise :class:`EstimatorError` on the first bad one."""
+        check_params(self.name, self._parameters, self.get_params())
 
     def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        """scikit-learn style: only the settings that differ from their defaults."""
+        defaults = {}
+        for klass in type(self).__mro__:
+            init = klass.__dict__.get("__init__")
+            if init is not None:
+                for k, p in inspect.signature(init).parameters.items():
+                    if p.default is not inspect.Parameter.empty:
+                        defaults.setdefault(k, p.default)
+        changed = {k: v for k, v in self.get_params().items() if k not in defaults or not _same(v, defaults[k])}
+        args = ", ".join(f"{k}={v!r}" for k, v in changed.items())
         return f"{type(self).__name__}({args})"
 
     def _check_fitted(self) -> None:
@@ -119,6 +170,18 @@ class BaseFilter:
 
     def _predict(self, t: NDArray[np.float64]) -> NDArray[np.float64]:  # pragma: no cover
         raise NotImplementedError
+
+
+TRAINING_PARAMETERS: dict[str, Param] = {
+    "max_components": Integral(1, 10, help="largest number of mixture components tried by AIC"),
+    "p_m": Real(0.0, 0.5, none_ok=True, help="P(seen absent | present); none: estimated from the training data"),
+    "p_f": Real(0.0, 0.5, none_ok=True, help="P(seen present | absent); none: estimated from the training data"),
+    "durations": Options("segments", "ground_truth", "auto", help="where training run durations come from"),
+    "min_segment": Integral(1, None, help="shortest change-point segment, observations"),
+    "segment_penalty": Real(0.0, None, help="change-point penalty, nats"),
+    "random_state": Integral(0, None, help="seed of the EM restarts"),
+}
+"""Settings shared by the estimators trained on run durations (Perpetua*, Perpetua)."""
 
 
 def _fallback(d: NDArray[np.float64], pooled: NDArray[np.float64], dominant: bool, span_s: float,

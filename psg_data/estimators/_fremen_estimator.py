@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
 from psg_data.estimators._common import BaseEstimator, BaseFilter, streams_by_edge
 from psg_data.estimators._fremen import WEEK_S, FremenComponents, FremenModel, LocalClock, choose_order
+from psg_data.estimators._params import Integral, Real
 
 __all__ = ["FremenEstimator", "FremenFilter", "fit_fremen_edge", "training_clock"]
 
@@ -86,6 +86,11 @@ class FremenEstimator(BaseEstimator):
     """
 
     name = "fremen"
+    _parameters = {
+        "n_periods": Integral(0, None, help="candidate periods one week / k, k = 1..n_periods"),
+        "max_order": Integral(0, None, none_ok=True, help="largest order tried on validation data (none: n_periods)"),
+        "order_tol": Real(0.0, None, help="MAE tolerance favouring smaller orders"),
+    }
 
     def __init__(self, *, n_periods: int = 1000, max_order: int | None = None, order_tol: float = 1e-3) -> None:
         self.n_periods = n_periods
@@ -94,8 +99,7 @@ class FremenEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> FremenEstimator:
-        if int(self.n_periods) < 0:
-            raise EstimatorError(f"fremen: n_periods must be >= 0, got {self.n_periods}")
+        self.validate_params()
         tr = streams_by_edge(streams)
         va = streams_by_edge(val_streams)
         self.clock_ = training_clock(list(streams), timezone)

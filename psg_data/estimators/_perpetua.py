@@ -23,8 +23,9 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.estimators._common import BaseEstimator, BaseFilter, fit_survivals
+from psg_data.estimators._common import TRAINING_PARAMETERS, BaseEstimator, BaseFilter, fit_survivals
 from psg_data.estimators._mixture import MixtureFilter
+from psg_data.estimators._params import Integral, Real
 from psg_data.estimators._survival import SurvivalMixture
 from psg_data.estimators._training import collect_durations
 
@@ -163,6 +164,13 @@ class PerpetuaEstimator(BaseEstimator):
     """
 
     name = "perpetua"
+    _parameters = {
+        "delta_low": Real(0.0, 1.0, closed="neither", help="switch to emergence when the belief drops to this"),
+        "delta_high": Real(0.0, 1.0, closed="neither", help="switch back to persistence at this"),
+        "eps": Real(0.0, 1.0, help="weight of the initial component prior after a restart"),
+        "num_steps": Integral(0, None, help="simulated sub-steps between observations"),
+        **TRAINING_PARAMETERS,
+    }
 
     def __init__(self, *, delta_low: float = 0.05, delta_high: float = 0.95, eps: float = 0.1, num_steps: int = 1,
                  max_components: int = 5, p_m: float | None = None, p_f: float | None = None,
@@ -182,6 +190,7 @@ class PerpetuaEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> PerpetuaEstimator:
+        self.validate_params()
         if not (0.0 < float(self.delta_low) < float(self.delta_high) < 1.0):
             raise EstimatorError(f"{self.name}: need 0 < delta_low < delta_high < 1, got {self.delta_low}, "
                                  f"{self.delta_high}")

@@ -39,9 +39,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.estimators._common import BaseEstimator, BaseFilter, fit_survivals, streams_by_edge
+from psg_data.estimators._common import TRAINING_PARAMETERS, BaseEstimator, BaseFilter, fit_survivals, streams_by_edge
 from psg_data.estimators._fremen_estimator import fit_fremen_edge, training_clock
 from psg_data.estimators._mixture import MixtureFilter, ScanResult
+from psg_data.estimators._params import Integral, MappingParam, Options, Real
 from psg_data.estimators._priors import (
     ConstantPrior,
     FremenPrior,
@@ -388,6 +389,21 @@ class PerpetuaStarEstimator(BaseEstimator):
     """
 
     name = "perpetua_star"
+    _parameters = {
+        "prior": Options(*PRIOR_KINDS, help="switching prior"),
+        "gamma": Real(0.0, 1.0, help="forgetting factor on the model likelihoods, per observation"),
+        "alpha0": Real(0.0, None, help="annealing decay rate per time_unit_s"),
+        "time_unit_s": Real(0.0, None, closed="right", help="time unit of alpha0, seconds"),
+        **TRAINING_PARAMETERS,
+        "n_periods": Integral(0, None, help="FreMEn prior: candidate periods one week / k"),
+        "max_order": Integral(0, None, none_ok=True, help="FreMEn prior: largest order tried"),
+        "order_tol": Real(0.0, None, help="FreMEn prior: MAE tolerance favouring smaller orders"),
+        "schedules": MappingParam(help="schedule prior: edge -> LLM-format schedule"),
+        "schedule_inside": Real(0.0, 1.0, help="schedule prior value inside the scheduled intervals"),
+        "schedule_outside": Real(0.0, 1.0, help="schedule prior value outside them"),
+        "ground_truth": MappingParam(help="oracle prior: edge -> (t_s, state)"),
+        "prior_floor": Real(0.0, 0.5, closed="neither", help="prior clipped to [floor, 1 - floor]"),
+    }
 
     def __init__(self, *, prior: str = "fremen", gamma: float = 0.99, alpha0: float = 0.01, time_unit_s: float = 60.0,
                  max_components: int = 5, p_m: float | None = None, p_f: float | None = None,
@@ -417,14 +433,7 @@ class PerpetuaStarEstimator(BaseEstimator):
         self.random_state = random_state
 
     def _validate(self) -> None:
-        if self.prior not in PRIOR_KINDS:
-            raise EstimatorError(f"{self.name}: prior must be one of {', '.join(PRIOR_KINDS)}, got {self.prior!r}")
-        if not (0.0 <= float(self.gamma) <= 1.0):
-            raise EstimatorError(f"{self.name}: gamma must be in [0, 1], got {self.gamma}")
-        if float(self.alpha0) < 0 or float(self.time_unit_s) <= 0:
-            raise EstimatorError(f"{self.name}: alpha0 must be >= 0 and time_unit_s > 0")
-        if not (0.0 < float(self.prior_floor) < 0.5):
-            raise EstimatorError(f"{self.name}: prior_floor must be in (0, 0.5), got {self.prior_floor}")
+        self.validate_params()
         if self.prior == "schedule" and not self.schedules:
             raise EstimatorError(f"{self.name}: prior='schedule' needs schedules={{(object, receptacle): llm_answer}}")
 

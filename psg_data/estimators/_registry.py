@@ -20,8 +20,9 @@ from typing import Any
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import PersistenceEstimator
+from psg_data.estimators._params import check_params, declared
 
-__all__ = ["get_estimator", "list_estimators", "register_estimator", "ENTRY_POINT_GROUP"]
+__all__ = ["get_estimator", "get_factory", "list_estimators", "register_estimator", "ENTRY_POINT_GROUP"]
 
 log = logging.getLogger(__name__)
 
@@ -68,24 +69,35 @@ def _load(spec: str) -> Callable[..., PersistenceEstimator]:
     return getattr(importlib.import_module(mod), attr)  # type: ignore[no-any-return]
 
 
+def get_factory(name: str) -> Callable[..., PersistenceEstimator]:
+    """The class or factory registered as ``name`` (not called; plugins are loaded here).
+
+    Raises:
+        EstimatorError: unknown name (the message lists the valid names) or a plugin that fails to load.
+    """
+    if name in _REGISTERED:
+        return _REGISTERED[name]
+    if name in _BUILTINS:
+        return _load(_BUILTINS[name])
+    eps = _entry_points()
+    if name not in eps:
+        raise EstimatorError(f"unknown estimator {name!r}; valid names: {', '.join(list_estimators())}")
+    try:
+        return eps[name].load()  # type: ignore[no-any-return]
+    except Exception as exc:
+        raise EstimatorError(f"estimator plugin {name!r} ({eps[name].value}) failed to load: {exc}") from exc
+
+
 def get_estimator(name: str, **settings: Any) -> PersistenceEstimator:
     """An unfitted estimator configured with keyword-only ``settings``.
+
+    Settings the estimator declares (``_parameters``) are checked here, before any data is read.
 
     Raises:
         EstimatorError: unknown name (the message lists the valid names) or invalid settings.
     """
-    if name in _REGISTERED:
-        factory = _REGISTERED[name]
-    elif name in _BUILTINS:
-        factory = _load(_BUILTINS[name])
-    else:
-        eps = _entry_points()
-        if name not in eps:
-            raise EstimatorError(f"unknown estimator {name!r}; valid names: {', '.join(list_estimators())}")
-        try:
-            factory = eps[name].load()
-        except Exception as exc:
-            raise EstimatorError(f"estimator plugin {name!r} ({eps[name].value}) failed to load: {exc}") from exc
+    factory = get_factory(name)
+    check_params(name, declared(factory), settings)
     try:
         est = factory(**settings)
     except TypeError as exc:

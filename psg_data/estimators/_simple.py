@@ -23,6 +23,7 @@ from psg_data.estimators._common import BaseEstimator, BaseFilter, streams_by_ed
 from psg_data.estimators._fremen import WEEK_S, LocalClock
 from psg_data.estimators._fremen_estimator import training_clock
 from psg_data.estimators._mixture import MixtureFilter
+from psg_data.estimators._params import Options, Pair, Real
 from psg_data.estimators._survival import SURVIVAL_FAMILIES, SurvivalMixture
 from psg_data.estimators._training import collect_durations
 
@@ -83,6 +84,13 @@ class PersistenceFilterEstimator(BaseEstimator):
     """
 
     name = "persistence_filter"
+    _parameters = {
+        "survival": Options(*SURVIVAL_FAMILIES, help="survival prior family"),
+        "survival_params": Pair(none_ok=True, help="fixed prior parameters (p1, p2); none: fitted per edge"),
+        "p_m": Real(0.0, 0.5, none_ok=True, help="P(seen absent | present); none: estimated"),
+        "p_f": Real(0.0, 0.5, none_ok=True, help="P(seen present | absent); none: estimated"),
+        "durations": Options("segments", "ground_truth", "auto", help="where training run durations come from"),
+    }
 
     def __init__(self, *, survival: str = "exponential", survival_params: tuple[float, float] | None = None,
                  p_m: float | None = None, p_f: float | None = None, durations: str = "segments") -> None:
@@ -94,9 +102,7 @@ class PersistenceFilterEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> PersistenceFilterEstimator:
-        if self.survival not in SURVIVAL_FAMILIES:
-            raise EstimatorError(f"{self.name}: survival must be one of {', '.join(SURVIVAL_FAMILIES)}, "
-                                 f"got {self.survival!r}")
+        self.validate_params()
         durs, (pm, pf) = collect_durations(list(streams), source=self.durations)
         self.p_m_ = float(self.p_m) if self.p_m is not None else pm
         self.p_f_ = float(self.p_f) if self.p_f is not None else pf
@@ -220,6 +226,10 @@ class TimeOfWeekFrequencyEstimator(BaseEstimator):
     """
 
     name = "time_of_week_frequency"
+    _parameters = {
+        "bin_s": Real(0.0, WEEK_S, closed="right", help="time-of-week bin width, seconds"),
+        "pseudo_count": Real(0.0, None, help="Laplace smoothing towards the edge's overall frequency"),
+    }
 
     def __init__(self, *, bin_s: float = 3600.0, pseudo_count: float = 1.0) -> None:
         self.bin_s = bin_s
@@ -227,8 +237,7 @@ class TimeOfWeekFrequencyEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> TimeOfWeekFrequencyEstimator:
-        if not (0 < float(self.bin_s) <= WEEK_S):
-            raise EstimatorError(f"{self.name}: bin_s must be in (0, {WEEK_S}], got {self.bin_s}")
+        self.validate_params()
         streams = list(streams)
         self.clock_ = training_clock(streams, timezone)
         nb = int(np.ceil(WEEK_S / float(self.bin_s)))
