@@ -53,7 +53,17 @@ from psg_data.navigation._grid import (
     line_of_sight,
     points_in_polygon,
 )
-from psg_data.navigation._planner import SQRT2, PathResult, PlanningCache, astar, grid_graph, octile_distance, path_length_m
+from psg_data.navigation._planner import (
+    SQRT2,
+    GridPlanner,
+    PathResult,
+    PlanningCache,
+    astar,
+    astar_reference,
+    grid_graph,
+    octile_distance,
+    path_length_m,
+)
 from psg_data.navigation._plots import plot_query
 from psg_data.navigation._queries import (
     CATEGORIES,
@@ -87,6 +97,8 @@ __all__ = [
     "line_of_sight",
     "PathResult",
     "astar",
+    "astar_reference",
+    "GridPlanner",
     "octile_distance",
     "path_length_m",
     "grid_graph",
