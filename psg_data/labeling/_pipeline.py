@@ -358,6 +358,8 @@ class LabelSummary:
         timings: seconds per stage.
         written: paths written.
         extra: source-specific numbers.
+        edge_kind: ``"object"``, or ``"door"`` for the door-only source ``observed`` (its edges,
+            observations and codes are then the door-state edges').
     """
 
     source: str
@@ -368,11 +370,14 @@ class LabelSummary:
     timings: dict[str, float] = field(default_factory=dict)
     written: list[str] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
+    edge_kind: str = "object"
 
     def lines(self) -> list[str]:
         m, lo, hi = self.obs_per_edge
         c = self.codes
-        out = [f"source {self.source}: {self.n_edges} edges, observations per edge mean {m:.1f} (min {lo}, max {hi})",
+        kind = "door-state " if self.edge_kind == "door" else ""
+        out = [f"source {self.source}: {self.n_edges} {kind}edges, observations per {kind}edge mean {m:.1f} "
+               f"(min {lo}, max {hi})",
                f"codes: 1 (present) {c.get(1, 0)}, 0 (absent) {c.get(0, 0)}, -1 (not observed) {c.get(-1, 0)}, "
                f"-2 (invalid) {c.get(-2, 0)}"]
         if self.rates is not None:
@@ -388,8 +393,11 @@ class LabelSummary:
 
 
 def summarize(res: LabelResult) -> LabelSummary:
-    """Summary of a :class:`LabelResult`."""
+    """Summary of a :class:`LabelResult` (door-only sources are summarised by their door edges)."""
     g = res.labels
+    edge_kind = "object"
+    if not g.object_ids and res.doors is not None:
+        g, edge_kind = res.doors, "door"
     valid = g.valid
     n_obs = g.observed.sum(axis=0)[valid]
     rates = error_rates(g, res.gt) if res.gt is not None and g.source not in ("gt", "observed") else None
@@ -416,7 +424,7 @@ def summarize(res: LabelResult) -> LabelSummary:
     return LabelSummary(g.source, int(valid.sum()),
                         (float(n_obs.mean()) if n_obs.size else 0.0, int(n_obs.min()) if n_obs.size else 0,
                          int(n_obs.max()) if n_obs.size else 0),
-                        g.code_counts(), rates, dict(res.timings), extra=extra)
+                        g.code_counts(), rates, dict(res.timings), extra=extra, edge_kind=edge_kind)
 
 
 def label_dataset(root: str | Path, source: str, *, seed: int = 0, overwrite: bool = False,

@@ -104,6 +104,10 @@ def persistence_task_from_dataset(
         spec = parse_source(labels)
     except LabelingError as exc:
         raise EvaluationError(str(exc)) from None
+    if spec.kind == "observed":
+        raise EvaluationError("labels 'observed': a door-only source (door states read from the depth images); the "
+                              "persistence task scores object edges: use gt, privileged, noisy:P or detections:FILE, "
+                              "or score doors with `psg-eval --task doors --labels observed`")
     if spec.kind == "gt":
         grid = compute_labels(ds, "gt", seed=seed).labels
     else:

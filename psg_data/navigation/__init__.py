@@ -3,9 +3,14 @@
 - Grids (:mod:`._grid`): :func:`grid_from_geometry` (room polygons, walls, receptacle footprints,
   switchable doorways), :func:`grid_from_points` / :func:`grid_from_scans` (fused point clouds),
   :class:`OccupancyGrid` (robot-radius inflation per door configuration).
-- Planning (:mod:`._planner`): :func:`astar` (8-connected, octile costs, no corner cutting),
-  :func:`grid_graph` and :class:`PlanningCache` (cached multi-source Dijkstra fields per receptacle
-  approach set and door configuration).
+- Planning (:mod:`._planner`): :func:`astar` / :class:`GridPlanner` (exact 8-connected shortest
+  paths, octile costs, no corner cutting, through ``scipy.sparse.csgraph``; the pure-Python
+  :func:`astar_reference` is the test oracle), :func:`grid_graph` and :class:`PlanningCache` (cached
+  multi-source Dijkstra fields per receptacle approach set and door configuration).
+- Label sources (:mod:`._sources`): map, door and sighting observations of ``gt``, ``privileged``,
+  ``noisy:P``, ``detections:FILE`` (:func:`source_observations`, :class:`ObservationModel`).
+- Options (:mod:`._options`): :class:`NavigationOptions` and the :data:`PROTOCOLS` ``sim`` and
+  ``paper-real`` (25 queries: 10 static, 10 dynamic, 5 absent, one fixed start, adaptive).
 - Queries (:mod:`._queries`): :func:`make_queries` (seeded, static / dynamic / absent), stored with
   :func:`save_queries` / :func:`load_queries`.
 - Environment (:mod:`._env`): :class:`NavigationEnv` from a dataset or the synthetic lab, with the
@@ -40,7 +45,7 @@ from psg_data.navigation._doors import (
     run_door_episode,
     run_door_navigation,
 )
-from psg_data.navigation._env import WEEK_S, NavigationEnv, streams_from_states
+from psg_data.navigation._env import WEEK_S, DatasetTimeline, NavigationEnv, streams_from_states
 from psg_data.navigation._grid import (
     OccupancyGrid,
     box_footprint,
@@ -64,6 +69,7 @@ from psg_data.navigation._planner import (
     octile_distance,
     path_length_m,
 )
+from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
 from psg_data.navigation._plots import plot_query
 from psg_data.navigation._queries import (
     CATEGORIES,
@@ -74,6 +80,7 @@ from psg_data.navigation._queries import (
     queries_to_frame,
     save_queries,
 )
+from psg_data.navigation._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
 from psg_data.navigation._runner import (
     ABSENT_RULES,
     METRICS,
@@ -105,7 +112,16 @@ __all__ = [
     "PlanningCache",
     "SQRT2",
     "NavigationEnv",
+    "DatasetTimeline",
     "streams_from_states",
+    "NavigationOptions",
+    "PROTOCOLS",
+    "DOOR_BELIEFS",
+    "START_MODES",
+    "ObservationModel",
+    "SourceObservations",
+    "source_observations",
+    "grid_map_streams",
     "WEEK_S",
     "Query",
     "CATEGORIES",

@@ -15,10 +15,17 @@ Episode (the paper's location-prediction and active-navigation tools):
    closed), it stops in front of it, marks that door closed and replans (the walked distance
    counts). With ``detect_en_route`` it stops as soon as it stands in the approach set of the
    receptacle that really holds the object (the object is then within reach and visible).
-4. Arriving at the candidate, it sees whether the object is there. If not: in the ``adaptive``
-   setting it updates that edge's filter with ``y = 0`` at the current time (query time plus the
-   walking time at ``speed_mps``) and recomputes all beliefs before the next decision; in the
-   ``predictive`` setting beliefs stay those of the query time. Then back to 1.
+4. Arriving at the candidate, it looks whether the object is there. If it sees it, it stops
+   (outcome ``found``, or ``false_positive`` when the object is not really there). If not: in the
+   ``adaptive`` setting it updates that edge's filter with ``y = 0`` at the current time (query
+   time plus the walking time at ``speed_mps``) and recomputes all beliefs before the next
+   decision; in the ``predictive`` setting beliefs stay those of the query time. Then back to 1.
+
+Looking (on arrival, and when a path first enters the approach set of the receptacle that holds
+the object, with ``detect_en_route``) goes through the environment's sighting model
+(:class:`~psg_data.navigation._sources.ObservationModel`): exact for ground-truth and privileged
+labels, with the source's miss and false-positive rates for noisy or perception labels. A missed
+object is walked past.
 
 Success: the object is present and the final cell is in the approach set of its true receptacle
 under the true door states (within ``reach_m`` = 1 m with line of sight on the grid).
@@ -40,13 +47,14 @@ from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeFilter
 from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query
+from psg_data.navigation._sources import ObservationModel
 
 __all__ = ["AgentConfig", "Episode", "run_episode", "SETTINGS", "OUTCOMES"]
 
 log = logging.getLogger(__name__)
 
 SETTINGS = ("predictive", "adaptive")
-OUTCOMES = ("found", "abort", "exhausted", "no_path")
+OUTCOMES = ("found", "false_positive", "abort", "exhausted", "no_path")
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,7 @@ class Episode:
     final_xy: tuple[float, float]
     doors_discovered: list[str] = field(default_factory=list)
     beliefs: dict[str, float] = field(default_factory=dict)
+    n_missed: int = 0
     trail: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
 
 
@@ -132,6 +141,7 @@ def run_episode(
     *,
     beliefs: Mapping[str, float] | None = None,
     door_belief: Mapping[str, bool] | None = None,
+    observation: ObservationModel | None = None,
 ) -> Episode:
     """Run one query.
 
@@ -144,6 +154,7 @@ def run_episode(
         beliefs: precomputed beliefs at the query time (receptacle_id -> P(present)); default:
             predicted from ``filters``.
         door_belief: door states the agent plans with (default: the true states at the query time).
+        observation: sighting model (default: exact sightings).
 
     Returns:
         The :class:`Episode`.
@@ -170,6 +181,16 @@ def run_episode(
     pred_rec = min(bel, key=lambda r: (-bel[r], r)) if bel else None
     best = bel[pred_rec] if pred_rec is not None else 0.0
 
+    model = observation or ObservationModel()
+    rec_index = {r: k for k, r in enumerate(sorted(grid.receptacle_cells))}
+    looks: dict[str, int] = {}
+
+    def sees(rec: str, there: bool) -> bool:
+        k = looks.get(rec, 0)
+        looks[rec] = k + 1
+        return model.sees(there, (query.seed, query.query_id, rec_index.get(rec, -1), k))
+
+    n_missed = 0
     cur = query.start_cell[0] * W + query.start_cell[1]
     trail: list[NDArray[np.int64]] = [np.array([cur], dtype=np.int64)]
     walked = 0.0
@@ -209,10 +230,13 @@ def run_episode(
             kb = int(blocked[0]) if blocked.size else -1
             if kb >= 0:
                 stop, event = kb - 1, "blocked"
-            if config.detect_en_route and approach_true is not None:
+            if config.detect_en_route and approach_true is not None and gt is not None:
                 hits = np.flatnonzero(approach_true[path[: stop + 1]])
                 if hits.size:
-                    stop, event = int(hits[0]), "found"
+                    if sees(gt, True):
+                        stop, event = int(hits[0]), "found"
+                    else:
+                        n_missed += 1
             seg = path[: stop + 1]
             walked += float(cache.step_lengths(seg)[-1])
             trail.append(seg[1:])
@@ -250,11 +274,12 @@ def run_episode(
         if not arrived:
             continue  # the target became unreachable once a closed door was seen: next candidate
         visited.append(target)
-        y = int(gt == target and approach_true is not None and bool(approach_true[cur]))
-        if y:
+        there = bool(gt == target and approach_true is not None and approach_true[cur])
+        if sees(target, there):
             found = True
             outcome = "found"
             break
+        n_missed += int(there)
         if adaptive:
             t_now = query.t_s + walked / config.speed_mps
             f = filters.get(target)
@@ -263,13 +288,15 @@ def run_episode(
             bel = {r: _predict(fl, t_now) for r, fl in filters.items() if r in grid.receptacle_cells}
 
     success = bool(found and gt is not None and approach_true is not None and approach_true[cur])
+    if found and not success:
+        outcome = "false_positive"
     xy = grid.cell_to_world((cur // W, cur % W))
     return Episode(
         query_id=query.query_id, object_id=query.object_id, category=query.category, outcome=outcome,
         success=success, aborted=outcome == "abort", path_m=walked,
         shortest_path_m=l_star if reachable else float("nan"), reachable=reachable, n_attempts=attempts,
         visited=visited, predicted_receptacle=pred_rec, best_belief=float(best), final_xy=(float(xy[0]), float(xy[1])),
-        doors_discovered=discovered, beliefs=initial, trail=np.concatenate(trail))
+        doors_discovered=discovered, beliefs=initial, trail=np.concatenate(trail), n_missed=n_missed)
 
 
 def episode_record(ep: Episode, **extra: Any) -> dict[str, Any]:
@@ -281,4 +308,4 @@ def episode_record(ep: Episode, **extra: Any) -> dict[str, Any]:
             "shortest_path_m": ep.shortest_path_m, "reachable": ep.reachable, "n_attempts": ep.n_attempts,
             "visited": json.dumps(ep.visited), "predicted_receptacle": ep.predicted_receptacle,
             "best_belief": ep.best_belief, "final_x_m": ep.final_xy[0], "final_y_m": ep.final_xy[1],
-            "doors_discovered": json.dumps(ep.doors_discovered)}
+            "doors_discovered": json.dumps(ep.doors_discovered), "n_missed": ep.n_missed}

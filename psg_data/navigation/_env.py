@@ -10,9 +10,12 @@ A :class:`NavigationEnv` is what the agent and the scorer need from a dataset:
   ``doors_at(t_s) -> dict[door_id, bool]`` (True = open).
 
 Edges: for every object, the receptacles it was seen on during the mapping scans (the paper's
-"previously observed receptacles"). Every mapping scan yields, for each of those edges, ``y = 1``
-if the object was on that receptacle and ``y = 0`` otherwise, stamped at the scan start. These are
-privileged (ground-truth) observations from the ``schedule`` table.
+"previously observed receptacles"). The observations come from a label source
+(:mod:`psg_data.navigation._sources`): with ``labels="gt"`` (default) every mapping scan yields, for
+each of those edges, ``y = 1`` if the object was on that receptacle and ``y = 0`` otherwise, stamped
+at the scan start; other sources observe what they saw. The door observations of the same source
+(``door_streams``) drive predicted door states, and its sighting model (``observation``) what the
+agent sees on the way. The ground truth (``gt_at`` / ``doors_at``) is always the schedule.
 """
 
 from __future__ import annotations
@@ -29,9 +32,10 @@ import numpy as np
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream
 from psg_data.navigation._grid import OccupancyGrid, grid_from_dataset, grid_from_geometry
+from psg_data.navigation._sources import ObservationModel, source_observations
 from psg_data.schemas._records import Door, Receptacle
 
-__all__ = ["NavigationEnv", "streams_from_states", "WEEK_S"]
+__all__ = ["NavigationEnv", "DatasetTimeline", "streams_from_states", "WEEK_S"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +66,94 @@ def streams_from_states(times_s: Sequence[float], states: Sequence[Mapping[str, 
 
 
 @dataclass
+class DatasetTimeline:
+    """The scans of a dataset in time order with their ground truth (a step function between scans).
+
+    Attributes:
+        ids: scan ids, chronological.
+        start_s, end_s: scan start / end times, float seconds UTC.
+        map_ids: the map scans (chronological).
+        by_scan: scan -> {object_id: receptacle_id | None} (the ``schedule`` table).
+        door_by_scan: scan -> {door_id: is_open} (the ``door_states`` table; 'unknown' counts open).
+        door_ids: the dataset's doors.
+        t_map_s: end of the last map scan; t_end_s: end of the last later scan (or a week after).
+    """
+
+    ids: list[str]
+    start_s: list[float]
+    end_s: list[float]
+    map_ids: list[str]
+    by_scan: dict[str, dict[str, str | None]]
+    door_by_scan: dict[str, dict[str, bool]]
+    door_ids: list[str]
+    t_map_s: float
+    t_end_s: float
+
+    @classmethod
+    def from_dataset(cls, dataset: Any, map_scans: Sequence[str] | None = None, *, need_schedule: bool = True
+                     ) -> DatasetTimeline:
+        """Timeline of a dataset; map scans default to split 'train' (if no scan has a split, the
+        first two thirds of the scans).
+
+        Raises:
+            EvaluationError: no scans, no map scans, or (``need_schedule``) an empty schedule.
+        """
+        scans = dataset.df("scans").sort_values(["start_stamp_ns", "scan_id"]).reset_index(drop=True)
+        if scans.empty:
+            raise EvaluationError(f"{dataset.root}: no scans; navigation needs scans with a schedule")
+        sched = dataset.df("schedule") if dataset.has_table("schedule") else None
+        if need_schedule and (sched is None or sched.empty):
+            raise EvaluationError(f"{dataset.root}: table 'schedule' is empty; navigation needs ground truth")
+        if map_scans is None:
+            if scans["split"].notna().any():
+                map_ids = scans.loc[scans["split"] == "train", "scan_id"].tolist()
+            else:
+                map_ids = scans["scan_id"].tolist()[: max(1, int(round(len(scans) * 2 / 3)))]
+        else:
+            map_ids = list(map_scans)
+        if not map_ids:
+            raise EvaluationError(f"{dataset.root}: no map scans (no scan with split 'train')")
+        ids = scans["scan_id"].tolist()
+        pos = {sid: k for k, sid in enumerate(ids)}
+        unknown = [m for m in map_ids if m not in pos]
+        if unknown:
+            raise EvaluationError(f"{dataset.root}: map scans {unknown[:3]} are not in the scans table")
+        by_scan: dict[str, dict[str, str | None]] = {sid: {} for sid in ids}
+        if sched is not None:
+            for sid, o, r in zip(sched["scan_id"], sched["object_id"], sched["receptacle_id"]):
+                by_scan.setdefault(sid, {})[o] = None if r is None or (isinstance(r, float) and np.isnan(r)) else str(r)
+        door_by_scan: dict[str, dict[str, bool]] = {}
+        if dataset.has_table("door_states"):
+            ds_ = dataset.df("door_states")
+            for sid, d, st in zip(ds_["scan_id"], ds_["door_id"], ds_["state"]):
+                door_by_scan.setdefault(sid, {})[d] = st != "closed"
+        start_s = (scans["start_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
+        end_s = (scans["end_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
+        map_ids = sorted(map_ids, key=lambda x: pos[x])
+        last = pos[map_ids[-1]]
+        later = end_s[last + 1:]
+        t_map = end_s[last]
+        return cls(ids, start_s, end_s, map_ids, by_scan, door_by_scan,
+                   list(dataset.doors) if dataset.has_table("doors") else [], float(t_map),
+                   float(max(later) if later else t_map + WEEK_S))
+
+    def scan_before(self, t_s: float) -> str:
+        """The latest scan starting at or before ``t_s`` (the first scan before any)."""
+        k = bisect.bisect_right(self.start_s, t_s) - 1
+        return self.ids[max(k, 0)]
+
+    def gt_at(self, object_id: str, t_s: float) -> str | None:
+        return self.by_scan.get(self.scan_before(t_s), {}).get(object_id)
+
+    def doors_of(self, scan_id: str) -> dict[str, bool]:
+        st = self.door_by_scan.get(scan_id, {})
+        return {d: bool(st.get(d, True)) for d in self.door_ids}
+
+    def doors_at(self, t_s: float) -> dict[str, bool]:
+        return self.doors_of(self.scan_before(t_s))
+
+
+@dataclass
 class NavigationEnv:
     """Everything the navigation harness needs from one dataset (or synthetic lab).
 
@@ -79,6 +171,13 @@ class NavigationEnv:
         map_state: object -> receptacle (None = absent) at the last map update.
         map_doors: door -> is_open at the last map update.
         timezone: IANA site timezone.
+        extra: provenance (source, map scans, label info).
+        door_streams: ``(door_id, 'open')`` observations up to the last map update, from the
+            same label source as ``map_streams``.
+        observation: the agent's sighting model of that source.
+        labels: the label source of ``map_streams`` / ``door_streams``.
+        start_xy: world (x, y) of the recordings' first camera pose, metres (the robot's dock;
+            the fixed start of the real-world protocol), or None.
     """
 
     name: str
@@ -95,6 +194,10 @@ class NavigationEnv:
     map_doors: dict[str, bool]
     timezone: str = "UTC"
     extra: dict[str, Any] = field(default_factory=dict)
+    door_streams: list[EdgeStream] = field(default_factory=list)
+    observation: ObservationModel = field(default_factory=ObservationModel)
+    labels: str = "gt"
+    start_xy: tuple[float, float] | None = None
 
     @property
     def edges(self) -> list[EdgeKey]:
@@ -114,6 +217,8 @@ class NavigationEnv:
         resolution_m: float = 0.05,
         robot_radius_m: float = 0.25,
         name: str | None = None,
+        labels: str = "gt",
+        label_seed: int = 0,
     ) -> NavigationEnv:
         """Environment of a psg-dataset (a :class:`~psg_data.loaders.Dataset` or its path).
 
@@ -126,9 +231,12 @@ class NavigationEnv:
                 the latest scan starting at or before ``t`` (door state 'unknown' counts as open).
             resolution_m, robot_radius_m: grid parameters.
             name: environment name (default: the dataset name).
+            labels: label source of the map and door observations (``gt``, ``privileged``,
+                ``noisy:P[,P_F]``, ``detections:FILE``; :mod:`psg_data.navigation._sources`).
+            label_seed: seed of the ``noisy`` flips and of the agent's sighting draws.
 
         Raises:
-            EvaluationError: no schedule, no scans, or no map scans.
+            EvaluationError: no schedule, no scans, no map scans, or labels missing.
         """
         if isinstance(dataset, (str, Path)):
             from psg_data.loaders._dataset import open_dataset
@@ -137,69 +245,30 @@ class NavigationEnv:
         if grid is None:
             grid = grid_from_dataset(dataset, source=grid_source, resolution_m=resolution_m,
                                      robot_radius_m=robot_radius_m)
-        scans = dataset.df("scans").sort_values(["start_stamp_ns", "scan_id"]).reset_index(drop=True)
-        if scans.empty:
-            raise EvaluationError(f"{dataset.root}: no scans; navigation needs scans with a schedule")
-        sched = dataset.df("schedule")
-        if sched.empty:
-            raise EvaluationError(f"{dataset.root}: table 'schedule' is empty; navigation needs ground truth")
-        if map_scans is None:
-            if scans["split"].notna().any():
-                map_ids = scans.loc[scans["split"] == "train", "scan_id"].tolist()
-            else:
-                map_ids = scans["scan_id"].tolist()[: max(1, int(round(len(scans) * 2 / 3)))]
-        else:
-            map_ids = list(map_scans)
-        if not map_ids:
-            raise EvaluationError(f"{dataset.root}: no map scans (no scan with split 'train')")
+        tl = DatasetTimeline.from_dataset(dataset, map_scans, need_schedule=True)
         objects = sorted(dataset.objects) if dataset.has_table("objects") and len(dataset.objects) else sorted(
-            sched["object_id"].unique())
-        by_scan: dict[str, dict[str, str | None]] = {sid: {} for sid in scans["scan_id"]}
-        for sid, o, r in zip(sched["scan_id"], sched["object_id"], sched["receptacle_id"]):
-            by_scan.setdefault(sid, {})[o] = None if r is None or (isinstance(r, float) and np.isnan(r)) else str(r)
-        door_by_scan: dict[str, dict[str, bool]] = {}
-        if dataset.has_table("door_states"):
-            ds_ = dataset.df("door_states")
-            for sid, d, st in zip(ds_["scan_id"], ds_["door_id"], ds_["state"]):
-                door_by_scan.setdefault(sid, {})[d] = st != "closed"
-        start_s = (scans["start_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
-        end_s = (scans["end_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
-        ids = scans["scan_id"].tolist()
-        pos = {sid: k for k, sid in enumerate(ids)}
-        map_ids = sorted(map_ids, key=lambda s: pos[s])
-        door_ids = list(dataset.doors) if dataset.has_table("doors") else []
-
-        def _scan_before(t_s: float) -> str:
-            k = bisect.bisect_right(start_s, t_s) - 1
-            return ids[max(k, 0)]
-
-        def _gt(o: str, t_s: float) -> str | None:
-            return by_scan.get(_scan_before(t_s), {}).get(o)
-
-        def _doors(t_s: float) -> dict[str, bool]:
-            st = door_by_scan.get(_scan_before(t_s), {})
-            return {d: bool(st.get(d, True)) for d in door_ids}
-
-        last = map_ids[-1]
-        t_map = end_s[pos[last]]
-        later = [e for sid, e in zip(ids, end_s) if pos[sid] > pos[last]]
-        t_end = max(later) if later else t_map + WEEK_S
-        streams = streams_from_states([start_s[pos[s]] for s in map_ids], [by_scan[s] for s in map_ids], objects)
+            dataset.df("schedule")["object_id"].unique())
+        map_ids, last = tl.map_ids, tl.map_ids[-1]
+        src = source_observations(dataset, labels, map_ids, seed=label_seed)
         return cls(
             name=name or dataset.info.name or str(dataset.root.name),
             grid=grid,
             receptacles=dict(dataset.receptacles),
             doors=dict(dataset.doors) if dataset.has_table("doors") else {},
             object_ids=objects,
-            gt_at=gt_at or _gt,
-            doors_at=doors_at or _doors,
-            map_streams=streams,
-            t_map_s=float(t_map),
-            t_end_s=float(t_end),
-            map_state={o: by_scan[last].get(o) for o in objects},
-            map_doors={d: door_by_scan.get(last, {}).get(d, True) for d in door_ids},
+            gt_at=gt_at or tl.gt_at,
+            doors_at=doors_at or tl.doors_at,
+            map_streams=src.object_streams,
+            t_map_s=tl.t_map_s,
+            t_end_s=tl.t_end_s,
+            map_state={o: tl.by_scan[last].get(o) for o in objects},
+            map_doors=tl.doors_of(last),
             timezone=dataset.info.timezone or "UTC",
-            extra={"source": "dataset", "root": str(dataset.root), "map_scans": len(map_ids)},
+            extra={"source": "dataset", "root": str(dataset.root), "map_scans": len(map_ids), "labels": src.info},
+            door_streams=src.door_streams,
+            observation=src.observation,
+            labels=labels,
+            start_xy=_first_pose_xy(dataset, tl.ids[0]),
         )
 
     @classmethod
@@ -231,7 +300,11 @@ class NavigationEnv:
 
         times = [p.start_ns / 1e9 for p in plans]
         streams = streams_from_states(times, [p.state.objects for p in plans], objects)
+        door_streams = [EdgeStream((d.door_id, "open"), np.asarray(times, np.float64),
+                                   np.array([bool(p.state.doors_open.get(d.door_id, True)) for p in plans], np.int8),
+                                   {"source": "gt"}) for d in L.doors]
         last = plans[-1]
+        first = lab.scans[0].poses[0]
         return cls(
             name=name or f"lab_seed{lab.config.seed}",
             grid=grid,
@@ -247,7 +320,22 @@ class NavigationEnv:
             map_doors=dict(last.state.doors_open),
             timezone=lab.config.timezone,
             extra={"source": "synth", "seed": lab.config.seed, "roles": dict(sched.roles)},
+            door_streams=door_streams,
+            start_xy=(float(first[0, 3]), float(first[1, 3])),
         )
+
+    def start_cell(self) -> tuple[int, int]:
+        """The fixed start cell: the free cell (with every door closed, in the main free component)
+        nearest to :attr:`start_xy` (the grid centre when there is no recorded pose)."""
+        from psg_data.navigation._queries import start_cells
+
+        cells = start_cells(self)
+        W = self.grid.shape[1]
+        ij = np.stack(np.divmod(cells, W), axis=1)
+        xy = self.grid.cell_to_world(ij)
+        target = np.asarray(self.start_xy if self.start_xy is not None else xy.mean(axis=0))
+        k = int(np.argmin(np.linalg.norm(xy - target, axis=1)))
+        return (int(ij[k, 0]), int(ij[k, 1]))
 
     @classmethod
     def coerce(cls, obj: Any, **kwargs: Any) -> NavigationEnv:
@@ -255,6 +343,23 @@ class NavigationEnv:
         if isinstance(obj, NavigationEnv):
             return obj
         if hasattr(obj, "layout") and hasattr(obj, "schedule"):
+            if kwargs.get("labels", "gt") != "gt":
+                raise EvaluationError(f"labels {kwargs['labels']!r}: a synthetic LabModel has only its ground truth; "
+                                      "build the dataset (psg-data synth) and label it to use other sources")
             return cls.from_lab(obj, **{k: v for k, v in kwargs.items()
                                         if k in ("grid", "resolution_m", "robot_radius_m", "name")})
         return cls.from_dataset(obj, **kwargs)
+
+
+def _first_pose_xy(dataset: Any, scan_id: str) -> tuple[float, float] | None:
+    """World (x, y) of the first camera pose of a scan (camera-to-world translation), metres."""
+    from psg_data.errors import PsgDataError
+
+    try:
+        poses = dataset.scan(scan_id).poses
+    except (PsgDataError, KeyError, IndexError) as exc:  # a scan without frames: no recorded start
+        log.debug("no first pose for scan %s: %s", scan_id, exc)
+        return None
+    if len(poses) == 0:
+        return None
+    return (float(poses[0][0, 3]), float(poses[0][1, 3]))

@@ -6,7 +6,8 @@ Sampling (per query, from ``numpy.random.default_rng([seed, 8801])``): a query t
 ahead of the last map update"), a target object uniform over the environment's objects, and a
 start cell uniform over the cells that are free with *every* door closed (so the start is free
 under any door configuration and never inside a doorway) and lie in the largest 8-connected
-component of the free space with every door open (no starts in isolated pockets).
+component of the free space with every door open (no starts in isolated pockets). With a fixed
+start (the paper's real-world protocol) every query starts from the same cell.
 
 Categories (the paper's): ``static`` = the object is present and on the same receptacle as at the
 last map update; ``dynamic`` = present on another receptacle (or present now but absent at the map
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,7 +65,8 @@ class Query:
     doors_open: dict[str, bool] = field(default_factory=dict)
 
 
-def _start_cells(env: NavigationEnv) -> np.ndarray:
+def start_cells(env: NavigationEnv) -> np.ndarray:
+    """Flat indices of the cells a query may start from (module docstring)."""
     from scipy.ndimage import label
 
     g = env.grid
@@ -83,12 +86,13 @@ def _start_cells(env: NavigationEnv) -> np.ndarray:
 
 def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, horizon_s: float = WEEK_S,
                  objects: list[str] | None = None, reachable_only: bool = False, reach_m: float = 1.0,
-                 max_tries: int = 100) -> list[Query]:
+                 max_tries: int = 100, quotas: Mapping[str, int] | None = None,
+                 start_cell: tuple[int, int] | None = None) -> list[Query]:
     """Sample ``n_queries`` queries (deterministic for ``env`` and ``seed``).
 
     Args:
         env: the environment.
-        n_queries: number of queries.
+        n_queries: number of queries (ignored when ``quotas`` are given).
         seed: seed of the set.
         horizon_s: latest query time after the last map update, seconds (default one week).
         objects: restrict the targets to these objects.
@@ -97,12 +101,15 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
             draw is kept). Default False: unreachable targets occur and are reported separately.
         reach_m: success radius used for the reachability test, metres.
         max_tries: draws per query with ``reachable_only``.
+        quotas: category -> number of queries (e.g. the paper's real-world 10 static, 10 dynamic,
+            5 absent): draws are kept while their category is not full (and, with
+            ``reachable_only``, their present target is reachable), in draw order.
+        start_cell: one start cell for every query (default: a random start cell per query).
 
     Raises:
-        EvaluationError: no objects, no time window, or no free start cell.
+        EvaluationError: no objects, no time window, no free start cell, or quotas that cannot be
+            filled (too few targets of a category in the query window).
     """
-    if n_queries < 1:
-        raise EvaluationError(f"n_queries must be >= 1, got {n_queries}")
     objs = list(objects) if objects is not None else list(env.object_ids)
     if not objs:
         raise EvaluationError(f"{env.name}: no target objects to query")
@@ -111,28 +118,57 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
     if not t_hi > t_lo:
         raise EvaluationError(f"{env.name}: no ground truth after the last map update (t_end <= t_map)")
     rng = np.random.default_rng([int(seed), 8801])
-    cells = _start_cells(env)
+    cells = start_cells(env)
     W = env.grid.shape[1]
+    fixed = None if start_cell is None else int(start_cell[0]) * W + int(start_cell[1])
     cache = None
     if reachable_only:
         from psg_data.navigation._planner import PlanningCache
 
         cache = PlanningCache(env.grid, reach_m=reach_m)
-    out: list[Query] = []
-    for q in range(n_queries):
-        for _ in range(max(1, max_tries)):
-            t = float(t_hi - rng.uniform(0.0, 1.0) * (t_hi - t_lo))  # in (t_lo, t_hi]
-            o = objs[int(rng.integers(len(objs)))]
-            c = int(cells[int(rng.integers(cells.size))])
-            gt = env.gt_at(o, t)
-            doors = {k: bool(v) for k, v in env.doors_at(t).items()}
-            if cache is None or gt is None or np.isfinite(cache.distance(gt, cache.key(doors), c)):
-                break
+
+    def draw() -> tuple[float, str, int, str | None, dict[str, bool], str]:
+        t = float(t_hi - rng.uniform(0.0, 1.0) * (t_hi - t_lo))  # in (t_lo, t_hi]
+        o = objs[int(rng.integers(len(objs)))]
+        c = int(cells[int(rng.integers(cells.size))]) if fixed is None else fixed
+        gt = env.gt_at(o, t)
+        doors = {k: bool(v) for k, v in env.doors_at(t).items()}
+        cat = "absent" if gt is None else ("static" if gt == env.map_state.get(o) else "dynamic")
+        return t, o, c, gt, doors, cat
+
+    def reachable(gt: str | None, doors: dict[str, bool], c: int) -> bool:
+        return cache is None or gt is None or bool(np.isfinite(cache.distance(gt, cache.key(doors), c)))
+
+    def query(k: int, d: tuple[float, str, int, str | None, dict[str, bool], str]) -> Query:
+        t, o, c, gt, doors, cat = d
         ij = (c // W, c % W)
         xy = env.grid.cell_to_world(ij)
-        mp = env.map_state.get(o)
-        cat = "absent" if gt is None else ("static" if gt == mp else "dynamic")
-        out.append(Query(q, int(seed), o, t, ij, (float(xy[0]), float(xy[1])), cat, gt, mp, doors))
+        return Query(k, int(seed), o, t, ij, (float(xy[0]), float(xy[1])), cat, gt, env.map_state.get(o), doors)
+
+    out: list[Query] = []
+    if quotas is not None:
+        want = {c: int(n) for c, n in quotas.items() if int(n) > 0}
+        got = {c: 0 for c in want}
+        budget = 2000 * max(sum(want.values()), 1)
+        for _ in range(budget):
+            if got == want:
+                break
+            d = draw()
+            if got.get(d[5], 0) < want.get(d[5], 0) and reachable(d[3], d[4], d[2]):
+                got[d[5]] += 1
+                out.append(query(len(out), d))
+        if got != want:
+            raise EvaluationError(f"{env.name}: could not draw the query quotas {want} in {budget} draws (got {got}); "
+                                  "the query window has too few targets of some category")
+        return out
+    if n_queries < 1:
+        raise EvaluationError(f"n_queries must be >= 1, got {n_queries}")
+    for q in range(n_queries):
+        for _ in range(max(1, max_tries)):
+            d = draw()
+            if reachable(d[3], d[4], d[2]):
+                break
+        out.append(query(q, d))
     return out
 
 

@@ -30,7 +30,7 @@ import json
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,8 @@ from psg_data.errors import EvaluationError, NotFittedError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey
 from psg_data.navigation._agent import AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import last_seen_filters, oracle_filters
-from psg_data.navigation._env import WEEK_S, NavigationEnv
+from psg_data.navigation._env import NavigationEnv
+from psg_data.navigation._options import PROTOCOLS, NavigationOptions
 from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query, load_queries, make_queries, save_queries
 
@@ -283,28 +284,116 @@ def _methods(estimators: Any) -> list[tuple[str, MethodSpec]]:
     return out
 
 
+def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: NavigationOptions,
+                settings: Mapping[str, Any] | None) -> Callable[[Sequence[float]], list[dict[str, bool]] | None]:
+    """Door states a method plans with at a batch of query times (None = the true states)."""
+    mode = options.door_belief
+    door_ids = list(env.grid.door_ids)
+    if mode == "truth" or not door_ids or (mode == "predicted" and spec == "oracle"):
+        return lambda ts: None
+    if mode == "last_map":
+        return lambda ts: [dict(env.map_doors) for _ in ts]
+    if mode == "all_open":
+        return lambda ts: [{d: True for d in door_ids} for _ in ts]
+    from psg_data.navigation._doors import fit_door_filters
+
+    if spec == "last_seen_map":
+        filters: Mapping[str, EdgeFilter] = {s.edge[0]: f for s, f in zip(env.door_streams, last_seen_filters(
+            env.door_streams).values())}
+        missing = [d for d in door_ids if d not in filters]
+        if missing:
+            log.info("%s: doors never observed on the map (believed open): %s", name, missing)
+    elif isinstance(spec, str) or hasattr(spec, "get_params"):
+        est = spec if isinstance(spec, str) else type(spec)(**spec.get_params())
+        filters, kind = fit_door_filters(est, env.door_streams, door_ids, timezone=env.timezone, settings=settings)
+        unseen = [d for d, k in kind.items() if k == "prior"]
+        if unseen:
+            log.info("%s: doors without observations use P(open) = 0.5 (believed open): %s", name, unseen)
+    else:
+        raise EvaluationError(f"method {name}: door_belief='predicted' needs a registry name or an estimator "
+                              "(to fit on the door streams); got a filter mapping or callable")
+
+    def hook(ts: Sequence[float]) -> list[dict[str, bool]]:
+        t = np.asarray(ts, np.float64)
+        p = {d: np.asarray(f.predict(t), np.float64).reshape(-1) for d, f in filters.items()}
+        out = []
+        for k in range(t.size):
+            out.append({d: bool(not np.isfinite(p[d][k]) or p[d][k] >= 0.5) if d in p else True for d in door_ids})
+        return out
+
+    return hook
+
+
+def _query_sets(env: NavigationEnv, options: NavigationOptions, out_dir: str | Path | None) -> dict[int, list[Query]]:
+    """One query set per seed: loaded from ``out_dir/queries`` when stored there, else drawn (and stored)."""
+    qsets: dict[int, list[Query]] = {}
+    start = env.start_cell() if options.start == "fixed" else None
+    for sd in options.seeds:
+        qpath = Path(out_dir) / "queries" / f"{env.name}_seed{sd}{options.query_tag}.parquet" if out_dir else None
+        if qpath is not None and qpath.is_file():
+            qsets[sd] = load_queries(qpath)
+            log.info("loaded %d queries from %s", len(qsets[sd]), qpath)
+            continue
+        qsets[sd] = make_queries(env, options.n_queries, seed=sd, horizon_s=options.horizon_s,
+                                 reachable_only=options.reachable_only, reach_m=options.reach_m,
+                                 quotas=dict(options.quotas) if options.quotas else None, start_cell=start)
+        if qpath is not None:
+            save_queries(qsets[sd], qpath)
+            save_queries(qsets[sd], qpath.with_suffix(".json"))
+    return qsets
+
+
+def _initial_beliefs(name: str, qs: list[Query], by_obj: Mapping[str, Mapping[str, EdgeFilter]]
+                     ) -> dict[int, dict[str, float]]:
+    """Beliefs at the query times, one vectorised predict per edge."""
+    bel0: dict[int, dict[str, float]] = {}
+    for o in {q.object_id for q in qs}:
+        mine = [q for q in qs if q.object_id == o]
+        t = np.array([q.t_s for q in mine], dtype=np.float64)
+        preds = {r: np.asarray(f.predict(t), dtype=np.float64).reshape(-1) for r, f in by_obj.get(o, {}).items()}
+        for r, v in preds.items():
+            if v.shape != t.shape or not np.all(np.isfinite(v)):
+                raise EvaluationError(f"method {name}: edge ({o}, {r}) predicted non-finite or misshaped beliefs")
+        for k, q in enumerate(mine):
+            bel0[q.query_id] = {r: float(v[k]) for r, v in preds.items()}
+    return bel0
+
+
+def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tuple[Any, Any]:
+    import pandas as pd
+
+    from psg_data.metrics import summarize
+
+    per_seed_rows = []
+    for (name, sd), df in records.groupby(["method", "seed"], sort=False):
+        per_seed_rows.append({"method": name, "seed": sd, **score_records(
+            df, absent_in_overall=options.absent_in_overall, unreachable=options.unreachable)})
+    per_seed = pd.DataFrame(per_seed_rows)
+    summ_rows = []
+    for name in names:
+        ps = per_seed[per_seed["method"] == name]
+        row: dict[str, Any] = {"method": name, "n_seeds": len(ps)}
+        for m in METRICS:
+            st = summarize(ps[m].to_numpy(np.float64))
+            row[f"{m}_mean"], row[f"{m}_std"] = st.mean, st.std
+        for c in ("n_queries", "n_static", "n_dynamic", "n_absent", "n_unreachable"):
+            row[c] = int(ps[c].sum())
+        summ_rows.append(row)
+    return per_seed, pd.DataFrame(summ_rows)
+
+
+_LEGACY = {"seed": "seeds"}
+
+
 def run_navigation(
     dataset_or_lab: Any,
     estimators: Any = BUILTIN_METHODS,
+    options: NavigationOptions | None = None,
     *,
-    seed: int | Sequence[int] = 0,
-    n_queries: int = 250,
-    setting: str = "predictive",
-    delta: float = 0.2,
-    max_attempts: int = 2,
-    detect_en_route: bool = True,
-    door_belief: str | Mapping[str, bool] | Callable[[float], Mapping[str, bool]] | None = None,
-    absent_in_overall: str = "abort_is_success",
-    unreachable: str = "exclude",
-    horizon_s: float = WEEK_S,
-    reach_m: float = 1.0,
-    resolution_m: float = 0.05,
-    robot_radius_m: float = 0.25,
     out_dir: str | Path | None = None,
     estimator_settings: Mapping[str, Mapping[str, Any]] | None = None,
-    keep_trails: bool = True,
-    reachable_only: bool = False,
     env_kwargs: Mapping[str, Any] | None = None,
+    **overrides: Any,
 ) -> NavigationResult:
     """Run semi-static object navigation for several methods on the same queries.
 
@@ -313,71 +402,48 @@ def run_navigation(
             ``LabModel``.
         estimators: methods: a mapping name -> spec or a sequence of specs (see :func:`build_filters`;
             'oracle' and 'last_seen_map' are built in, other names come from the estimator registry).
-        seed: one seed or several (one query set each; the table reports mean ± std across them).
-        n_queries: queries per seed.
-        setting: 'predictive' or 'adaptive' (see :mod:`psg_data.navigation._agent`).
-        delta: absence threshold on the best belief.
-        max_attempts: receptacles the agent may walk to.
-        detect_en_route: stop when the object comes within reach and sight on the way.
-        door_belief: door states the agent plans with: None (the true states at the query time),
-            'last_map' (the states at the last map update), a mapping, or a callable
-            ``t_s -> mapping`` (e.g. a door estimator's MAP prediction). Doors believed open that
-            are closed are discovered when reached.
-        absent_in_overall, unreachable: scoring rules (module docstring).
-        horizon_s: latest query time after the last map update, seconds.
-        reach_m: success radius (the paper's 1 m).
-        resolution_m, robot_radius_m: grid parameters when the environment is built here.
+        options: the run settings (:class:`~psg_data.navigation.NavigationOptions`; default the
+            ``sim`` protocol).
         out_dir: if given, query sets are loaded from / stored to ``out_dir/queries/`` (Parquet and
             JSON) and the results are saved there.
         estimator_settings: name -> keyword settings for registry estimators.
-        keep_trails: keep every walked path in memory (for plotting).
-        reachable_only: sample only queries whose present target is reachable (see
-            :func:`make_queries`); the default keeps the natural mix and reports unreachable ones.
         env_kwargs: extra arguments of :meth:`NavigationEnv.from_dataset`.
+        **overrides: fields of :class:`NavigationOptions` replacing those of ``options`` (``seed``
+            is accepted for ``seeds``; ``door_belief`` may also be a mapping or a callable
+            ``t_s -> {door_id: is_open}`` used for every method).
 
     Returns:
         A :class:`NavigationResult`.
     """
-    cfg = AgentConfig(setting=setting, delta=delta, max_attempts=max_attempts, detect_en_route=detect_en_route)
-    if absent_in_overall not in ABSENT_RULES:
-        raise EvaluationError(f"absent_in_overall: expected one of {ABSENT_RULES}, got {absent_in_overall!r}")
-    env = NavigationEnv.coerce(dataset_or_lab, resolution_m=resolution_m, robot_radius_m=robot_radius_m,
+    hook = overrides.pop("door_belief", None)
+    if isinstance(hook, str):
+        overrides["door_belief"], hook = hook, None
+    for old, new in _LEGACY.items():
+        if old in overrides:
+            v = overrides.pop(old)
+            overrides[new] = (v,) if isinstance(v, (int, np.integer)) else tuple(v)
+    base = options if options is not None else PROTOCOLS["sim"]
+    try:
+        opts = replace(base, **overrides, protocol=base.protocol if not overrides else f"{base.protocol}+custom")
+    except TypeError as exc:
+        raise EvaluationError(f"run_navigation: {exc}") from None
+    cfg = AgentConfig(setting=opts.setting, delta=opts.delta, max_attempts=opts.max_attempts,
+                      detect_en_route=opts.detect_en_route)
+    env = NavigationEnv.coerce(dataset_or_lab, resolution_m=opts.resolution_m, robot_radius_m=opts.robot_radius_m,
+                               **({"labels": opts.labels, "label_seed": opts.label_seed} if opts.labels != "gt"
+                                  or opts.label_seed else {}),
+                               **({"grid_source": opts.grid_source} if opts.grid_source != "geometry" else {}),
                                **dict(env_kwargs or {}))
-    cache = PlanningCache(env.grid, reach_m=reach_m)
-    seeds = [int(seed)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
-    if not seeds:
-        raise EvaluationError("run_navigation: no seeds")
+    if isinstance(dataset_or_lab, NavigationEnv) and (opts.labels != env.labels):
+        raise EvaluationError(f"labels {opts.labels!r}: the given environment was built with labels {env.labels!r}")
+    cache = PlanningCache(env.grid, reach_m=opts.reach_m)
     methods = _methods(estimators)
     if not methods:
         raise EvaluationError("run_navigation: no methods")
     names = [m for m, _ in methods]
     if len(set(names)) != len(names):
         raise EvaluationError(f"run_navigation: duplicate method names {names}")
-
-    qsets: dict[int, list[Query]] = {}
-    for sd in seeds:
-        tag = "_reachable" if reachable_only else ""
-        qpath = Path(out_dir) / "queries" / f"{env.name}_seed{sd}_n{n_queries}{tag}.parquet" if out_dir else None
-        if qpath is not None and qpath.is_file():
-            qsets[sd] = load_queries(qpath)
-            log.info("loaded %d queries from %s", len(qsets[sd]), qpath)
-        else:
-            qsets[sd] = make_queries(env, n_queries, seed=sd, horizon_s=horizon_s, reachable_only=reachable_only,
-                                     reach_m=reach_m)
-            if qpath is not None:
-                save_queries(qsets[sd], qpath)
-                save_queries(qsets[sd], qpath.with_suffix(".json"))
-
-    def _doors_for(q: Query) -> Mapping[str, bool] | None:
-        if door_belief is None:
-            return None
-        if isinstance(door_belief, str):
-            if door_belief != "last_map":
-                raise EvaluationError(f"door_belief: expected None, 'last_map', a mapping or a callable, got {door_belief!r}")
-            return env.map_doors
-        if isinstance(door_belief, Mapping):
-            return door_belief
-        return door_belief(q.t_s)
+    qsets = _query_sets(env, opts, out_dir)
 
     import pandas as pd
 
@@ -387,59 +453,36 @@ def run_navigation(
     timings: dict[str, float] = {}
     for name, spec in methods:
         t0 = time.perf_counter()
-        filt = build_filters(env, spec, settings=(estimator_settings or {}).get(name))
+        settings = (estimator_settings or {}).get(name)
+        filt = build_filters(env, spec, settings=settings)
+        doors_for = _door_hooks(env, name, spec, opts, settings) if hook is None else (
+            lambda ts, h=hook: [dict(h) if isinstance(h, Mapping) else dict(h(t)) for t in ts])
         by_obj: dict[str, dict[str, EdgeFilter]] = {}
         for (o, r), f in filt.items():
             by_obj.setdefault(o, {})[r] = f
-        for sd in seeds:
+        for sd in opts.seeds:
             qs = qsets[sd]
-            bel0: dict[int, dict[str, float]] = {}
-            for o in {q.object_id for q in qs}:  # beliefs at the query times, one vectorised call per edge
-                mine = [q for q in qs if q.object_id == o]
-                t = np.array([q.t_s for q in mine], dtype=np.float64)
-                preds = {r: np.asarray(f.predict(t), dtype=np.float64).reshape(-1) for r, f in by_obj.get(o, {}).items()}
-                for r, v in preds.items():
-                    if v.shape != t.shape or not np.all(np.isfinite(v)):
-                        raise EvaluationError(f"method {name}: edge ({o}, {r}) predicted non-finite or misshaped beliefs")
-                for k, q in enumerate(mine):
-                    bel0[q.query_id] = {r: float(v[k]) for r, v in preds.items()}
-            for q in qs:
+            bel0 = _initial_beliefs(name, qs, by_obj)
+            door_bel = doors_for([q.t_s for q in qs]) or [None] * len(qs)
+            for q, db in zip(qs, door_bel):
                 ep: Episode = run_episode(cache, q, by_obj.get(q.object_id, {}), cfg, beliefs=bel0[q.query_id],
-                                          door_belief=_doors_for(q))
+                                          door_belief=db, observation=env.observation)
                 rows.append(episode_record(ep, method=name, seed=sd, t_s=q.t_s, start_x_m=q.start_xy[0],
                                            start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle,
-                                           map_receptacle=q.map_receptacle))
-                if keep_trails:
+                                           map_receptacle=q.map_receptacle,
+                                           doors_believed=json.dumps(db, sort_keys=True) if db is not None else None))
+                if opts.keep_trails:
                     trails[(name, sd, q.query_id)] = ep.trail
                     beliefs_out[(name, sd, q.query_id)] = ep.beliefs
         timings[name] = time.perf_counter() - t0
         log.info("navigation: %s done in %.2f s", name, timings[name])
 
     records = pd.DataFrame(rows)
-    per_seed_rows = []
-    for (name, sd), df in records.groupby(["method", "seed"], sort=False):
-        per_seed_rows.append({"method": name, "seed": sd,
-                              **score_records(df, absent_in_overall=absent_in_overall, unreachable=unreachable)})
-    per_seed = pd.DataFrame(per_seed_rows)
-    from psg_data.metrics import summarize
-
-    summ_rows = []
-    for name in names:
-        ps = per_seed[per_seed["method"] == name]
-        row: dict[str, Any] = {"method": name, "n_seeds": len(ps)}
-        for m in METRICS:
-            s = summarize(ps[m].to_numpy(np.float64))
-            row[f"{m}_mean"], row[f"{m}_std"] = s.mean, s.std
-        for c in ("n_queries", "n_static", "n_dynamic", "n_absent", "n_unreachable"):
-            row[c] = int(ps[c].sum())
-        summ_rows.append(row)
-    summary = pd.DataFrame(summ_rows)
-    config = {"env": env.name, "seeds": seeds, "n_queries": n_queries, "setting": setting, "delta": delta,
-              "max_attempts": max_attempts, "detect_en_route": detect_en_route,
-              "door_belief": door_belief if isinstance(door_belief, (str, type(None))) else "custom",
-              "absent_in_overall": absent_in_overall, "unreachable": unreachable, "horizon_s": horizon_s,
-              "reach_m": reach_m, "reachable_only": reachable_only, "resolution_m": env.grid.resolution_m, "robot_radius_m": env.grid.robot_radius_m,
-              "grid_source": env.grid.source, "methods": names}
+    per_seed, summary = _summarise(records, names, opts)
+    config = {"env": env.name, **opts.to_dict(), "door_belief": opts.door_belief if hook is None else "custom",
+              "resolution_m": env.grid.resolution_m, "robot_radius_m": env.grid.robot_radius_m,
+              "grid_source": env.grid.source, "methods": names, "labels_info": env.extra.get("labels"),
+              "sightings": {"p_miss": env.observation.p_miss, "p_false": env.observation.p_false}}
     res = NavigationResult(records, per_seed, summary, qsets, config, timings, env, cache, trails, beliefs_out)
     if out_dir is not None:
         res.save(out_dir)

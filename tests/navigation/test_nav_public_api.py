@@ -8,7 +8,8 @@ import sys
 
 import psg_data.navigation as nav
 
-SUBMODULES = ["_grid", "_planner", "_env", "_queries", "_baselines", "_agent", "_runner", "_plots"]
+SUBMODULES = ["_grid", "_planner", "_env", "_queries", "_baselines", "_agent", "_runner", "_plots", "_options",
+              "_sources", "_doors"]
 
 
 def test_all_is_complete_and_resolvable():
