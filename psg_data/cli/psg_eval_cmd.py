@@ -57,14 +57,24 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 @click.option("--references/--no-references", default=True, show_default=True,
               help=f"Also score the reference methods ({', '.join(REFERENCE_ESTIMATORS)}) for the paper's table.")
 @click.option("--task", type=click.Choice(["persistence", "navigation", "doors"]), default="persistence",
-              show_default=True, help="doors: planning around predicted closed doors (the door loop world).")
+              show_default=True, help="doors: planning around predicted closed doors on the dataset's own map.")
 @click.option("--setting", type=click.Choice(["predictive", "adaptive"]), default="adaptive", show_default=True,
               help="adaptive: test observations update the estimators online; predictive: they do not.")
-@click.option("--labels", default="gt", show_default=True, metavar="gt|privileged|noisy:P|detections:FILE",
-              help="Observation source (non-gt sources are read from the dataset's label tables).")
+@click.option("--labels", default="gt", show_default=True, metavar="gt|privileged|noisy:P|detections:FILE|observed",
+              help="Observation source: gt (the schedule); privileged, detections:FILE, observed (door states read "
+                   "from the depth; doors only) from the dataset's labels table (psg-data label); noisy:P: "
+                   "persistence reads the stored noisy labels, navigation and doors flip the ground truth "
+                   "(the paper's noised training data). Scoring always uses the schedule.")
+@click.option("--protocol", type=click.Choice(["sim", "paper-real"]), default="sim", show_default=True,
+              help="Navigation queries: sim (--queries per seed, random starts, natural mix) or paper-real (25: 10 "
+                   "static, 10 dynamic, 5 absent, one fixed start, adaptive, predicted doors; the paper's real-world "
+                   "table).")
+@click.option("--door-belief", type=click.Choice(["truth", "predicted", "last-map", "all-open"]), default=None,
+              help="Navigation: door states the agent plans with (default: truth for sim, predicted for paper-real).")
 @click.option("--seeds", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Seeds 0..N-1 (benchmark: one draw per seed; datasets: estimator seeds / query sets).")
-@click.option("--queries", type=click.IntRange(1), default=250, show_default=True, help="Navigation queries per seed.")
+@click.option("--queries", type=click.IntRange(1), default=None,
+              help="Navigation / door queries per seed (default 250; the paper-real protocol has 25).")
 @click.option("--delta", type=click.FloatRange(0.0, 1.0), default=0.2, show_default=True,
               help="Navigation: abort (declare the object absent) when the best receptacle belief is below this.")
 @click.option("--reachable-only", is_flag=True,
@@ -81,8 +91,8 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 @click.pass_context
 @handle_errors
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
-         setting: str, labels: str, seeds: int, queries: int, delta: float, reachable_only: bool, out: Path | None,
-         overwrite: bool, jobs: int,
+         setting: str, labels: str, protocol: str, door_belief: str | None, seeds: int, queries: int | None,
+         delta: float, reachable_only: bool, out: Path | None, overwrite: bool, jobs: int,
          list_estimators: bool, no_plots: bool, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1, mean +- std over seeds).
 
@@ -95,7 +105,8 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
       psg-eval --dataset persistence-benchmark -e perpetua_star -e perpetua_star_oracle
       psg-eval --dataset /data/lab --labels privileged -e my_plugin:alpha=0.3 --out res/
       psg-eval --task navigation -e perpetua_star -e fremen    # SR / SPL / AR / DIST
-      psg-eval --task doors -e perpetua_star --no-references   # blocked first plans, extra metres
+      psg-eval --task navigation --dataset /data/lab --labels noisy:0.1 --protocol paper-real -e perpetua_star
+      psg-eval --task doors --dataset /data/lab -e perpetua_star   # blocked first plans, extra metres
       psg-eval compare res/a res/b                             # tabulate earlier runs
     """
     if ctx.invoked_subcommand is not None:
@@ -114,6 +125,14 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
         have = {s.name for s in specs}
         specs += [parse_estimator_spec(r) for r in REFERENCE_ESTIMATORS if r not in have]
     check_estimators(specs)
+    nav_options = None
+    if task in ("navigation", "doors"):
+        from psg_data.cli._eval_navigation import door_task_options, navigation_options
+
+        nav_options = (navigation_options(protocol, labels=labels, seeds=list(range(seeds)), queries=queries,
+                                          setting=setting, delta=delta, reachable_only=reachable_only,
+                                          door_belief=door_belief) if task == "navigation" else
+                       door_task_options(labels=labels, seeds=list(range(seeds)), queries=queries))
     out_dir = _out_dir(out, overwrite)
     tmp = out_dir.with_name(out_dir.name + ".partial")
     shutil.rmtree(tmp, ignore_errors=True)
@@ -125,10 +144,9 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
         if task == "persistence":
             ok = run_persistence(specs, dataset, setting, labels, list(range(seeds)), jobs, tmp, no_plots, quiet)
         elif task == "doors":
-            ok = run_doors_task(specs, dataset, labels, list(range(seeds)), queries, tmp, no_plots)
+            ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet)
         else:
-            ok = run_navigation_task(specs, dataset, setting, labels, list(range(seeds)), queries, tmp, no_plots, quiet,
-                                 reachable_only, delta)
+            ok = run_navigation_task(specs, dataset, nav_options, tmp, no_plots, quiet)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -31,6 +31,13 @@ from __future__ import annotations
 
 from psg_data.navigation._agent import OUTCOMES, SETTINGS, AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import LastSeenFilter, OracleFilter, last_seen_filters, oracle_filters
+from psg_data.navigation._door_dataset import (
+    DOOR_MODE_LABELS,
+    DoorTaskOptions,
+    DoorTaskResult,
+    door_world_from_dataset,
+    run_door_task,
+)
 from psg_data.navigation._doors import (
     DOOR_BASELINES,
     DoorEpisode,
@@ -70,9 +77,10 @@ from psg_data.navigation._planner import (
     path_length_m,
 )
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
-from psg_data.navigation._plots import plot_query
+from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query
 from psg_data.navigation._queries import (
     CATEGORIES,
+    start_cells,
     Query,
     load_queries,
     make_queries,
@@ -126,6 +134,7 @@ __all__ = [
     "Query",
     "CATEGORIES",
     "make_queries",
+    "start_cells",
     "queries_to_frame",
     "queries_from_frame",
     "save_queries",
@@ -148,6 +157,8 @@ __all__ = [
     "METRICS",
     "ABSENT_RULES",
     "plot_query",
+    "pick_door_example",
+    "plot_door_example",
     "DOOR_BASELINES",
     "DoorWorld",
     "DoorQuery",
@@ -159,5 +170,10 @@ __all__ = [
     "make_door_queries",
     "run_door_navigation",
     "door_loop_world",
+    "door_world_from_dataset",
+    "DoorTaskOptions",
+    "DoorTaskResult",
+    "run_door_task",
+    "DOOR_MODE_LABELS",
     "plot_door_query",
 ]

@@ -6,20 +6,24 @@ door streams (the ``(door_id, 'open')`` edges, :func:`psg_data.labeling.load_lab
 
 Episode (:func:`run_door_episode`): the robot plans a shortest path to the goal receptacle's
 approach set with every door whose ``P(open) < threshold`` closed (default 0.5). If that leaves no
-path, it falls back to assuming the doors it has not seen closed are open (optimistic fallback).
-It walks the plan; when the next cell is blocked in reality (a closed door), it stops in front of
-it, marks that door closed and replans from there (the walked distance counts). The *first plan*
-is *blocked* when it runs into a door that is closed at the query time. Success: the robot
-reaches the goal's approach set. Extra distance: walked minus the shortest path under the true
-door states (successful episodes).
+path, by default (``no_path="decline"``) it does not go: it reports the goal unreachable (correct
+when a door on every route is closed, a failure otherwise); with ``no_path="optimistic"`` it
+falls back to assuming the doors it has not seen closed are open. It walks the plan; when the
+next cell is blocked in reality (a closed door), it stops in front of it, marks that door closed
+and replans from there (the walked distance counts). The *first plan* is *blocked* when it runs
+into a door that is closed at the query time. Success: the robot reaches the goal's approach
+set. Extra distance: walked minus the shortest path under the true door states (successful
+episodes). Wasted distance: metres walked towards goals that no route reaches at the query time
+(ideal 0: the planner that knows the doors does not set off).
 
 :func:`run_door_navigation` runs every method on the same queries and returns the table
 (estimator, queries, blocked_first_plans, blocked_rate, mean_extra_distance_m, SR, SPL); the
 methods are registry estimators plus the baselines ``all_open`` (assume every door open) and
-``oracle`` (the true door states). :func:`door_loop_world` builds the evaluation world: two rooms
-joined by a direct door (short route) and by a hallway (long route, always open), with the direct
-door following the synthetic lab's weekly door schedule. :func:`plot_door_query` draws the paper's
-"Predictive Navigation" figure.
+``oracle`` (the true door states). Worlds: :meth:`DoorWorld.from_dataset` (a dataset's own grid,
+doors, door states and door streams of a label source) and :func:`door_loop_world` (a unit-test
+world: two rooms joined by a direct door and by an always-open hallway, the direct door following
+the synthetic lab's weekly door schedule). :func:`plot_door_query` draws the paper's "Predictive
+Navigation" figure.
 """
 
 from __future__ import annotations
@@ -48,6 +52,7 @@ log = logging.getLogger(__name__)
 
 DOOR_BASELINES = ("all_open", "oracle")
 TABLE_COLUMNS = ("estimator", "queries", "blocked_first_plans", "blocked_rate", "mean_extra_distance_m", "SR", "SPL")
+NO_PATH_RULES = ("decline", "optimistic")
 
 
 @dataclass
@@ -65,6 +70,9 @@ class DoorWorld:
         start_cells: room name -> (N, 2) candidate start cells (row, col).
         goals: room name -> receptacle ids in that room (query goals).
         name: label of the world.
+        hours: local hours ``[lo, hi)`` of the query times (the robot's operating hours), or None
+            for any time of day.
+        info: provenance (dataset, label source, where the door streams came from).
     """
 
     grid: OccupancyGrid
@@ -76,7 +84,16 @@ class DoorWorld:
     start_cells: dict[str, NDArray[np.int64]]
     goals: dict[str, list[str]]
     name: str = "doors"
+    hours: tuple[float, float] | None = (9.0, 16.0)
+    info: dict[str, Any] = field(default_factory=dict)
     _cache: PlanningCache | None = field(default=None, repr=False)
+
+    @classmethod
+    def from_dataset(cls, dataset: Any, **kwargs: Any) -> DoorWorld:
+        """The door world of a psg-dataset (see :func:`psg_data.navigation.door_world_from_dataset`)."""
+        from psg_data.navigation._door_dataset import door_world_from_dataset
+
+        return door_world_from_dataset(dataset, **kwargs)
 
     @property
     def cache(self) -> PlanningCache:
@@ -112,6 +129,7 @@ class DoorEpisode:
     shortest_m: float
     n_replans: int
     fallback: bool
+    declined: bool
     p_open: dict[str, float]
     doors_discovered: list[str]
     first_plan: NDArray[np.int64] = field(repr=False)
@@ -199,7 +217,7 @@ def door_open_probabilities(filters: Mapping[str, EdgeFilter], t_s: float, door_
 
 
 def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str, float], *,
-                     threshold: float = 0.5, method: str = "") -> DoorEpisode:
+                     threshold: float = 0.5, method: str = "", no_path: str = "decline") -> DoorEpisode:
     """Run one door-aware query (module docstring).
 
     Args:
@@ -208,7 +226,11 @@ def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str
         p_open: door_id -> predicted P(open) (missing doors count as open, P = 1).
         threshold: doors with ``P(open) < threshold`` are planned as closed.
         method: label stored in the episode.
+        no_path: what to do when the believed doors leave no path: ``decline`` (stop, report the
+            goal unreachable) or ``optimistic`` (assume the doors not seen closed are open).
     """
+    if no_path not in NO_PATH_RULES:
+        raise EvaluationError(f"no_path: expected one of {NO_PATH_RULES}, got {no_path!r}")
     grid = cache.grid
     W = grid.shape[1]
     doors = grid.door_ids
@@ -224,10 +246,14 @@ def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str
     first_plan: NDArray[np.int64] | None = None
     first_blocked = False
     fallback_used = False
+    declined = False
     success = False
     for _ in range(len(doors) + 1):
         belief = {d: (float(p_open.get(d, 1.0)) >= threshold) and d not in known_closed for d in doors}
         path = cache.path(query.goal, cache.key(belief), cur)
+        if path is None and no_path == "decline":
+            declined = first_plan is None
+            break
         if path is None:
             optimistic = {d: d not in known_closed for d in doors}
             path = cache.path(query.goal, cache.key(optimistic), cur)
@@ -260,11 +286,11 @@ def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str
         known_closed.update(culprits)
         n_replans += 1
     return DoorEpisode(query.query_id, method, success, first_blocked, walked, shortest, n_replans, fallback_used,
-                       {d: float(p_open.get(d, 1.0)) for d in doors}, sorted(known_closed),
+                       declined, {d: float(p_open.get(d, 1.0)) for d in doors}, sorted(known_closed),
                        first_plan if first_plan is not None else np.zeros(0, np.int64), np.concatenate(trail))
 
 
-def make_door_queries(world: DoorWorld, n: int, *, seed: int = 0, hours: tuple[float, float] | None = (9.0, 16.0)
+def make_door_queries(world: DoorWorld, n: int, *, seed: int = 0, hours: tuple[float, float] | None | str = "world"
                       ) -> list[DoorQuery]:
     """Seeded queries after the training window: a start cell in one room, a goal in another room.
 
@@ -272,9 +298,13 @@ def make_door_queries(world: DoorWorld, n: int, *, seed: int = 0, hours: tuple[f
         world: the world.
         n: number of queries.
         seed: random seed.
-        hours: local hours ``[lo, hi)`` of the query times (the robot's operating hours; the
-            training scans' hours by default); None = any time of day.
+        hours: local hours ``[lo, hi)`` of the query times (the robot's operating hours); None =
+            any time of day; default ``"world"``: the world's :attr:`DoorWorld.hours`.
     """
+    if isinstance(hours, str):
+        if hours != "world":
+            raise EvaluationError(f"hours: expected (lo, hi), None or 'world', got {hours!r}")
+        hours = world.hours
     import datetime as dt
     from zoneinfo import ZoneInfo
 
@@ -336,38 +366,13 @@ class DoorNavigationResult:
         return t[list(TABLE_COLUMNS)].to_string(index=False)
 
 
-def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua_star", "time_of_week_frequency"),
-                        *, n_queries: int = 200, seed: int = 0, threshold: float = 0.5,
-                        hours: tuple[float, float] | None = (9.0, 16.0), baselines: Sequence[str] = DOOR_BASELINES,
-                        queries: Sequence[DoorQuery] | None = None, unseen_prior: float = 0.5,
-                        settings: Mapping[str, Mapping[str, Any]] | None = None) -> DoorNavigationResult:
-    """Every method on the same door queries; the small comparison table.
-
-    Args:
-        world: the world (grid, true door states, training streams).
-        estimators: registry names (or ``(label, estimator)`` pairs) predicting P(open) per door.
-        n_queries, seed, hours: query sampling (:func:`make_door_queries`).
-        threshold: doors with predicted ``P(open) < threshold`` are planned closed.
-        baselines: any of ``all_open`` (every door assumed open) and ``oracle`` (true states).
-        queries: fixed queries (overrides the sampling).
-        unseen_prior: P(open) of a door without training observations.
-        settings: estimator name -> keyword settings.
-
-    Returns:
-        :class:`DoorNavigationResult`; table columns estimator, queries, blocked_first_plans,
-        blocked_rate, mean_extra_distance_m (successful episodes), SR, SPL (and n_reachable,
-        mean_walked_m, unseen_doors).
-    """
-    import pandas as pd
-
-    from psg_data.metrics import spl, success_rate
-
+def _door_methods(world: DoorWorld, estimators: Sequence[Any], baselines: Sequence[str], unseen_prior: float,
+                  settings: Mapping[str, Mapping[str, Any]] | None
+                  ) -> list[tuple[str, Callable[[DoorQuery], dict[str, float]], list[str]]]:
+    """(label, query -> P(open) per door, doors without observations) for every method."""
     bad = [b for b in baselines if b not in DOOR_BASELINES]
     if bad:
         raise EvaluationError(f"baselines {bad}: expected any of {DOOR_BASELINES}")
-    qs = list(queries) if queries is not None else make_door_queries(world, n_queries, seed=seed, hours=hours)
-    if not qs:
-        raise EvaluationError("run_door_navigation: no queries")
     doors = world.door_ids
     methods: list[tuple[str, Callable[[DoorQuery], dict[str, float]], list[str]]] = []
     for b in baselines:
@@ -387,35 +392,81 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
             return door_open_probabilities(filters, q.t_s, doors, prior=unseen_prior)
 
         methods.append((str(label), belief, unseen))
+    return methods
+
+
+def _door_row(label: str, eps: Sequence[DoorEpisode], unseen: Sequence[str]) -> dict[str, Any]:
+    """One row of the door table (module docstring)."""
+    from psg_data.metrics import spl, success_rate
+
+    reach = np.array([math.isfinite(e.shortest_m) for e in eps])
+    succ = np.array([e.success for e in eps])[reach]
+    short = np.array([e.shortest_m for e in eps])[reach]
+    walk_all = np.array([e.walked_m for e in eps])
+    walk = walk_all[reach]
+    extra = np.array([e.extra_m for e in eps])
+    extra = extra[np.isfinite(extra)]
+    nb = int(sum(e.first_plan_blocked for e in eps))
+    return {"estimator": label, "queries": len(eps), "blocked_first_plans": nb,
+            "blocked_rate": nb / len(eps), "mean_extra_distance_m": float(extra.mean()) if extra.size else 0.0,
+            "SR": success_rate(succ) if succ.size else float("nan"),
+            "SPL": spl(succ, short, walk) if succ.size else float("nan"),
+            "n_reachable": int(reach.sum()), "declined": int(sum(e.declined for e in eps)),
+            "declined_reachable": int(sum(e.declined for e, r in zip(eps, reach) if r)),
+            "wasted_m": float(walk_all[~reach].mean()) if (~reach).any() else 0.0,
+            "mean_walked_m": float(walk.mean()) if walk.size else 0.0, "unseen_doors": ",".join(unseen)}
+
+
+def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua_star", "time_of_week_frequency"),
+                        *, n_queries: int = 200, seed: int = 0, threshold: float = 0.5,
+                        hours: tuple[float, float] | None | str = "world", baselines: Sequence[str] = DOOR_BASELINES,
+                        queries: Sequence[DoorQuery] | None = None, unseen_prior: float = 0.5,
+                        settings: Mapping[str, Mapping[str, Any]] | None = None,
+                        no_path: str = "decline") -> DoorNavigationResult:
+    """Every method on the same door queries; the small comparison table.
+
+    Args:
+        world: the world (grid, true door states, training streams).
+        estimators: registry names (or ``(label, estimator)`` pairs) predicting P(open) per door.
+        n_queries, seed, hours: query sampling (:func:`make_door_queries`; hours default to the
+            world's).
+        threshold: doors with predicted ``P(open) < threshold`` are planned closed.
+        baselines: any of ``all_open`` (every door assumed open) and ``oracle`` (true states).
+        queries: fixed queries (overrides the sampling).
+        unseen_prior: P(open) of a door without training observations.
+        settings: estimator name -> keyword settings.
+        no_path: policy when the believed doors leave no path (:func:`run_door_episode`).
+
+    Returns:
+        :class:`DoorNavigationResult`; table columns estimator, queries, blocked_first_plans,
+        blocked_rate, mean_extra_distance_m (successful episodes), SR, SPL (over reachable
+        goals), and n_reachable, declined (did not set off), declined_reachable (of which the goal
+        was reachable), wasted_m (mean walked towards unreachable goals), mean_walked_m,
+        unseen_doors.
+    """
+    import pandas as pd
+
+    qs = list(queries) if queries is not None else make_door_queries(world, n_queries, seed=seed, hours=hours)
+    if not qs:
+        raise EvaluationError("run_door_navigation: no queries")
+    doors = world.door_ids
     rows, recs = [], []
     episodes: dict[str, list[DoorEpisode]] = {}
     probs: dict[str, list[dict[str, float]]] = {}
-    for label, belief, unseen in methods:
+    for label, belief, unseen in _door_methods(world, estimators, baselines, unseen_prior, settings):
         eps, ps = [], []
         for q in qs:
             p = belief(q)
-            ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label)
+            ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label, no_path=no_path)
             eps.append(ep)
             ps.append(p)
             recs.append({"estimator": label, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
                          "success": ep.success, "first_plan_blocked": ep.first_plan_blocked, "walked_m": ep.walked_m,
                          "shortest_m": ep.shortest_m, "extra_m": ep.extra_m, "n_replans": ep.n_replans,
-                         "fallback": ep.fallback, **{f"p_open:{d}": v for d, v in p.items()},
+                         "fallback": ep.fallback, "declined": ep.declined, **{f"p_open:{d}": v for d, v in p.items()},
                          **{f"open:{d}": bool(q.doors_open.get(d, True)) for d in doors}})
         episodes[label], probs[label] = eps, ps
-        reach = np.array([math.isfinite(e.shortest_m) for e in eps])
-        succ = np.array([e.success for e in eps])[reach]
-        short = np.array([e.shortest_m for e in eps])[reach]
-        walk = np.array([e.walked_m for e in eps])[reach]
-        extra = np.array([e.extra_m for e in eps])
-        extra = extra[np.isfinite(extra)]
-        nb = int(sum(e.first_plan_blocked for e in eps))
-        rows.append({"estimator": label, "queries": len(eps), "blocked_first_plans": nb,
-                     "blocked_rate": nb / len(eps), "mean_extra_distance_m": float(extra.mean()) if extra.size else 0.0,
-                     "SR": success_rate(succ) if succ.size else float("nan"),
-                     "SPL": spl(succ, short, walk) if succ.size else float("nan"),
-                     "n_reachable": int(reach.sum()), "mean_walked_m": float(walk.mean()) if walk.size else 0.0,
-                     "unseen_doors": ",".join(unseen)})
+        rows.append(_door_row(label, eps, unseen))
     return DoorNavigationResult(pd.DataFrame(rows), pd.DataFrame(recs), qs, episodes, probs)
 
 

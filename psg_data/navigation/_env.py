@@ -329,7 +329,7 @@ class NavigationEnv:
         nearest to :attr:`start_xy` (the grid centre when there is no recorded pose)."""
         from psg_data.navigation._queries import start_cells
 
-        cells = start_cells(self)
+        cells = start_cells(self.grid, self.name)
         W = self.grid.shape[1]
         ij = np.stack(np.divmod(cells, W), axis=1)
         xy = self.grid.cell_to_world(ij)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -14,7 +15,7 @@ from psg_data.navigation._grid import box_footprint
 from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query
 
-__all__ = ["plot_query"]
+__all__ = ["plot_query", "pick_door_example", "plot_door_example"]
 
 log = logging.getLogger(__name__)
 
@@ -29,6 +30,9 @@ def plot_query(
     cache: PlanningCache | None = None,
     title: str | None = None,
     dpi: int = 120,
+    door_p_open: Mapping[str, float] | None = None,
+    compare: tuple[NDArray[np.int64], str] | None = None,
+    label: str = "path",
 ) -> Path:
     """Write a top-down map of one query as a PNG (matplotlib, Agg backend).
 
@@ -47,6 +51,10 @@ def plot_query(
         cache: planning cache (only to reuse its grid); optional.
         title: figure title.
         dpi: resolution.
+        door_p_open: door_id -> predicted P(open): doors are then coloured by it (pink low, teal
+            high) and labelled with the value and the true state, instead of green / red truth.
+        compare: (trail, label) of a second walk drawn dashed grey (e.g. the all-doors-open plan).
+        label: legend label of ``trail``.
 
     Returns:
         The written path.
@@ -82,23 +90,37 @@ def plot_query(
             if b is not None and b >= 0.05:
                 c = fp.mean(axis=0)
                 ax.text(c[0], c[1], f"{b:.2f}", ha="center", va="center", fontsize=6, color="white")
-        for did, door in env.doors.items():
-            is_open = query.doors_open.get(did, True)
-            ax.add_patch(Polygon(box_footprint(door.box), closed=True, facecolor="limegreen" if is_open else "red",
-                                 edgecolor="black", lw=0.8, alpha=0.9))
+        _draw_doors(ax, env, query, door_p_open)
         sx, sy = query.start_xy
         ax.plot([sx], [sy], "o", color="tab:blue", ms=7, label="start")
+        if compare is not None and np.size(compare[0]):
+            t = np.asarray(compare[0], dtype=np.int64)
+            xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
+            ax.plot(xy[:, 0], xy[:, 1], "--", color="0.35", lw=1.6, label=compare[1])
+            ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="0.35", ms=8, mew=2)
         if trail is not None and np.size(trail):
             t = np.asarray(trail, dtype=np.int64)
             xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
-            ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", lw=2, label="path")
+            ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", lw=2, label=label)
             ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="black", ms=9, mew=2, label="final")
         sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, 1))
         fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, label="predicted P(object on receptacle)")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
-        ax.legend(loc="upper right", fontsize=7)
+        from matplotlib.patches import Patch
+
+        proxies = [Patch(facecolor="none", edgecolor="gold", lw=2.5, label="true receptacle"),
+                   Patch(facecolor="none", edgecolor="magenta", ls="--", lw=1.5, label="receptacle at the last map"),
+                   Patch(facecolor=(0.85, 0.85, 0.85), edgecolor="black", hatch="///", label="no edge (never seen there)")]
+        if door_p_open is None:
+            proxies += [Patch(facecolor="limegreen", edgecolor="black", label="door open (truth)"),
+                        Patch(facecolor="red", edgecolor="black", label="door closed (truth)")]
+        else:
+            proxies += [Patch(facecolor=_DOOR_CMAP[0], edgecolor="black", label="door predicted closed"),
+                        Patch(facecolor=_DOOR_CMAP[2], edgecolor="black", label="door predicted open")]
+        handles, _ = ax.get_legend_handles_labels()
+        ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.16))
         ax.set_title(title or f"{query.object_id} ({query.category}), query {query.query_id}")
         out = Path(out_path)
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -106,3 +128,82 @@ def plot_query(
     finally:
         plt.close(fig)
     return out
+
+
+_DOOR_CMAP = ("#e75480", "#f2e6c9", "#008080")  # pink (predicted closed) .. teal (predicted open)
+
+
+def _draw_doors(ax: Any, env: NavigationEnv, query: Query, p_open: Mapping[str, float] | None) -> None:
+    """Doors: green open / red closed at the query time, or coloured by a predicted P(open)."""
+    from matplotlib.colors import LinearSegmentedColormap
+    from matplotlib.patches import Polygon
+
+    cmap = LinearSegmentedColormap.from_list("door_p", list(_DOOR_CMAP))
+    for did, door in env.doors.items():
+        is_open = query.doors_open.get(did, True)
+        fp = box_footprint(door.box)
+        if p_open is None:
+            ax.add_patch(Polygon(fp, closed=True, facecolor="limegreen" if is_open else "red", edgecolor="black",
+                                 lw=0.8, alpha=0.9))
+            continue
+        p = float(p_open.get(did, 1.0))
+        ax.add_patch(Polygon(fp, closed=True, facecolor=cmap(p), edgecolor="black", lw=1.0))
+        c = fp.mean(axis=0)
+        ax.annotate(f"{did}\nP(open)={p:.2f}\n(truly {'open' if is_open else 'closed'})", c, fontsize=7,
+                    ha="center", va="bottom", xytext=(0, 10), textcoords="offset points")
+
+
+def pick_door_example(result: Any, label: str) -> tuple[int, int] | None:
+    """(seed, query_id) of an object query of ``result`` (a run with methods ``"<label> [doors
+    predicted]"`` and ``"<label> [doors all open]"``) where the predicted doors paid off: the
+    prediction closed a door that was closed, the all-open plan walked into a closed door, and the
+    predicted plan found the object without meeting one. Falls back to any query where the
+    all-open plan met a closed door and the predicted one did not; None if there is none."""
+    import json
+
+    rec = result.records
+    pred = rec[rec["method"] == f"{label} [doors predicted]"].set_index(["seed", "query_id"])
+    base = rec[rec["method"] == f"{label} [doors all open]"].set_index(["seed", "query_id"])
+    if pred.empty or base.empty:
+        return None
+    both = pred.merge(base, left_index=True, right_index=True, suffixes=("", "_open"))
+    met = both["doors_discovered_open"].map(lambda x: bool(json.loads(x)))
+    clean = both["doors_discovered"].map(lambda x: not json.loads(x))
+    for pool in (both[met & clean & both["success"] & (both["path_m"] < both["path_m_open"])],
+                 both[met & clean & both["reachable"]], both[met & clean]):
+        if len(pool):
+            k = pool.index[0]
+            return int(k[0]), int(k[1])
+    return None
+
+
+def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: str | Path, *,
+                      estimator: Any = None, settings: Mapping[str, Any] | None = None) -> Path:
+    """The paper's "Predictive Navigation" figure for an object query: doors coloured by the
+    estimator's P(open), the walk with its predicted doors (blue) and with all doors open (grey).
+
+    Args:
+        result: a :class:`~psg_data.navigation.NavigationResult` with the two door modes of ``label``.
+        label: the estimator label; ``estimator`` (default ``label``) is refitted on the door streams
+            to show P(open).
+        key: (seed, query_id), e.g. from :func:`pick_door_example`.
+        out_path: PNG path.
+    """
+    from psg_data.navigation._doors import door_open_probabilities, fit_door_filters
+
+    env, seed, qid = result.env, key[0], key[1]
+    q = next(x for x in result.queries[seed] if x.query_id == qid)
+    door_ids = list(env.grid.door_ids)
+    filters, _ = fit_door_filters(estimator or label.split(":", 1)[0], env.door_streams, door_ids,
+                                  timezone=env.timezone, settings=settings)
+    p = door_open_probabilities(filters, q.t_s, door_ids)
+    pred, base = f"{label} [doors predicted]", f"{label} [doors all open]"
+    rec = result.records.set_index(["method", "seed", "query_id"])
+    outcome = rec.loc[(pred, seed, qid), "outcome"], rec.loc[(base, seed, qid), "outcome"]
+    walked = rec.loc[(pred, seed, qid), "path_m"], rec.loc[(base, seed, qid), "path_m"]
+    return plot_query(env, q, out_path, beliefs=result.beliefs.get((pred, seed, qid)),
+                      trail=result.trails.get((pred, seed, qid)), cache=result.cache, door_p_open=p,
+                      compare=(result.trails.get((base, seed, qid), np.zeros(0, np.int64)),
+                               f"all doors open ({walked[1]:.1f} m, {outcome[1]})"),
+                      label=f"{label}, predicted doors ({walked[0]:.1f} m, {outcome[0]})",
+                      title=f"{label}: {q.object_id} ({q.category}), query {qid} of seed {seed}")

@@ -27,8 +27,9 @@ import numpy as np
 
 from psg_data.errors import EvaluationError
 from psg_data.navigation._env import WEEK_S, NavigationEnv
+from psg_data.navigation._grid import OccupancyGrid
 
-__all__ = ["Query", "make_queries", "queries_to_frame", "queries_from_frame", "save_queries", "load_queries",
+__all__ = ["Query", "make_queries", "start_cells", "queries_to_frame", "queries_from_frame", "save_queries", "load_queries",
            "CATEGORIES"]
 
 log = logging.getLogger(__name__)
@@ -65,16 +66,20 @@ class Query:
     doors_open: dict[str, bool] = field(default_factory=dict)
 
 
-def start_cells(env: NavigationEnv) -> np.ndarray:
-    """Flat indices of the cells a query may start from (module docstring)."""
+def start_cells(grid: OccupancyGrid, name: str = "grid") -> np.ndarray:
+    """Flat indices of the cells a query may start from (module docstring).
+
+    Raises:
+        EvaluationError: the grid has no free cell.
+    """
     from scipy.ndimage import label
 
-    g = env.grid
+    g = grid
     closed = g.free({d: False for d in g.door_ids})
     open_ = g.free({d: True for d in g.door_ids})
     lab, n = label(open_, structure=np.ones((3, 3), dtype=int))
     if n == 0:
-        raise EvaluationError(f"{env.name}: the occupancy grid has no free cell")
+        raise EvaluationError(f"{name}: the occupancy grid has no free cell")
     sizes = np.bincount(lab.ravel())
     sizes[0] = 0
     main = lab == int(np.argmax(sizes))
@@ -118,7 +123,7 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
     if not t_hi > t_lo:
         raise EvaluationError(f"{env.name}: no ground truth after the last map update (t_end <= t_map)")
     rng = np.random.default_rng([int(seed), 8801])
-    cells = start_cells(env)
+    cells = start_cells(env.grid, env.name)
     W = env.grid.shape[1]
     fixed = None if start_cell is None else int(start_cell[0]) * W + int(start_cell[1])
     cache = None

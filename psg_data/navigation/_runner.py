@@ -41,7 +41,7 @@ from psg_data.estimators._base import EdgeFilter, EdgeKey
 from psg_data.navigation._agent import AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import last_seen_filters, oracle_filters
 from psg_data.navigation._env import NavigationEnv
-from psg_data.navigation._options import PROTOCOLS, NavigationOptions
+from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, NavigationOptions
 from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query, load_queries, make_queries, save_queries
 
@@ -211,9 +211,20 @@ class NavigationResult:
     trails: dict[tuple[str, int, int], Any] = field(default_factory=dict, repr=False)
     beliefs: dict[tuple[str, int, int], dict[str, float]] = field(default_factory=dict, repr=False)
 
-    def format_table(self, digits: int = 1) -> str:
-        """Text table shaped like the paper's (percent for SR/SPL/AR, metres for DIST, mean ± std)."""
+    def format_table(self, digits: int = 1, *, layout: str = "auto") -> str:
+        """Text table shaped like the paper's (percent for SR/SPL/AR, metres for DIST, mean ± std).
+
+        Args:
+            digits: decimals.
+            layout: ``sim`` (Table "Predictive Navigation": static / dynamic SR and SPL, absence AR
+                and DIST, overall SR and SPL), ``real`` (Table "Real-World Navigation": static SR,
+                dynamic SR, absent AR, overall SR) or ``auto`` (``real`` for the paper-real protocol).
+        """
         s = self.summary
+        if layout == "auto":
+            layout = "real" if str(self.config.get("protocol", "")).startswith("paper-real") else "sim"
+        if layout not in ("sim", "real"):
+            raise EvaluationError(f"layout: expected 'sim', 'real' or 'auto', got {layout!r}")
 
         def cell(row: Any, m: str) -> str:
             mu, sd = row[f"{m}_mean"], row[f"{m}_std"]
@@ -224,18 +235,34 @@ class NavigationResult:
 
         r0 = s.iloc[0] if len(s) else None
         n = (lambda c: int(r0[c]) if r0 is not None else 0)
-        head = [f"Static presence ({n('n_static')})", f"Dynamic presence ({n('n_dynamic')})",
-                f"Absence ({n('n_absent')})", f"Overall ({n('n_queries') - (n('n_unreachable') if self.config.get('unreachable') == 'exclude' else 0)})"]
-        cols = ["Method", "SR (%)", "SPL (%)", "SR (%)", "SPL (%)", "AR (%)", "Dist (m)", "SR (%)", "SPL (%)"]
-        rows = [[str(r["method"])] + [cell(r, m) for m in METRICS] for _, r in s.iterrows()]
+        n_all = n("n_queries") - (n("n_unreachable") if self.config.get("unreachable") == "exclude" else 0)
+        if layout == "real":
+            metrics = ("static_sr", "dynamic_sr", "absent_ar", "overall_sr")
+            head = [f"Static ({n('n_static')})", f"Dynamic ({n('n_dynamic')})", f"Absent ({n('n_absent')})",
+                    f"Overall ({n_all})"]
+            cols = ["Estimator", "SR (%)", "SR (%)", "AR (%)", "SR (%)"]
+            spans = [(1,), (2,), (3,), (4,)]
+        else:
+            metrics = METRICS
+            head = [f"Static presence ({n('n_static')})", f"Dynamic presence ({n('n_dynamic')})",
+                    f"Absence ({n('n_absent')})", f"Overall ({n_all})"]
+            cols = ["Method", "SR (%)", "SPL (%)", "SR (%)", "SPL (%)", "AR (%)", "Dist (m)", "SR (%)", "SPL (%)"]
+            spans = [(1, 2), (3, 4), (5, 6), (7, 8)]
+        rows = [[str(r["method"])] + [cell(r, m) for m in metrics] for _, r in s.iterrows()]
         w = [max(len(c), *(len(r[i]) for r in rows)) if rows else len(c) for i, c in enumerate(cols)]
+        for h, sp in zip(head, spans):  # widen the last column of a group to fit its header
+            short = len(h) - (sum(w[i] for i in sp) + 3 * (len(sp) - 1))
+            if short > 0:
+                w[sp[-1]] += short
         line = lambda vals: " | ".join(v.ljust(w[i]) for i, v in enumerate(vals))  # noqa: E731
-        groups = (f"{'':{w[0]}} | {head[0]:^{w[1] + w[2] + 3}} | {head[1]:^{w[3] + w[4] + 3}} | "
-                  f"{head[2]:^{w[5] + w[6] + 3}} | {head[3]:^{w[7] + w[8] + 3}}")
+        groups = f"{'':{w[0]}} | " + " | ".join(f"{h:^{sum(w[i] for i in sp) + 3 * (len(sp) - 1)}}"
+                                                for h, sp in zip(head, spans))
         sep = "-+-".join("-" * x for x in w)
-        extra = f"\nunreachable targets: {n('n_unreachable')} (rule: {self.config.get('unreachable')}); " \
-                f"seeds: {self.config.get('seeds')}; setting: {self.config.get('setting')}"
-        return "\n".join([groups, line(cols), sep, *(line(r) for r in rows)]) + extra
+        c = self.config
+        extra = (f"\nunreachable targets: {n('n_unreachable')} (rule: {c.get('unreachable')}); seeds: {c.get('seeds')}; "
+                 f"setting: {c.get('setting')}; protocol: {c.get('protocol')}; labels: {c.get('labels', 'gt')}; "
+                 f"doors: {c.get('door_belief')}")
+        return "\n".join([groups.rstrip(), line(cols), sep, *(line(r) for r in rows)]) + extra
 
     def save(self, out_dir: str | Path) -> dict[str, Path]:
         """Write records.parquet, per_seed.csv, summary.csv, summary.json and table.txt to ``out_dir``."""
@@ -393,6 +420,7 @@ def run_navigation(
     out_dir: str | Path | None = None,
     estimator_settings: Mapping[str, Mapping[str, Any]] | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
+    door_modes: Mapping[str, str] | None = None,
     **overrides: Any,
 ) -> NavigationResult:
     """Run semi-static object navigation for several methods on the same queries.
@@ -408,6 +436,9 @@ def run_navigation(
             JSON) and the results are saved there.
         estimator_settings: name -> keyword settings for registry estimators.
         env_kwargs: extra arguments of :meth:`NavigationEnv.from_dataset`.
+        door_modes: method name -> door belief (one of ``truth``, ``predicted``, ``last_map``,
+            ``all_open``) replacing ``options.door_belief`` for that method. Methods with the same
+            registry name and settings share one fit (filters are copied before any update).
         **overrides: fields of :class:`NavigationOptions` replacing those of ``options`` (``seed``
             is accepted for ``seeds``; ``door_belief`` may also be a mapping or a callable
             ``t_s -> {door_id: is_open}`` used for every method).
@@ -451,11 +482,20 @@ def run_navigation(
     trails: dict[tuple[str, int, int], Any] = {}
     beliefs_out: dict[tuple[str, int, int], dict[str, float]] = {}
     timings: dict[str, float] = {}
+    modes = dict(door_modes or {})
+    bad = {m: v for m, v in modes.items() if m not in names or v not in DOOR_BELIEFS}
+    if bad:
+        raise EvaluationError(f"door_modes {bad}: expected method names {names} and modes {DOOR_BELIEFS}")
+    fitted: dict[Any, dict[EdgeKey, EdgeFilter]] = {}
     for name, spec in methods:
         t0 = time.perf_counter()
         settings = (estimator_settings or {}).get(name)
-        filt = build_filters(env, spec, settings=settings)
-        doors_for = _door_hooks(env, name, spec, opts, settings) if hook is None else (
+        key = (spec, repr(sorted((settings or {}).items()))) if isinstance(spec, str) else id(spec)
+        if key not in fitted:
+            fitted[key] = build_filters(env, spec, settings=settings)
+        filt = fitted[key]
+        m_opts = replace(opts, door_belief=modes[name]) if name in modes else opts
+        doors_for = _door_hooks(env, name, spec, m_opts, settings) if hook is None else (
             lambda ts, h=hook: [dict(h) if isinstance(h, Mapping) else dict(h(t)) for t in ts])
         by_obj: dict[str, dict[str, EdgeFilter]] = {}
         for (o, r), f in filt.items():
@@ -480,6 +520,7 @@ def run_navigation(
     records = pd.DataFrame(rows)
     per_seed, summary = _summarise(records, names, opts)
     config = {"env": env.name, **opts.to_dict(), "door_belief": opts.door_belief if hook is None else "custom",
+              "door_modes": modes or None,
               "resolution_m": env.grid.resolution_m, "robot_radius_m": env.grid.robot_radius_m,
               "grid_source": env.grid.source, "methods": names, "labels_info": env.extra.get("labels"),
               "sightings": {"p_miss": env.observation.p_miss, "p_false": env.observation.p_false}}

@@ -198,7 +198,8 @@ def _door_grid(ds: Any, spec: Any, labels: str, seed: int) -> tuple[Any, str]:
         return (door_label_grid(ds, "noisy", source=labels, visible=vis, p_m=spec.p_m, p_f=spec.p_f, seed=seed),
                 "door_states, flipped")
     name = "observed" if spec.kind in ("detections", "observed") else spec.name
-    grid = _table_grid(ds, name, name, doors=True) if ds.has_table("labels") else None
+    stored = ds.has_table("labels") and name in set(ds.table("labels").column("source").to_pylist())
+    grid = _table_grid(ds, name, name, doors=True) if stored or spec.kind == "privileged" else None
     if grid is not None:
         return grid, f"labels table, source {name}"
     if spec.kind == "privileged":

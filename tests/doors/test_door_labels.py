@@ -87,6 +87,8 @@ def test_cli_label_observed_then_validate(door_lab_copy) -> None:  # type: ignor
     r = CliRunner().invoke(main, ["label", str(door_lab_copy), "--source", "observed", "-q"])
     assert r.exit_code == 0, r.output
     assert "state agrees with door_states in" in r.output
+    # the door-only source reports its door-state edges (2 doors x open/closed), not "0 edges"
+    assert "source observed: 4 door-state edges" in r.output and " 0 edges" not in r.output
     r = CliRunner().invoke(main, ["validate", str(door_lab_copy)])
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(main, ["label", str(door_lab_copy), "--source", "gt", "--no-doors", "-q"])

@@ -52,9 +52,9 @@ def test_fallback_when_every_route_is_believed_closed() -> None:
     g = door_grid()
     g.static_obstacle[6, 10] = True  # close the gap: the door is the only way
     cache = PlanningCache(g)
-    ep = run_door_episode(cache, _q({"d": True}), {"d": 0.2})
-    assert ep.success and ep.fallback and not ep.first_plan_blocked
-    ep = run_door_episode(cache, _q({"d": False}), {"d": 0.2})
+    ep = run_door_episode(cache, _q({"d": True}), {"d": 0.2}, no_path="optimistic")
+    assert ep.success and ep.fallback and not ep.first_plan_blocked and not ep.declined
+    ep = run_door_episode(cache, _q({"d": False}), {"d": 0.2}, no_path="optimistic")
     assert not ep.success and ep.first_plan_blocked and math.isnan(ep.shortest_m)
 
 

@@ -203,16 +203,16 @@ def test_dataset_files_untouched_by_eval(lab: Path, tmp_path: Path) -> None:
     assert sha256_file(lab / "tables/files.parquet") == before
 
 
-def test_doors_task_table_files_and_figure(tmp_path: Path) -> None:
+def test_doors_task_table_files_and_figure(lab: Path, tmp_path: Path) -> None:
     out = tmp_path / "doors"
-    res = run("--task", "doors", "-e", "perpetua_star", "--no-references", "--seeds", "2", "--queries", "60",
-              "--out", str(out), "--quiet")
+    res = run("--task", "doors", "--dataset", str(lab), "-e", "perpetua_star", "--no-references", "--seeds", "2",
+              "--queries", "60", "--out", str(out), "--quiet")
     assert res.exit_code == 0, res.output + str(res.exception)
     summary = pd.read_csv(out / "results.csv").set_index("estimator")
     assert set(summary.index) == {"all_open", "oracle", "perpetua_star"}
     assert (summary["queries"] == 120).all()
-    assert summary.loc["oracle", "blocked_first_plans"] == 0
-    assert summary.loc["perpetua_star", "blocked_first_plans"] < summary.loc["all_open", "blocked_first_plans"]
+    assert summary.loc["oracle", "blocked_first_plans"] == 0 and summary.loc["oracle", "wasted_m"] == 0.0
+    assert summary.loc["all_open", "declined"] == 0
     per_seed = pd.read_csv(out / "by_seed.csv")
     # the summary is the mean of the per-seed rows (an independent recomputation)
     m = per_seed.groupby("estimator").blocked_rate.mean()
@@ -220,9 +220,10 @@ def test_doors_task_table_files_and_figure(tmp_path: Path) -> None:
     rec = pd.read_csv(out / "records.csv")
     assert len(rec) == 3 * 120 and rec["p_open:door_ab"].between(0, 1).all()
     info = json.loads((out / "results.json").read_text())["info"]
-    assert info["task"] == "doors" and info["seeds"] == [0, 1]
-    _assert_png(out / "doors_perpetua_star.png")
+    assert info["task"] == "doors" and info["seeds"] == [0, 1] and info["labels"] == "gt"
+    _assert_png(out / "door_plan_perpetua_star.png")
     assert "perpetua_star" in res.output and "blocked %" in res.output
+    assert (out / "objects" / "summary.csv").is_file()
     cmp = run("compare", str(out))
     assert cmp.exit_code == 0 and "[doors]" in cmp.output
     line = next(l for l in cmp.output.splitlines() if " perpetua_star " in l)
@@ -230,8 +231,10 @@ def test_doors_task_table_files_and_figure(tmp_path: Path) -> None:
 
 
 def test_doors_task_rejects_other_inputs(tmp_path: Path) -> None:
-    res = run("--task", "doors", "--labels", "privileged", "--out", str(tmp_path / "x"), "--quiet")
-    assert res.exit_code == 1 and "--labels privileged" in res.stderr and "Traceback" not in res.output
-    res = run("--task", "doors", "--dataset", "demo", "--out", str(tmp_path / "y"), "--quiet")
-    assert res.exit_code == 1 and "door-loop" in res.stderr
-    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    res = run("--task", "doors", "--dataset", "door-loop", "--out", str(tmp_path / "x"), "--quiet")
+    assert res.exit_code == 1 and "unit-test world" in res.stderr and "Traceback" not in res.output
+    res = run("--task", "doors", "--dataset", "persistence-benchmark", "--out", str(tmp_path / "y"), "--quiet")
+    assert res.exit_code == 1 and "needs a dataset" in res.stderr
+    res = run("--task", "doors", "--labels", "psychic", "--out", str(tmp_path / "z"), "--quiet")
+    assert res.exit_code == 1 and "psychic" in res.stderr
+    assert not any((tmp_path / d).exists() for d in "xyz")

@@ -9,7 +9,7 @@ import sys
 import psg_data.navigation as nav
 
 SUBMODULES = ["_grid", "_planner", "_env", "_queries", "_baselines", "_agent", "_runner", "_plots", "_options",
-              "_sources", "_doors"]
+              "_sources", "_doors", "_door_dataset"]
 
 
 def test_all_is_complete_and_resolvable():
