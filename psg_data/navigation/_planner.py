@@ -152,13 +152,13 @@ def grid_graph(free: NDArray[np.bool_], resolution_m: float) -> Any:
         if di and dj:
             m &= pad[1 + di:H + 1 + di, 1:W + 1] & pad[1:H + 1, 1 + dj:W + 1 + dj]
         ok[:, :, k] = m
-    ok = ok.reshape(n, 8)
+    flat = np.flatnonzero(ok)  # row-major over (node, move): CSR order
+    rows, k = np.divmod(flat, 8)
     offs = np.array([di * W + dj for di, dj in _MOVES], dtype=np.int64)
     wts = np.array([SQRT2 * resolution_m if di and dj else float(resolution_m) for di, dj in _MOVES])
-    rows, k = np.nonzero(ok)
     indices = (rows + offs[k]).astype(np.int32)
     indptr = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum(ok.sum(axis=1), out=indptr[1:])
+    np.cumsum(np.count_nonzero(ok.reshape(n, 8), axis=1), out=indptr[1:])
     return csr_matrix((wts[k], indices, indptr), shape=(n, n))
 
 
@@ -199,11 +199,14 @@ class GridPlanner:
     Same motion model and lengths as :func:`astar_reference` (8-connected, octile costs, no
     corner cutting). A query is answered by, in order: (1) the octile lower bound, when one of the
     two monotone octile paths is free (then it is a shortest path); (2) the connected components
-    of the grid graph (different components: no path); (3) a bidirectional Dijkstra: two searches
+    of the grid graph (different components: no path; labelled from the planner's second search
+    on, so that a one-off query does not pay for it); (3) a bidirectional Dijkstra: two searches
     from the start and from the goal, each cut at distance ``L`` (``dijkstra(..., limit=L)``); the
     shortest path length is ``mu = min_v d_s(v) + d_g(v)``, exact once ``mu + w_max <= 2 L``
     (``w_max`` the diagonal step: the shortest path then has a node within ``L`` of both ends).
-    ``L`` starts just above half the octile bound and grows to ``(mu + w_max) / 2``.
+    ``L`` starts just above half the octile bound; when the two searches meet without that
+    guarantee, ``mu`` bounds the length and one more round at ``L = (mu + w_max) / 2`` is exact;
+    when they do not meet (a long detour), one single-source search from the start finishes.
 
     The graph and the components are built on first use and kept; build one planner per free mask
     (:class:`PlanningCache` keeps one per door configuration).
@@ -225,6 +228,7 @@ class GridPlanner:
         self.resolution_m = float(resolution_m)
         self._graph = graph
         self._labels: NDArray[np.int32] | None = None
+        self._searches = 0
 
     @property
     def graph(self) -> Any:
@@ -254,18 +258,22 @@ class GridPlanner:
         if direct is not None:
             return PathResult(path_length_m(direct, self.resolution_m), direct)
         si, gi = s[0] * W + s[1], g[0] * W + g[1]
-        lab = self.components
-        if lab[si] != lab[gi]:
-            return empty
+        self._searches += 1
+        if self._labels is not None or self._searches > 1:  # worth labelling once a planner is reused
+            lab = self.components
+            if lab[si] != lab[gi]:
+                return empty
         cells = self._bidirectional(si, gi, octile_distance(s, g, self.resolution_m))
+        if cells is None:
+            return empty
         return PathResult(path_length_m(cells, self.resolution_m), cells)
 
-    def _bidirectional(self, si: int, gi: int, lower_m: float) -> NDArray[np.int64]:
+    def _bidirectional(self, si: int, gi: int, lower_m: float) -> NDArray[np.int64] | None:
         from scipy.sparse.csgraph import dijkstra
 
         w_max = SQRT2 * self.resolution_m
         limit = 0.5 * (1.1 * lower_m + w_max) + self.resolution_m
-        while True:
+        for _ in range(2):
             ds, ps = dijkstra(self.graph, indices=si, limit=limit, return_predecessors=True)
             dg, pg = dijkstra(self.graph, indices=gi, limit=limit, return_predecessors=True)
             tot = ds + dg
@@ -273,18 +281,28 @@ class GridPlanner:
             mu = float(tot[v])
             if math.isfinite(mu) and mu + w_max <= 2.0 * limit:
                 break
-            # same component, so a path exists: with this limit the next round is exact
-            limit = 0.5 * (mu + w_max) + 1e-9 if math.isfinite(mu) else 2.0 * limit
-        head = [v]
-        while head[-1] != si:
-            head.append(int(ps[head[-1]]))
-        tail = []
-        p = v
-        while p != gi:
-            p = int(pg[p])
-            tail.append(p)
-        flat = np.asarray(head[::-1] + tail, dtype=np.int64)
+            if not math.isfinite(mu):  # a long detour: one search from the start over the component
+                return self._single_source(si, gi)
+            limit = 0.5 * (mu + w_max) + 1e-9  # mu bounds the length: this round is exact
+        flat = np.asarray(_walk_back(ps, si, v) + _walk_back(pg, gi, v)[::-1][1:], dtype=np.int64)
         return np.stack(np.divmod(flat, self.free.shape[1]), axis=1)
+
+    def _single_source(self, si: int, gi: int) -> NDArray[np.int64] | None:
+        from scipy.sparse.csgraph import dijkstra
+
+        dist, pred = dijkstra(self.graph, indices=si, return_predecessors=True)
+        if not math.isfinite(dist[gi]):
+            return None
+        flat = np.asarray(_walk_back(pred, si, gi), dtype=np.int64)
+        return np.stack(np.divmod(flat, self.free.shape[1]), axis=1)
+
+
+def _walk_back(pred: NDArray[np.int32], source: int, node: int) -> list[int]:
+    """Flat nodes from ``source`` to ``node`` along a predecessor array."""
+    out = [node]
+    while out[-1] != source:
+        out.append(int(pred[out[-1]]))
+    return out[::-1]
 
 
 def astar(free: NDArray[np.bool_], start: tuple[int, int], goal: tuple[int, int], resolution_m: float) -> PathResult:

@@ -311,6 +311,15 @@ def _methods(estimators: Any) -> list[tuple[str, MethodSpec]]:
     return out
 
 
+def _fresh(estimator: Any) -> Any:
+    """An unfitted copy of an estimator with the same settings (scikit-learn's ``clone``)."""
+    try:
+        params = estimator.get_params(deep=False)
+    except TypeError:  # a plugin whose get_params takes no ``deep``
+        params = estimator.get_params()
+    return type(estimator)(**params)
+
+
 def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: NavigationOptions,
                 settings: Mapping[str, Any] | None) -> Callable[[Sequence[float]], list[dict[str, bool]] | None]:
     """Door states a method plans with at a batch of query times (None = the true states)."""
@@ -331,7 +340,7 @@ def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: Naviga
         if missing:
             log.info("%s: doors never observed on the map (believed open): %s", name, missing)
     elif isinstance(spec, str) or hasattr(spec, "get_params"):
-        est = spec if isinstance(spec, str) else type(spec)(**spec.get_params())
+        est = spec if isinstance(spec, str) else _fresh(spec)
         filters, kind = fit_door_filters(est, env.door_streams, door_ids, timezone=env.timezone, settings=settings)
         unseen = [d for d, k in kind.items() if k == "prior"]
         if unseen:
