@@ -133,6 +133,17 @@ def true_shortest_path(cache: PlanningCache, query: Query) -> tuple[bool, float]
     return (True, d) if math.isfinite(d) else (False, float("nan"))
 
 
+def _closed_doors_at(cache: PlanningCache, bel_doors: Mapping[str, bool], query: Query, cell: int) -> list[str]:
+    """The doors believed open but closed that block ``cell`` (one if one explains it, else all of them)."""
+    wrong = [d for d, o in bel_doors.items() if o and not query.doors_open.get(d, True)]
+    for d in wrong:
+        if not cache.free_flat(cache.key({**bel_doors, d: False}))[cell]:
+            return [d]
+    if not wrong:
+        raise EvaluationError(f"query {query.query_id}: path blocked by a non-door cell {cell}")
+    return wrong  # several doors together: learn all the closed ones
+
+
 def run_episode(
     cache: PlanningCache,
     query: Query,
@@ -245,25 +256,9 @@ def run_episode(
                 found = True
                 break
             if event == "blocked":
-                cell = int(path[kb])
-                culprit = None
-                for d, is_open in bel_doors.items():
-                    if is_open and not query.doors_open.get(d, True):
-                        trial = dict(bel_doors)
-                        trial[d] = False
-                        if not cache.free_flat(cache.key(trial))[cell]:
-                            culprit = d
-                            break
-                if culprit is None:  # several doors together: learn all the closed ones
-                    wrong = [d for d, o in bel_doors.items() if o and not query.doors_open.get(d, True)]
-                    if not wrong:
-                        raise EvaluationError(f"query {query.query_id}: path blocked by a non-door cell {cell}")
-                    for d in wrong:
-                        bel_doors[d] = False
-                    discovered += wrong
-                else:
-                    bel_doors[culprit] = False
-                    discovered.append(culprit)
+                for d in _closed_doors_at(cache, bel_doors, query, int(path[kb])):
+                    bel_doors[d] = False
+                    discovered.append(d)
                 cfg_bel = cache.key(bel_doors)
                 continue
             arrived = True

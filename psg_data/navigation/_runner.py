@@ -395,6 +395,16 @@ def _initial_beliefs(name: str, qs: list[Query], by_obj: Mapping[str, Mapping[st
     return bel0
 
 
+def _episodes(env: NavigationEnv, cache: PlanningCache, name: str, qs: list[Query],
+              by_obj: Mapping[str, Mapping[str, EdgeFilter]], doors_for: Callable[[Sequence[float]], Any],
+              cfg: AgentConfig) -> list[tuple[Query, dict[str, bool] | None, Episode]]:
+    """Every query of one set for one method: (query, door belief, episode)."""
+    bel0 = _initial_beliefs(name, qs, by_obj)
+    door_bel = doors_for([q.t_s for q in qs]) or [None] * len(qs)
+    return [(q, db, run_episode(cache, q, by_obj.get(q.object_id, {}), cfg, beliefs=bel0[q.query_id],
+                                door_belief=db, observation=env.observation)) for q, db in zip(qs, door_bel)]
+
+
 def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tuple[Any, Any]:
     import pandas as pd
 
@@ -419,6 +429,25 @@ def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tu
 
 
 _LEGACY = {"seed": "seeds"}
+
+
+def _resolve_options(options: NavigationOptions | None, overrides: dict[str, Any]) -> tuple[NavigationOptions, Any]:
+    """The run's options with ``overrides`` applied, and a custom door-belief hook (or None)."""
+    overrides = dict(overrides)
+    hook = overrides.pop("door_belief", None)
+    if isinstance(hook, str):
+        overrides["door_belief"], hook = hook, None
+    for old, new in _LEGACY.items():
+        if old in overrides:
+            v = overrides.pop(old)
+            overrides[new] = (v,) if isinstance(v, (int, np.integer)) else tuple(v)
+    base = options if options is not None else PROTOCOLS["sim"]
+    if "protocol" not in overrides and overrides:
+        overrides["protocol"] = f"{base.protocol}+custom"
+    try:
+        return replace(base, **overrides), hook
+    except TypeError as exc:
+        raise EvaluationError(f"run_navigation: {exc}") from None
 
 
 def run_navigation(
@@ -455,18 +484,7 @@ def run_navigation(
     Returns:
         A :class:`NavigationResult`.
     """
-    hook = overrides.pop("door_belief", None)
-    if isinstance(hook, str):
-        overrides["door_belief"], hook = hook, None
-    for old, new in _LEGACY.items():
-        if old in overrides:
-            v = overrides.pop(old)
-            overrides[new] = (v,) if isinstance(v, (int, np.integer)) else tuple(v)
-    base = options if options is not None else PROTOCOLS["sim"]
-    try:
-        opts = replace(base, **overrides, protocol=base.protocol if not overrides else f"{base.protocol}+custom")
-    except TypeError as exc:
-        raise EvaluationError(f"run_navigation: {exc}") from None
+    opts, hook = _resolve_options(options, overrides)
     cfg = AgentConfig(setting=opts.setting, delta=opts.delta, max_attempts=opts.max_attempts,
                       detect_en_route=opts.detect_en_route)
     env = NavigationEnv.coerce(dataset_or_lab, resolution_m=opts.resolution_m, robot_radius_m=opts.robot_radius_m,
@@ -510,12 +528,7 @@ def run_navigation(
         for (o, r), f in filt.items():
             by_obj.setdefault(o, {})[r] = f
         for sd in opts.seeds:
-            qs = qsets[sd]
-            bel0 = _initial_beliefs(name, qs, by_obj)
-            door_bel = doors_for([q.t_s for q in qs]) or [None] * len(qs)
-            for q, db in zip(qs, door_bel):
-                ep: Episode = run_episode(cache, q, by_obj.get(q.object_id, {}), cfg, beliefs=bel0[q.query_id],
-                                          door_belief=db, observation=env.observation)
+            for q, db, ep in _episodes(env, cache, name, qsets[sd], by_obj, doors_for, cfg):
                 rows.append(episode_record(ep, method=name, seed=sd, t_s=q.t_s, start_x_m=q.start_xy[0],
                                            start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle,
                                            map_receptacle=q.map_receptacle,
