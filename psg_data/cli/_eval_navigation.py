@@ -121,8 +121,17 @@ def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Pat
     text = res.format_table()
     objects_text = ""
     if res.objects is not None:
+        from psg_data.navigation import walk_summary
+
         res.objects.save(out / "objects")
-        objects_text = res.objects.format_table()
+        walk = walk_summary(res.objects)
+        walk.to_csv(out / "objects" / "walk.csv", index=False)
+        shown = walk.round(2).astype(object).where(walk.notna(), "-").rename(columns={"walked_m": "walked m", "walked_unreachable_m":
+                                                          "walked m (unreachable)", "lost_vs_all_open": "lost",
+                                                          "won_vs_all_open": "won"})
+        objects_text = (res.objects.format_table() + "\n\n" + shown.to_string(index=False) +
+                        "\nwalked m: mean per query; (unreachable): towards targets no route reached (left out of SR / "
+                        "SPL); lost / won: queries found with all doors open and not with these doors / the reverse")
     info = provenance({"task": "doors", "dataset_label": choice.label, "dataset": str(choice.path),
                        **options.to_dict(), "world": res.world.info, "seconds": round(time.perf_counter() - t0, 2),
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
@@ -152,7 +161,7 @@ def _door_figures(res: Any, spec: Any, out: Path) -> None:
     pick = next((i for i, (e, b) in enumerate(zip(eps, base)) if b.first_plan_blocked and not e.first_plan_blocked
                  and e.success), None)
     pick = pick if pick is not None else next((i for i, b in enumerate(base) if b.first_plan_blocked), 0)
-    plot_door_query(res.world, first.queries[pick], eps[pick], out / f"door_plan_{label}.png")
+    plot_door_query(res.world, first.queries[pick], eps[pick], out / f"door_plan_{label}.png", baseline=base[pick])
     if res.objects is not None:
         ex = pick_door_example(res.objects, label)
         if ex is not None:

@@ -37,6 +37,7 @@ from psg_data.navigation._door_dataset import (
     DoorTaskResult,
     door_world_from_dataset,
     run_door_task,
+    walk_summary,
 )
 from psg_data.navigation._doors import (
     DOOR_BASELINES,
@@ -174,6 +175,7 @@ __all__ = [
     "DoorTaskOptions",
     "DoorTaskResult",
     "run_door_task",
+    "walk_summary",
     "DOOR_MODE_LABELS",
     "plot_door_query",
 ]

@@ -563,13 +563,14 @@ def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, nois
 
 # -- the figure -------------------------------------------------------------------------------------
 def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, out_path: str | Path, *,
-                    title: str | None = None, dpi: int = 120) -> Path:
+                    title: str | None = None, dpi: int = 120, baseline: DoorEpisode | None = None) -> Path:
     """PNG like the paper's "Predictive Navigation" figure.
 
     Shows the grid (free light, obstacles dark), each door's cells coloured by the predicted
     P(open) (pink = low, teal = high; label with the value and the true state), the path the
     method walked (blue, with a red cross where it met a closed door), the shortest path under the
-    true door states (dashed black), the start (blue dot) and the goal receptacle (gold).
+    true door states (dashed black), the start (blue dot) and the goal receptacle (gold); with
+    ``baseline`` also another method's walk (dotted grey, e.g. the all-doors-open planner).
     """
     import matplotlib
 
@@ -606,8 +607,14 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     if sp is not None:
         xy = grid.cell_to_world(np.stack(np.divmod(sp, W), 1))
         ax.plot(xy[:, 0], xy[:, 1], "k--", lw=1.2, label="shortest (true doors)")
+    if baseline is not None and baseline.trail.size > 1:
+        bt = grid.cell_to_world(np.stack(np.divmod(baseline.trail, W), 1))
+        ax.plot(bt[:, 0], bt[:, 1], ":", color="0.35", lw=2.0,
+                label=f"walked by {baseline.method} ({baseline.walked_m:.1f} m"
+                      f"{', met a closed door' if baseline.first_plan_blocked else ''})")
     tr = grid.cell_to_world(np.stack(np.divmod(episode.trail, W), 1))
-    ax.plot(tr[:, 0], tr[:, 1], "-", color="#1f4fbf", lw=2.0, alpha=0.8, label=f"walked by {episode.method}")
+    what = "declined: no route with the predicted doors" if episode.declined else f"{episode.walked_m:.1f} m"
+    ax.plot(tr[:, 0], tr[:, 1], "-", color="#1f4fbf", lw=2.0, alpha=0.8, label=f"walked by {episode.method} ({what})")
     if episode.first_plan_blocked and episode.first_plan.size:
         free_true = cache.free_flat(cfg_true)
         kb = int(np.flatnonzero(~free_true[episode.first_plan])[0])
@@ -621,7 +628,9 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
     ax.legend(loc="lower center", fontsize=7, ncol=3, bbox_to_anchor=(0.5, -0.35))
-    ax.set_title(title or f"query {query.query_id}: walked {episode.walked_m:.1f} m, shortest {episode.shortest_m:.1f} m")
+    short = f"{episode.shortest_m:.1f} m" if math.isfinite(episode.shortest_m) else "none (no route is open)"
+    ax.set_title(title or f"query {query.query_id} to {query.goal}: {episode.method} walked {episode.walked_m:.1f} m; "
+                          f"shortest with the true doors {short}")
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, bbox_inches="tight")

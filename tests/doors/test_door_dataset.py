@@ -127,6 +127,17 @@ def test_door_task_and_objects_behind_doors(labelled_lab) -> None:  # type: igno
     b = rec[rec.method == "tow [doors known]"]["best_belief"].to_numpy()
     assert np.array_equal(a, b)
     assert "declined" in res.format_table()
+    # the walking summary, recomputed from the records
+    from psg_data.navigation import walk_summary
+
+    w = walk_summary(res.objects).set_index("method")
+    for m, df in rec.groupby("method"):
+        assert w.loc[m, "walked_m"] == pytest.approx(df.path_m.mean())
+        assert w.loc[m, "found"] == df.success.sum()
+    a = rec[rec.method == "tow [doors all open]"].set_index(["seed", "query_id"]).success
+    p = rec[rec.method == "tow [doors predicted]"].set_index(["seed", "query_id"]).success
+    assert w.loc["tow [doors predicted]", "lost_vs_all_open"] == int((a & ~p).sum())
+    assert w.loc["tow [doors predicted]", "won_vs_all_open"] == int((~a & p).sum())
 
 
 def test_cli_doors_on_a_dataset(labelled_lab, tmp_path) -> None:  # type: ignore[no-untyped-def]
