@@ -623,14 +623,14 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     sxy = grid.cell_to_world(np.array(query.start_cell))
     ax.plot(sxy[0], sxy[1], "o", color="#1f4fbf", ms=8, label="start")
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, 1))
-    fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, label="predicted P(open)")
+    fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, shrink=0.8, label="predicted P(open)")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.legend(loc="lower center", fontsize=7, ncol=3, bbox_to_anchor=(0.5, -0.35))
+    ax.legend(loc="upper center", fontsize=7, ncol=2, bbox_to_anchor=(0.45, -0.2))
     short = f"{episode.shortest_m:.1f} m" if math.isfinite(episode.shortest_m) else "none (no route is open)"
-    ax.set_title(title or f"query {query.query_id} to {query.goal}: {episode.method} walked {episode.walked_m:.1f} m; "
-                          f"shortest with the true doors {short}")
+    ax.set_title(title or f"query {query.query_id} to {query.goal}\n{episode.method} walked {episode.walked_m:.1f} m; "
+                          f"shortest with the true doors {short}", fontsize=10)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, bbox_inches="tight")

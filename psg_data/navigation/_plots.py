@@ -120,7 +120,7 @@ def plot_query(
             proxies += [Patch(facecolor=_DOOR_CMAP[0], edgecolor="black", label="door predicted closed"),
                         Patch(facecolor=_DOOR_CMAP[2], edgecolor="black", label="door predicted open")]
         handles, _ = ax.get_legend_handles_labels()
-        ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.16))
+        ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.2))
         ax.set_title(title or f"{query.object_id} ({query.category}), query {query.query_id}")
         out = Path(out_path)
         out.parent.mkdir(parents=True, exist_ok=True)
