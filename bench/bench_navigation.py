@@ -14,7 +14,9 @@
    runs in alternation with this tree, each in its own process, and the ratio is reported.
 
 Every measurement is repeated ``--repeat`` times (default 3); medians are reported with the load
-average (``os.getloadavg``). Run:
+average (``os.getloadavg``). Times are CPU seconds of the measuring process (``time.process_time``:
+on a shared machine other jobs' load then inflates them far less than wall time); the task also
+reports wall seconds. Run:
 
     python bench/bench_navigation.py [--quick] [--repeat 3] [--baseline-ref main]
 
@@ -54,13 +56,14 @@ def task_once(n_queries: int, seed: int) -> dict:
     t_env = time.perf_counter() - t0
     from psg_data.navigation import build_filters
 
-    t0 = time.perf_counter()
+    w0, t0 = time.perf_counter(), time.process_time()
     filters = {m: build_filters(env, m) for m in METHODS}  # fitting: estimator code, not navigation's
-    t_fit = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t_fit = time.process_time() - t0
+    t0 = time.process_time()
     res = run_navigation(env, filters, seed=seed, n_queries=n_queries, setting="predictive")
-    t_nav = time.perf_counter() - t0
+    t_nav = time.process_time() - t0
     return {"env_s": t_env, "fit_s": t_fit, "episodes_s": t_nav, "run_s": t_fit + t_nav,
+            "wall_s": time.perf_counter() - w0,
             "per_method_s": res.timings_s,
             "overall_sr": {r["method"]: r["overall_sr_mean"] for r in res.summary.to_dict("records")}}
 
@@ -89,13 +92,13 @@ def pairs_bench(n_pairs: int, seed: int, repeat: int) -> dict:
     for r in range(repeat):
         for k, (cfg, s, g, _) in enumerate(pairs):
             free = env.grid.free(cfg)
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             a = astar_reference(free, s, g, res_m)
-            t1 = time.perf_counter()
+            t1 = time.process_time()
             b = cache.shortest_path(s, g, cfg)
-            t2 = time.perf_counter()
+            t2 = time.process_time()
             c = astar(free, s, g, res_m)
-            t3 = time.perf_counter()
+            t3 = time.process_time()
             ref[r, k], warm[r, k], cold[r, k] = t1 - t0, t2 - t1, t3 - t2
             for x in (b, c):
                 if math.isfinite(a.length_m) != math.isfinite(x.length_m) or (
@@ -118,9 +121,9 @@ def pairs_bench(n_pairs: int, seed: int, repeat: int) -> dict:
     out["first_pair"] = {"reference_ms": 1e3 * float(np.median(ref[:, k0])),
                          "planner_ms": 1e3 * float(np.median(warm[:, k0])),
                          "one_shot_ms": 1e3 * float(np.median(cold[:, k0]))}
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     cache.field(pairs[0][3], pairs[0][0])
-    out["one_field_ms"] = 1e3 * (time.perf_counter() - t0)
+    out["one_field_ms"] = 1e3 * (time.process_time() - t0)
     return out
 
 
@@ -148,11 +151,11 @@ def task_bench(n_queries: int, seed: int, repeat: int, baseline_ref: str | None)
             if base is not None:
                 runs["baseline"].append(_child(base, n_queries, seed))
     out: dict = {"n_queries": n_queries, "methods": METHODS, "load": _load(),
-                 **{f"this_{k}": [r[k] for r in runs["this"]] for k in ("run_s", "fit_s", "episodes_s")},
+                 **{f"this_{k}": [r[k] for r in runs["this"]] for k in ("run_s", "fit_s", "episodes_s", "wall_s")},
                  "this_per_method_s": runs["this"][-1]["per_method_s"]}
     if runs["baseline"]:
         out["baseline_ref"] = baseline_ref
-        for k in ("run_s", "fit_s", "episodes_s"):
+        for k in ("run_s", "fit_s", "episodes_s", "wall_s"):
             out[f"baseline_{k}"] = [r[k] for r in runs["baseline"]]
             out[f"ratio_{k}"] = float(np.median([b[k] / a[k] for a, b in zip(runs["this"], runs["baseline"])]))
         out["ratio"] = out["ratio_run_s"]
@@ -187,7 +190,8 @@ def main() -> int:
     tb = task_bench(n_queries, args.seed, repeat, args.baseline_ref)
     print(f"navigation task, {n_queries} queries x {len(METHODS)} methods (predictive), {repeat} run(s); load "
           f"{tb['load']}")
-    for k, what in (("run_s", "whole task"), ("fit_s", "fitting the estimators"), ("episodes_s", "navigation")):
+    for k, what in (("run_s", "whole task, CPU"), ("fit_s", "fitting, CPU"), ("episodes_s", "navigation, CPU"),
+                    ("wall_s", "whole task, wall")):
         line = f"  {what:24s} this: median {float(np.median(tb['this_' + k])):6.2f} s {['%.2f' % x for x in tb['this_' + k]]}"
         if "ratio" in tb:
             line += (f" | {tb['baseline_ref']}: {float(np.median(tb['baseline_' + k])):6.2f} s "
