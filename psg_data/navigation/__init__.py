@@ -17,14 +17,17 @@
   dense ground truth ``gt_at`` / ``doors_at``.
 - Agent (:mod:`._agent`): :func:`run_episode` (MAP / top-k ranking, delta abort, two attempts,
   adaptive belief updates, door discovery).
-- Harness (:mod:`._runner`): :func:`run_navigation` -> :class:`NavigationResult` (per-query
-  records and the paper-shaped table), baselines 'oracle' and 'last_seen_map'.
+- Harness (:mod:`._runner`): :func:`run_navigation` (a :class:`NavigationOptions`) ->
+  :class:`NavigationResult` (per-query records and the paper-shaped tables, simulation or
+  real-world layout), baselines 'oracle' and 'last_seen_map', per-method door beliefs.
 - Plots (:mod:`._plots`): :func:`plot_query`.
-- Doors (:mod:`._doors`): door estimators' P(open) (:func:`fit_door_filters`,
+- Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
   (:func:`run_door_episode`), :func:`run_door_navigation` (blocked first plans, extra distance,
-  SR, SPL per estimator vs. the all-doors-open planner), :func:`door_loop_world` and
-  :func:`plot_door_query`.
+  SR, SPL per estimator vs. the all-doors-open planner), worlds from a dataset
+  (:meth:`DoorWorld.from_dataset`) or the unit-test :func:`door_loop_world`, the dataset door task
+  :func:`run_door_task` (with objects behind predicted-closed doors, :func:`walk_summary`) and the
+  figures :func:`plot_door_query` / :func:`plot_door_example`.
 """
 
 from __future__ import annotations
