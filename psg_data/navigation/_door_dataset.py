@@ -212,7 +212,8 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
                                   settings=settings, no_path=o.no_path)
         tables.append(res.table.assign(seed=seed))
         records.append(res.records.assign(seed=seed))
-        first = first or res
+        if first is None:
+            first = res
     per_seed = pd.concat(tables, ignore_index=True)
     cols = ["blocked_rate", "mean_extra_distance_m", "SR", "SPL", "wasted_m"]
     g = per_seed.groupby("estimator", sort=False)
