@@ -11,7 +11,7 @@ import numpy as np
 from psg_data.errors import EstimatorError, EvaluationError
 
 __all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice", "resolve_dataset",
-           "persistence_tasks"]
+           "persistence_tasks", "dataset_hints", "require_hints"]
 
 BENCHMARK = "persistence-benchmark"
 DEMO = "demo"
@@ -78,6 +78,38 @@ def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
     given = dict(spec.settings)
     extra = [(k, v) for k, v in hints.items() if k in params and k not in given and params[k] is None]
     return EstimatorSpec(spec.label, spec.name, spec.settings + tuple(extra)) if extra else spec
+
+
+def dataset_hints(ds: Any) -> dict[str, Any]:
+    """Estimator settings a dataset provides: a synthetic dataset with its stored generator model
+    (``generator/process.json``) gives ``dataset`` (its path, for ``process_oracle``) and
+    ``schedules`` (its routines in the paper's LLM output format, for the schedule prior)."""
+    extra = ds.info.extra
+    rel = extra.get("process_file")
+    if extra.get("generator") != "psg_data.synth" or not rel or not (ds.root / rel).is_file():
+        return {}
+    from psg_data.synth._process import llm_schedules, load_process
+
+    proc = load_process(ds.root)
+    return {"dataset": str(ds.root), "schedules": {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}}
+
+
+_NEEDS = {"process_oracle": ("dataset", "a synthetic dataset whose manifest names its generator model "
+                                        "(psg-data synth, generator steps-v2)"),
+          "perpetua_star_schedule": ("schedules", "schedules in the LLM output format (the persistence benchmark "
+                                                  "and psg-data synth datasets provide them)")}
+
+
+def require_hints(specs: list[EstimatorSpec], hints: dict[str, Any], dataset_label: str) -> None:
+    """Refuse, before any work, estimators that need a setting the dataset cannot provide."""
+    for spec in specs:
+        need = _NEEDS.get(spec.name)
+        if need is None:
+            continue
+        key, what = need
+        given = dict(spec.settings)
+        if given.get(key) is None and hints.get(key) is None and not (key == "dataset" and given.get("model")):
+            raise EvaluationError(f"--estimator {spec.label!r}: {spec.name} needs {what}; {dataset_label} has none")
 
 
 def check_estimators(specs: list[EstimatorSpec]) -> None:
@@ -176,6 +208,7 @@ def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], q
     if ds.info.extra.get("generator") == "psg_data.synth":
         dense = _synth_dense_ground_truth(ds, step_s=900.0)
     task = persistence_task_from_dataset(ds, labels=labels, dense_ground_truth=dense)
+    task.estimator_hints = dataset_hints(ds)
     return [task], {**task.info, "per_seed_draws": False}
 
 

@@ -66,11 +66,19 @@ def _dataset(dataset: str | None, labels: str, quiet: bool, task: str) -> Any:
     return choice
 
 
-def _methods(specs: list[Any]) -> tuple[dict[str, str], dict[str, dict[str, Any]]]:
+def _methods(specs: list[Any], choice: Any) -> tuple[dict[str, str], dict[str, dict[str, Any]]]:
+    """Method labels -> names, and each one's settings with the dataset's hints (e.g. the generator
+    model for process_oracle); estimators that need a hint the dataset lacks are refused here."""
+    from psg_data.cli._eval_inputs import dataset_hints, require_hints, with_hints
+    from psg_data.loaders import open_dataset
+
+    hints = dataset_hints(open_dataset(choice.path))
+    require_hints(specs, hints, choice.label)
     methods = {"oracle": "oracle", "last_seen_map": "last_seen_map"}
     settings = {}
     for s in specs:
         methods[s.label] = s.name
+        s = with_hints(s, hints)
         if s.settings:
             settings[s.label] = dict(s.settings)
     return methods, settings
@@ -82,7 +90,7 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
     from psg_data.navigation import run_navigation
 
     choice = _dataset(dataset, options.labels, quiet, "navigation")
-    methods, settings = _methods(specs)
+    methods, settings = _methods(specs, choice)
     t0 = time.perf_counter()
     res = run_navigation(choice.path, methods, options, out_dir=out, estimator_settings=settings or None)
     info = provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path),

@@ -15,7 +15,7 @@ __all__ = ["run_persistence"]
 
 def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int], jobs: int,
                      out: Path, no_plots: bool, quiet: bool) -> bool:
-    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset, with_hints
+    from psg_data.cli._eval_inputs import persistence_tasks, require_hints, resolve_dataset, with_hints
     from psg_data.metrics import (
         RegistryFactory,
         choose_plot_edges,
@@ -29,6 +29,7 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
 
     choice = resolve_dataset(dataset, quiet=quiet)
     tasks, info = persistence_tasks(choice, labels=labels, seeds=seeds, quiet=quiet)
+    require_hints(specs, tasks[0].estimator_hints, choice.label)
     n_edges = len(tasks[0].ground_truth)
     prog = Progress("evaluating", total=len(specs) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
     offset = 0

@@ -28,7 +28,7 @@ from typing import Any
 
 from psg_data.errors import EstimatorError
 
-__all__ = ["Param", "Real", "Integral", "Options", "Boolean", "Pair", "MappingParam", "check_params",
+__all__ = ["Param", "Real", "Integral", "Options", "Boolean", "Pair", "MappingParam", "Text", "check_params",
            "parse_setting"]
 
 _NONE_WORDS = ("none", "null")
@@ -41,7 +41,8 @@ class Param:
     """One declared setting.
 
     Attributes:
-        kind: "real", "int", "options", "bool", "pair" (two reals) or "mapping" (Python API only).
+        kind: "real", "int", "options", "bool", "pair" (two reals), "text" (a string, e.g. a path)
+            or "mapping" (Python API only).
         low, high: bounds of "real" / "int" values (None: unbounded on that side).
         closed: which bounds are included: "both", "left", "right" or "neither".
         choices: allowed values of an "options" setting.
@@ -67,6 +68,8 @@ class Param:
             text = "a pair of numbers (a, b)"
         elif self.kind == "mapping":
             text = "a mapping (Python API only)"
+        elif self.kind == "text":
+            text = "a text"
         else:
             text = ("an integer" if self.kind == "int" else "a number") + self._range_text()
         return text + (" or none" if self.none_ok else "")
@@ -92,6 +95,8 @@ class Param:
             return isinstance(value, bool)
         if self.kind == "mapping":
             return isinstance(value, Mapping)
+        if self.kind == "text":
+            return isinstance(value, str)
         if self.kind == "pair":
             return (isinstance(value, (tuple, list)) and len(value) == 2
                     and all(_is_real(v) and math.isfinite(float(v)) for v in value))
@@ -124,7 +129,7 @@ class Param:
     def _convert(self, text: str) -> Any:
         if self.none_ok and text.lower() in _NONE_WORDS:
             return None
-        if self.kind == "options":
+        if self.kind in ("options", "text"):
             return text
         if self.kind == "bool":
             low = text.lower()
@@ -182,6 +187,11 @@ def Boolean(*, help: str = "") -> Param:
 def Pair(*, none_ok: bool = False, help: str = "") -> Param:
     """Two finite numbers, e.g. a survival prior's parameters; on the command line ``a/b``."""
     return Param("pair", none_ok=none_ok, help=help)
+
+
+def Text(*, none_ok: bool = True, help: str = "") -> Param:
+    """A string setting (a name or a path)."""
+    return Param("text", none_ok=none_ok, help=help)
 
 
 def MappingParam(*, none_ok: bool = True, help: str = "") -> Param:

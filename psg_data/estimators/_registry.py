@@ -38,6 +38,7 @@ _BUILTINS: dict[str, str] = {
     "last_seen": "psg_data.estimators._simple:LastSeenEstimator",
     "always_present": "psg_data.estimators._simple:AlwaysPresentEstimator",
     "time_of_week_frequency": "psg_data.estimators._simple:TimeOfWeekFrequencyEstimator",
+    "process_oracle": "psg_data.estimators._process_oracle:ProcessOracleEstimator",
 }
 
 _REGISTERED: dict[str, Callable[..., PersistenceEstimator]] = {}

@@ -12,6 +12,9 @@ per edge and the site timezone. :func:`persistence_task_from_dataset` builds it 
   otherwise by time: the first two weeks train, the third week test;
 - **ground truth**: the schedule table at the test scans (a step function between scans), or a
   denser grid given by ``dense_ground_truth`` (the synthetic lab knows its schedule at any time).
+  The training streams carry the training window's ground truth the same way in
+  ``meta['gt_t_s']`` / ``meta['gt_state']`` (used only by oracle switching priors and by
+  ``durations="ground_truth"``), so ``perpetua_star_oracle`` runs on any dataset with a schedule.
 """
 
 from __future__ import annotations
@@ -132,13 +135,16 @@ def persistence_task_from_dataset(
     if not edges:
         raise EvaluationError(f"{ds.root}: no edges (the schedule never places an object on a receptacle)")
 
-    def streams(mask: NDArray[np.bool_]) -> list[EdgeStream]:
+    def streams(mask: NDArray[np.bool_], truth: Mapping[EdgeKey, tuple[Any, Any]] | None = None) -> list[EdgeStream]:
         out = []
         for o, r in zip(*np.nonzero(valid)):
             c = codes[:, o, r]
             m = mask & ((c == 0) | (c == 1))
-            out.append(EdgeStream((gt.object_ids[o], gt.receptacle_ids[r]), t_s[m], c[m].astype(np.int8),
-                                  {"source": grid.source}))
+            e = (gt.object_ids[o], gt.receptacle_ids[r])
+            meta: dict[str, Any] = {"source": grid.source}
+            if truth is not None:  # the training ground truth (oracle switching priors)
+                meta["gt_t_s"], meta["gt_state"] = truth[e]
+            out.append(EdgeStream(e, t_s[m], c[m].astype(np.int8), meta))
         return out
 
     test_idx = np.flatnonzero(masks["test"])
@@ -157,9 +163,10 @@ def persistence_task_from_dataset(
         for o, r in zip(*np.nonzero(valid)):
             truth[(gt.object_ids[o], gt.receptacle_ids[r])] = (t_s[test_idx], gt.codes[test_idx, o, r].astype(np.int64))
     val = streams(masks["val"]) if masks["val"].any() else None
+    train_truth = _train_truth(ds, gt, masks["train"], edges, dense_ground_truth)
     return PersistenceTask(
         name=ds.info.name,
-        train_streams=streams(masks["train"]),
+        train_streams=streams(masks["train"], train_truth),
         test_streams=streams(masks["test"]),
         ground_truth=truth,
         timezone=ds.info.timezone,
@@ -168,3 +175,23 @@ def persistence_task_from_dataset(
               "split": split_rule, "ground_truth": gt_kind, "edges": len(edges),
               "scans": {k: int(v.sum()) for k, v in masks.items()}},
     )
+
+
+def _train_truth(ds: Any, gt: Any, train: NDArray[np.bool_], edges: list[EdgeKey],
+                 dense: DenseGroundTruth | None) -> dict[EdgeKey, tuple[NDArray[np.float64], NDArray[np.int8]]] | None:
+    """Ground truth over the training window per edge: the dense grid when given, else the schedule
+    at the training scans (a step function). None when there is no training scan."""
+    idx = np.flatnonzero(train)
+    if idx.size == 0:
+        return None
+    if dense is not None:
+        scans = ds.df("scans").set_index("scan_id")
+        start = int(gt.stamps_ns[idx[0]])
+        end = int(scans.loc[gt.scan_ids[idx[-1]], "end_stamp_ns"]) + 1
+        stamps, states = dense(start, end)
+        t = np.asarray(stamps, np.float64) / 1e9
+        return {e: (t, np.asarray(states[e], np.int8)) for e in edges}
+    t = gt.stamps_ns[idx].astype(np.float64) / 1e9
+    oi = {o: i for i, o in enumerate(gt.object_ids)}
+    ri = {r: i for i, r in enumerate(gt.receptacle_ids)}
+    return {e: (t, (gt.codes[idx, oi[e[0]], ri[e[1]]] == 1).astype(np.int8)) for e in edges}

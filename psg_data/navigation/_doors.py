@@ -499,7 +499,8 @@ def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, nois
 
     if not 0 < train_days < days:
         raise EvaluationError(f"train_days: {train_days}, expected 0 < train_days < days ({days})")
-    lab = LabModel(LabConfig(seed=seed, days=days, train_days=train_days, scan_hours=tuple(scan_hours)))
+    lab = LabModel(LabConfig(seed=seed, days=days, train_days=train_days, scan_hours=tuple(scan_hours),
+                             generator="continuous-v1"))  # the door models below are continuous-time ones
     sched = lab.schedule
     if lab_door not in sched.doors:
         raise EvaluationError(f"lab_door {lab_door!r}: the lab has doors {sorted(sched.doors)}")

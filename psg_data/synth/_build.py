@@ -34,6 +34,8 @@ def build_lab(out: str | Path, config: LabConfig | None = None, *, overwrite: bo
     then 'test'), frames (PNG colour + 16-bit depth), rooms, receptacles, doors, door_states and
     schedule per scan, objects. The generator parameters are stored in the manifest ``extra``;
     the dense ground truth is reproducible with ``LabModel.from_dataset(ds).schedule.dense()``.
+    With the ``steps-v2`` generator the full generative model (every entity's step process) is
+    stored as ``generator/process.json`` (:func:`psg_data.synth.load_process`).
 
     Args:
         out: dataset directory to create.
@@ -75,6 +77,11 @@ def build_lab(out: str | Path, config: LabConfig | None = None, *, overwrite: bo
                 progress(1, frames=n_frames)
         w.set_table("door_states", door_rows)
         w.set_table("schedule", sched_rows)
+        process = getattr(lab.schedule, "process", None)
+        if process is not None:  # steps-v2: the exact generative model, for the Bayes ceiling
+            from psg_data.synth._process import PROCESS_FILE
+
+            w.add_file(PROCESS_FILE, process.to_json().encode("utf-8"))
     log.info("synthetic lab: %d scans, seed %d", len(lab.scans), cfg.seed)
     return Path(out)
 

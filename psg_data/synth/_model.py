@@ -25,17 +25,25 @@ from numpy.typing import NDArray
 
 from psg_data.errors import PsgDataError
 from psg_data.schemas._records import CameraIntrinsics
+from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
 from psg_data.synth._layout import RECEPTACLE_ID0, LabLayout, make_layout
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
 
-__all__ = ["LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION"]
+__all__ = ["LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION", "GENERATORS"]
 
 log = logging.getLogger(__name__)
 
-SYNTH_VERSION = "1"
-"""Version of the generator; part of the manifest ``extra`` and of the demo cache key."""
+SYNTH_VERSION = "2"
+"""Version of the generator; part of the manifest ``extra`` and of the demo cache key.
+
+"1": continuous-time schedules only; "2": the step process (``steps-v2``) is the default and its
+model is stored with the dataset (``generator/process.json``)."""
+
+GENERATORS = ("steps-v2", "continuous-v1")
+"""Schedule generators: ``steps-v2`` (default; bi-hourly steps with routines, exact model stored)
+and ``continuous-v1`` (the first generator, kept so that old datasets rebuild identically)."""
 
 CAMERA_HEIGHT_M = 1.25
 CAMERA_PITCH_DEG = 28.0
@@ -57,6 +65,15 @@ class LabConfig:
         scan_hours: local start hours of the scans of a day.
         timezone: IANA site timezone.
         noise: depth/colour noise model.
+        generator: schedule generator, ``steps-v2`` (default) or ``continuous-v1``.
+        routine_strength: ``steps-v2``: probability that the day's routine sets an entity's state at
+            a step boundary, from 0 (affinity random walk with stays of hours or days) to 1
+            (clockwork).
+        day_patterns: ``steps-v2``: day patterns per entity (D; workday variants and two weekend
+            patterns).
+        day_persistence: ``steps-v2``: probability that the next day of the same kind keeps the
+            day's pattern (diagonal of the day-level matrix).
+        max_dwell_steps: ``steps-v2``: longest stay drawn for an entity's best receptacle, steps.
     """
 
     seed: int = 0
@@ -71,6 +88,11 @@ class LabConfig:
     scan_hours: tuple[int, ...] = (9, 11, 13, 15)
     timezone: str = "America/Toronto"
     noise: DepthNoise = field(default_factory=DepthNoise)
+    generator: str = "steps-v2"
+    routine_strength: float = 0.8
+    day_patterns: int = 5
+    day_persistence: float = 0.6
+    max_dwell_steps: int = 8
 
     def __post_init__(self) -> None:
         if self.days < 1:
@@ -84,6 +106,19 @@ class LabConfig:
         bad = [d for d in self.shift_weekdays if d not in WEEKDAYS]
         if bad:
             raise PsgDataError(f"shift_weekdays: unknown {bad}, expected names from {WEEKDAYS}")
+        if self.generator not in GENERATORS:
+            raise PsgDataError(f"generator: expected one of {GENERATORS}, got {self.generator!r}")
+        if not 0.0 <= float(self.routine_strength) <= 1.0:
+            raise PsgDataError(f"routine_strength: expected a number in [0, 1], got {self.routine_strength}")
+        if not 0.0 <= float(self.day_persistence) <= 1.0:
+            raise PsgDataError(f"day_persistence: expected a number in [0, 1], got {self.day_persistence}")
+        if not 1 <= int(self.day_patterns) <= 12:
+            raise PsgDataError(f"day_patterns: expected an integer in [1, 12], got {self.day_patterns}")
+        if int(self.max_dwell_steps) < 1:
+            raise PsgDataError(f"max_dwell_steps: expected >= 1, got {self.max_dwell_steps}")
+        hours = list(self.scan_hours)
+        if not hours or any(b <= a for a, b in zip(hours, hours[1:])) or hours[0] < 0 or hours[-1] >= 24:
+            raise PsgDataError(f"scan_hours: expected increasing local hours in [0, 24), got {hours}")
 
     @property
     def n_train_days(self) -> int:
@@ -100,23 +135,43 @@ class LabConfig:
         return frozenset(d for d in range(self.n_train_days, self.days)
                          if WEEKDAYS[(self.date + dt.timedelta(days=d)).weekday()] in self.shift_weekdays)
 
+    @property
+    def process_params(self) -> ProcessParams:
+        return ProcessParams(float(self.routine_strength), int(self.day_patterns), float(self.day_persistence),
+                             int(self.max_dwell_steps))
+
     def to_extra(self) -> dict[str, Any]:
-        """JSON-able parameters for the manifest ``extra``."""
+        """JSON-able parameters for the manifest ``extra`` (every generator parameter).
+
+        ``generator`` stays ``"psg_data.synth"`` (what readers test for); the schedule generator is
+        ``schedule_generator``; ``steps-v2`` datasets also name their stored model ``process_file``.
+        """
         d = asdict(self)
         d["shift_weekdays"] = list(self.shift_weekdays)
         d["scan_hours"] = list(self.scan_hours)
         d["train_days"] = self.n_train_days
         d["resolution"] = [self.width, self.height]
-        return {"generator": "psg_data.synth", "synth_version": SYNTH_VERSION, **d}
+        d["schedule_generator"] = d.pop("generator")
+        out = {"generator": "psg_data.synth", "synth_version": SYNTH_VERSION, **d}
+        if self.generator == "continuous-v1":
+            for k in ("routine_strength", "day_patterns", "day_persistence", "max_dwell_steps"):
+                out.pop(k)
+        else:
+            from psg_data.synth._process import PROCESS_FILE
+
+            out["process_file"] = PROCESS_FILE
+        return out
 
     @staticmethod
     def from_extra(extra: dict[str, Any]) -> LabConfig:
-        """Inverse of :meth:`to_extra`."""
+        """Inverse of :meth:`to_extra`; datasets of synth version 1 (no ``schedule_generator``)
+        rebuild with ``continuous-v1``."""
         if extra.get("generator") != "psg_data.synth":
             raise PsgDataError("manifest extra: not a psg_data.synth dataset (no generator 'psg_data.synth')")
         keys = {"seed", "days", "train_days", "frames_per_scan", "width", "height", "shift", "start_date",
-                "timezone"}
+                "timezone", "routine_strength", "day_patterns", "day_persistence", "max_dwell_steps"}
         kw: dict[str, Any] = {k: extra[k] for k in keys if k in extra}
+        kw["generator"] = extra.get("schedule_generator", "continuous-v1")
         kw["shift_weekdays"] = tuple(extra.get("shift_weekdays", ("Mon", "Fri")))
         kw["scan_hours"] = tuple(extra.get("scan_hours", (9, 11, 13, 15)))
         if "noise" in extra:
@@ -191,8 +246,14 @@ class LabModel:
             raise PsgDataError("LabModel: pass either config or seed, not both")
         self.config = config
         self.layout: LabLayout = make_layout(config.seed)
-        self.schedule = LabSchedule(self.layout, config.seed, config.date, config.days, config.timezone,
-                                    config.shifted_days())
+        self.schedule: LabSchedule | StepSchedule
+        if config.generator == "continuous-v1":
+            self.schedule = LabSchedule(self.layout, config.seed, config.date, config.days, config.timezone,
+                                        config.shifted_days())
+        else:
+            self.schedule = StepSchedule(self.layout, config.seed, config.date, config.days, config.timezone,
+                                         tuple(float(h) for h in config.scan_hours), config.process_params,
+                                         config.shifted_days())
         self.camera: CameraIntrinsics = d435_intrinsics(config.width, config.height)
         self._scans: list[ScanPlan] | None = None
         self._candidates: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None

@@ -484,6 +484,23 @@ class DatasetWriter:
             raise FormatError(f"set_table: {name!r} is not a settable table")
         self._tables[name] = to_arrow(name, rows)
 
+    def add_file(self, rel: str, data: bytes) -> None:
+        """Store a side file of the dataset (e.g. ``generator/process.json``, the generator's model).
+
+        It is listed with its size and SHA-256 in ``tables/files.parquet`` like every other file.
+
+        Raises:
+            FormatError: ``rel`` is absolute, leaves the dataset, or lies in ``tables/`` / ``images/``.
+        """
+        parts = Path(rel).parts
+        if (not parts or Path(rel).is_absolute() or ".." in parts or parts[0] in ("tables", "images")
+                or rel == MANIFEST_NAME):
+            raise FormatError(f"add_file: {rel!r}, expected a relative path outside tables/ and images/")
+        path = self.tmp / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(bytes(data))
+        self._table_files[Path(rel).as_posix()] = (len(data), hashlib.sha256(data).hexdigest())
+
     # -- scans ------------------------------------------------------------------------------
     def scan(self, scan_id: str, *, source: str | None = None, split: str | None = None) -> ScanWriter:
         """Start a scan. Frames are added to the returned :class:`ScanWriter`."""

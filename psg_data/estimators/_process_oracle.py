@@ -1,0 +1,272 @@
+"""``process_oracle``: the exact Bayes posterior of a synthetic lab's generative model (the ceiling).
+
+A dataset written by ``psg-data synth`` with the ``steps-v2`` generator stores its generative
+model (``generator/process.json``: every entity's hierarchical step process, see
+:mod:`psg_data.synth._process`). Given an entity's observations, the posterior over its state
+(receptacle or absent; door open or closed) at any later step is computed exactly by the forward
+algorithm over (day pattern x state x remaining dwell); the prediction for edge (entity, label)
+is P(state = label). No estimator that sees the same observations can do better in expectation.
+
+Information used by the filter of edge ``(o, r)`` (never anything later than the filter's own last
+update time ``H``, whatever order the filters are built, updated or asked in):
+
+* its own observations (those given to ``update`` / ``update_many``);
+* the observations of the object's other edges ``(o, r')`` from the training streams handed to
+  :meth:`ProcessOracleEstimator.fit`, restricted to times ``<= H``;
+* with ``share_updates=True``: also the observations later than the training data that sibling
+  filters of the same fitted estimator received (a per-object tracker), restricted to ``<= H``.
+  Off by default: the per-edge protocol feeds every filter only its own test observations, and
+  what a sibling filter has seen depends on the order (and worker process) in which the harness
+  runs the edges; without the tracker the information set of a filter is exactly what a per-edge
+  estimator can know, so the ceiling is reproducible and independent of ``jobs``.
+
+Before any observation (``last_t_s`` None) the prediction is the model's prior marginal.
+Observations are noise-free by default (ground-truth and privileged labels); declare ``p_m`` /
+``p_f`` for noisy labels. An observation impossible under the model raises
+:class:`~psg_data.errors.EstimatorError` (wrong dataset, or noisy labels with zero noise rates).
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.errors import EstimatorError, PsgDataError
+from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.estimators._common import BaseEstimator, BaseFilter
+from psg_data.estimators._params import Boolean, MappingParam, Real, Text
+
+__all__ = ["ProcessOracleEstimator", "ProcessOracleFilter"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class _Tracker:
+    """Observations of one object's filters later than the training data (``share_updates``)."""
+
+    t: list[float] = field(default_factory=list)
+    label: list[str] = field(default_factory=list)
+    y: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _EntityData:
+    """Training observations of one entity, sorted by time."""
+
+    t: NDArray[np.float64]
+    label: NDArray[np.object_]
+    y: NDArray[np.int8]
+
+
+class ProcessOracleEstimator(BaseEstimator):
+    """The exact posterior under a synthetic dataset's stored generator model (see the module docstring).
+
+    Args:
+        dataset: a dataset directory written by ``psg-data synth`` (generator ``steps-v2``), or the
+            path of its ``generator/process.json``. ``psg-eval`` fills it in for such datasets.
+        model: the process as a dict (the parsed JSON) or a ``StepProcess``; overrides ``dataset``.
+        p_m: P(seen absent | present) of the observations (0 for ground-truth / privileged labels).
+        p_f: P(seen present | absent) of the observations.
+        share_updates: also use the post-training observations that sibling filters of the same
+            object received (order-dependent; see the module docstring).
+    """
+
+    name = "process_oracle"
+    _parameters = {
+        "dataset": Text(help="synthetic dataset (or its generator/process.json) carrying the generator model"),
+        "model": MappingParam(help="the generator process as a dict (Python API; overrides dataset)"),
+        "p_m": Real(0.0, 0.5, closed="left", help="P(seen absent | present) of the labels"),
+        "p_f": Real(0.0, 0.5, closed="left", help="P(seen present | absent) of the labels"),
+        "share_updates": Boolean(help="filters of one object share their post-training observations"),
+    }
+
+    def __init__(self, *, dataset: str | None = None, model: Mapping[str, Any] | None = None, p_m: float = 0.0,
+                 p_f: float = 0.0, share_updates: bool = False) -> None:
+        self.dataset = dataset
+        self.model = model
+        self.p_m = p_m
+        self.p_f = p_f
+        self.share_updates = share_updates
+
+    def _load(self) -> Any:
+        from psg_data.synth._process import load_process
+
+        source = self.model if self.model is not None else self.dataset
+        if source is None:
+            raise EstimatorError(f"{self.name}: needs the generator model of a synthetic dataset (dataset=PATH of a "
+                                 "psg-data synth dataset; psg-eval sets it for such datasets); other datasets have "
+                                 "no exact ceiling")
+        try:
+            return load_process(source)
+        except PsgDataError as exc:
+            raise EstimatorError(f"{self.name}: {exc}") from None
+
+    def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
+            timezone: str = "UTC") -> ProcessOracleEstimator:
+        """Load the model and keep the training observations of every entity (``val_streams`` unused)."""
+        self.validate_params()
+        self.process_ = self._load()
+        by_entity: dict[str, list[tuple[NDArray[np.float64], str, NDArray[np.int8]]]] = {}
+        end = -np.inf
+        for s in streams:
+            if not isinstance(s, EdgeStream):
+                raise EstimatorError(f"fit: expected EdgeStream objects, got {type(s).__name__}")
+            eid, label = str(s.edge[0]), str(s.edge[1])
+            if eid not in self.process_.entities:
+                raise EstimatorError(f"{self.name}: edge {s.edge}: {eid!r} is not an entity of the generator model "
+                                     "(is this the dataset the model belongs to?)")
+            by_entity.setdefault(eid, []).append((s.t_s, label, s.y))
+            if len(s):
+                end = max(end, float(s.t_s[-1]))
+        self.observations_: dict[str, _EntityData] = {}
+        for eid, parts in by_entity.items():
+            t = np.concatenate([p[0] for p in parts])
+            lab = np.concatenate([np.full(p[0].size, p[1], dtype=object) for p in parts])
+            y = np.concatenate([p[2] for p in parts]).astype(np.int8)
+            order = np.argsort(t, kind="stable")
+            self.observations_[eid] = _EntityData(t[order], lab[order], y[order])
+        self.fit_end_s_ = float(end)
+        self.timezone_ = timezone
+        self.trackers_: dict[str, _Tracker] = {}
+        self.fitted_ = True
+        return self
+
+    def make_filter(self, edge: EdgeKey) -> ProcessOracleFilter:
+        self._check_fitted()
+        eid, label = str(edge[0]), str(edge[1])
+        if eid not in self.process_.entities:
+            raise EstimatorError(f"{self.name}: edge {edge}: {eid!r} is not an entity of the generator model")
+        empty = _EntityData(np.zeros(0), np.zeros(0, dtype=object), np.zeros(0, np.int8))
+        tracker = self.trackers_.setdefault(eid, _Tracker()) if self.share_updates else None
+        return ProcessOracleFilter((eid, label), self.process_, self.observations_.get(eid, empty), tracker,
+                                   float(self.fit_end_s_), float(self.p_m), float(self.p_f))
+
+    def filter_from_state(self, state: dict[str, Any]) -> ProcessOracleFilter:
+        edge = self._check_state(state)
+        f = self.make_filter(edge)  # its restored observations are not re-shared with a tracker
+        t = np.asarray(state.get("own_t", []), np.float64)
+        y = np.asarray(state.get("own_y", []), np.int8)
+        if t.size:
+            f._own_t.extend(t.tolist())
+            f._own_y.extend(y.tolist())
+            f._last_t = float(t[-1])
+        return f
+
+
+class ProcessOracleFilter(BaseFilter):
+    """One edge of :class:`ProcessOracleEstimator` (exact forward algorithm, cached)."""
+
+    def __init__(self, edge: EdgeKey, process: Any, data: _EntityData, tracker: _Tracker | None, fit_end_s: float,
+                 p_m: float, p_f: float) -> None:
+        super().__init__(edge)
+        self._process = process
+        self._entity = process.entities[edge[0]]
+        self._data = data
+        self._tracker = tracker
+        self._fit_end = fit_end_s
+        self._p_m, self._p_f = p_m, p_f
+        self._own_t: list[float] = []
+        self._own_y: list[int] = []
+        self._belief: Any = None
+        self._belief_h: float = -np.inf
+        self._seen_tracker = 0
+        self._index = self._entity.state_index(edge[1])
+        self._fc: list[NDArray[np.float64]] | None = None  # state marginals at steps b.n, b.n + 1, ...
+        self._fc_belief: Any = None
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> ProcessOracleFilter:
+        out = copy.copy(self)  # the model and the training data are read-only: shared
+        out._own_t, out._own_y = list(self._own_t), list(self._own_y)
+        out._tracker = copy.deepcopy(self._tracker, memo)
+        out._belief = None if self._belief is None else self._belief.copy()
+        out._fc, out._fc_belief = None, None
+        return out
+
+    def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
+        self._own_t.extend(t.tolist())
+        self._own_y.extend(int(v) for v in y)
+        if self._tracker is not None:
+            late = t > self._fit_end
+            self._tracker.t.extend(t[late].tolist())
+            self._tracker.label.extend([self.edge[1]] * int(late.sum()))
+            self._tracker.y.extend(int(v) for v in y[late])
+
+    def _window(self, lo: float, hi: float) -> tuple[NDArray[np.float64], list[str], NDArray[np.int8]]:
+        """Observations of the entity with lo < t <= hi: siblings from the training data and the
+        tracker, the own edge from the filter's updates."""
+        d = self._data
+        a, b = np.searchsorted(d.t, lo, side="right"), np.searchsorted(d.t, hi, side="right")
+        sib = d.label[a:b] != self.edge[1]
+        ts = [d.t[a:b][sib]]
+        labels = list(d.label[a:b][sib])
+        ys = [d.y[a:b][sib]]
+        own_t = np.asarray(self._own_t, np.float64)
+        m = (own_t > lo) & (own_t <= hi)
+        ts.append(own_t[m])
+        labels += [self.edge[1]] * int(m.sum())
+        ys.append(np.asarray(self._own_y, np.int8)[m])
+        if self._tracker is not None and self._tracker.t:
+            tt = np.asarray(self._tracker.t, np.float64)
+            tl = np.asarray(self._tracker.label, dtype=object)
+            m = (tt > lo) & (tt <= hi) & (tl != self.edge[1])
+            ts.append(tt[m])
+            labels += list(tl[m])
+            ys.append(np.asarray(self._tracker.y, np.int8)[m])
+        t = np.concatenate(ts)
+        y = np.concatenate(ys).astype(np.int8)
+        order = np.argsort(t, kind="stable")
+        return t[order], [labels[i] for i in order], y[order]
+
+    def _current(self) -> Any:
+        """The forward belief at the step of the last update, with every allowed observation absorbed."""
+        from psg_data.synth._process import ForwardBelief, observation_likelihood
+
+        H = self._last_t
+        tracker_n = len(self._tracker.t) if self._tracker is not None else 0
+        if self._belief is not None and tracker_n > self._seen_tracker:
+            new_t = np.asarray(self._tracker.t[self._seen_tracker:], np.float64)  # type: ignore[union-attr]
+            if np.any(new_t <= self._belief_h):  # a sibling reported an observation we have passed
+                self._belief = None
+        self._seen_tracker = tracker_n
+        if self._belief is None:
+            self._belief, self._belief_h = ForwardBelief(self._process, self._entity).start(), -np.inf
+            self._fc = None
+        if H is None or H <= self._belief_h:
+            return self._belief
+        self._fc = None
+        t, labels, y = self._window(self._belief_h, H)
+        b = self._belief
+        try:
+            steps = self._process.clock.step_of(t)
+            for n, lab, yy in zip(steps, labels, y):
+                b.advance_to(int(n))
+                b.observe(observation_likelihood(self._entity, lab, int(yy), self._p_m, self._p_f))
+            b.advance_to(int(self._process.clock.step_of(np.array([H]))[0]))
+        except PsgDataError as exc:
+            self._belief = None
+            raise EstimatorError(f"process_oracle: edge {self.edge}: {exc}") from None
+        self._belief_h = H
+        return b
+
+    def _predict(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self._index < 0:
+            return np.zeros(t.shape)
+        b = self._current()
+        steps = np.maximum(self._process.clock.step_of(t), b.n) - b.n
+        if self._fc is None:
+            self._fc, self._fc_belief = [b.state_marginal()], b.copy()
+        while len(self._fc) <= int(steps.max(initial=0)):  # extend the cached forecast to the furthest step
+            self._fc_belief.advance()
+            self._fc.append(self._fc_belief.state_marginal())
+        return np.asarray(self._fc)[steps, self._index]
+
+    def get_state(self) -> dict[str, Any]:
+        return {"estimator": ProcessOracleEstimator.name, "edge": [self.edge[0], self.edge[1]],
+                "own_t": list(self._own_t), "own_y": list(self._own_y)}

@@ -1,0 +1,169 @@
+"""The forward algorithm of the step process against brute-force enumeration of every path.
+
+The enumeration follows the generative description (pattern draw at the first step of a day,
+routine placement with probability rho, else hold or jump, fresh dwells uniform in whole steps)
+step by step, with no shared code beyond the model's parameters.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from psg_data.synth._process import (
+    EntityProcess,
+    ForwardBelief,
+    StepProcess,
+    llm_schedules,
+    observation_likelihood,
+)
+
+START = dt.date(2025, 3, 7)  # a Friday: day 1 is a Saturday (weekend mask)
+
+
+def tiny_process(seed: int, *, K: int = 2, S: int = 3, D: int = 2, max_hi: int = 2, absent: bool = True,
+                 rho: float | None = None) -> StepProcess:
+    rng = np.random.default_rng(seed)
+    states = tuple([f"r{i}" for i in range(S - 1)] + [None if absent else f"r{S - 1}"])
+    allowed = np.ones((7, D), bool)
+    allowed[5:, 0] = False  # weekends: pattern 0 not allowed
+    lo = rng.integers(1, max_hi + 1, size=(D, S))
+    hi = np.minimum(lo + rng.integers(0, 2, size=(D, S)), max_hi)
+    ent = EntityProcess(
+        "obj", "object", "dynamic", states, tuple(f"p{i}" for i in range(D)), allowed, rng.dirichlet(np.ones(D)),
+        rng.dirichlet(np.ones(D), size=D), rng.dirichlet(np.ones(S)), rng.integers(0, S, size=(D, K)),
+        np.full((D, K), rho) if rho is not None else rng.uniform(0, 1, size=(D, K)),
+        rng.dirichlet(np.ones(S), size=(D, S)), np.stack([lo, hi], axis=-1))
+    return StepProcess("America/Toronto", START, 3, tuple(9.0 + 2 * k for k in range(K)), {"obj": ent})
+
+
+def brute_force(proc: StepProcess, ent: EntityProcess, n_steps: int, obs: dict[int, list[tuple[str | None, int]]],
+                p_m: float, p_f: float) -> tuple[np.ndarray, float]:
+    """P(state at step n_steps - 1 | observations) and the evidence, by enumerating every path."""
+    K = proc.n_slots
+    post = np.zeros(ent.n_states)
+
+    def lik(n: int, s: int) -> float:
+        out = 1.0
+        for label, y in obs.get(n, []):
+            at = ent.states[s] == label
+            p1 = (1 - p_m) if at else p_f
+            out *= p1 if y == 1 else 1 - p1
+        return out
+
+    def rec(n: int, p: int, s: int, r: int, w: float) -> None:
+        if w == 0.0:
+            return
+        if n == n_steps:
+            post[s] += w
+            return
+        day, k = divmod(n, K)
+        if k == 0:
+            allowed = proc.allowed(ent, day).astype(float)
+            row = ent.pattern_initial * allowed if day == 0 else ent.pattern_transition[p] * allowed
+            choices = [(q, row[q] / row.sum()) for q in range(ent.n_patterns) if row[q] > 0]
+        else:
+            choices = [(p, 1.0)]
+        for q, wq in choices:
+            rho = ent.routine_strength[q, k]
+            moves: list[tuple[int, int, float]] = []
+            lo, hi = 0, 0
+            s_r = int(ent.routine[q, k])
+            lo, hi = ent.dwell[q, s_r]
+            moves += [(s_r, d, rho / (hi - lo + 1)) for d in range(lo, hi + 1)]
+            if r > 1:
+                moves.append((s, r - 1, 1 - rho))
+            else:
+                for s2 in range(ent.n_states):
+                    lo, hi = ent.dwell[q, s2]
+                    moves += [(s2, d, (1 - rho) * ent.jump[q, s, s2] / (hi - lo + 1)) for d in range(lo, hi + 1)]
+            for s2, r2, wm in moves:
+                rec(n + 1, q, s2, r2, w * wq * wm * lik(n, s2))
+
+    for s0 in range(ent.n_states):
+        rec(0, -1, s0, 1, float(ent.state_initial[s0]))
+    z = post.sum()
+    return post / z, float(z)
+
+
+def forward(proc: StepProcess, ent: EntityProcess, n_steps: int, obs: dict[int, list[tuple[str | None, int]]],
+            p_m: float, p_f: float) -> tuple[np.ndarray, float]:
+    b = ForwardBelief(proc, ent).start()
+    for n in range(n_steps):
+        b.advance_to(n)
+        for label, y in obs.get(n, []):
+            b.observe(observation_likelihood(ent, label, y, p_m, p_f))
+    return b.state_marginal(), float(np.exp(b.log_evidence))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_forward_equals_brute_force(seed: int) -> None:
+    proc = tiny_process(seed)
+    ent = proc.entities["obj"]
+    obs = {0: [("r0", 1)], 2: [("r1", 0)], 3: [("r0", 0), ("r1", 0)]}
+    for n_steps in (1, 3, 5):  # n_steps = 5: forecast one step past the last observation, across a night
+        want, z_want = brute_force(proc, ent, n_steps, obs, 0.1, 0.05)
+        got, z_got = forward(proc, ent, n_steps, obs, 0.1, 0.05)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(z_got, z_want, rtol=1e-9)
+
+
+def test_noise_free_observations_and_clockwork() -> None:
+    proc = tiny_process(7, rho=1.0)
+    ent = proc.entities["obj"]
+    got, _ = forward(proc, ent, 4, {}, 0.0, 0.0)
+    want, _ = brute_force(proc, ent, 4, {}, 0.0, 0.0)
+    np.testing.assert_allclose(got, want, atol=1e-9)
+    proc = tiny_process(8, rho=0.0)
+    ent = proc.entities["obj"]
+    obs = {1: [("r1", 1)]}
+    np.testing.assert_allclose(forward(proc, ent, 4, obs, 0.0, 0.0)[0], brute_force(proc, ent, 4, obs, 0.0, 0.0)[0],
+                               atol=1e-9)
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 5), st.lists(st.tuples(st.integers(0, 4), st.integers(0, 2),
+                                                                     st.integers(0, 1)), max_size=4))
+def test_forward_equals_brute_force_property(seed: int, n_steps: int, raw: list[tuple[int, int, int]]) -> None:
+    proc = tiny_process(seed, max_hi=2)
+    ent = proc.entities["obj"]
+    obs: dict[int, list[tuple[str | None, int]]] = {}
+    for n, j, y in raw:
+        if n < n_steps:
+            obs.setdefault(n, []).append((ent.states[j], y))
+    want, z = brute_force(proc, ent, n_steps, obs, 0.2, 0.1)
+    got, z2 = forward(proc, ent, n_steps, obs, 0.2, 0.1)
+    np.testing.assert_allclose(got, want, atol=1e-9)
+    np.testing.assert_allclose(z2, z, rtol=1e-9)
+
+
+def test_json_round_trip_and_problems() -> None:
+    proc = tiny_process(3)
+    back = StepProcess.from_dict(proc.to_dict())
+    e0, e1 = proc.entities["obj"], back.entities["obj"]
+    for name in ("pattern_transition", "jump", "dwell", "routine", "routine_strength", "pattern_allowed"):
+        np.testing.assert_allclose(getattr(e1, name), getattr(e0, name), atol=1e-12)
+    assert e1.states == e0.states and back.step_hours == proc.step_hours
+    bad = proc.to_dict()
+    bad["entities"][0]["jump"][0][0] = [0.5, 0.5, 0.5]
+    with pytest.raises(Exception, match="jump: rows must be probability distributions"):
+        StepProcess.from_dict(bad)
+
+
+def test_llm_schedules_follow_the_modal_routine() -> None:
+    proc = tiny_process(4, K=2, rho=1.0)
+    ent = proc.entities["obj"]
+    ent.pattern_transition[:] = [[0.0, 1.0], [0.0, 1.0]]  # always pattern 1 after day 0
+    ent.routine[1] = [0, 1]
+    sched = llm_schedules(proc)
+    # slot 0 (09-11) on r0 every day; slot 1 (11-13, the last: until 09:00 next day) on r1
+    assert sched[("obj", "r0")] == [f"{d}: 09:00 - {d}: 11:00" for d in ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")]
+    assert sched[("obj", "r1")][0] == "Mon: 11:00 - Tue: 09:00" and len(sched[("obj", "r1")]) == 7
+    assert ("obj", "None") not in sched
+    from psg_data.estimators import parse_llm_schedule
+
+    assert len(parse_llm_schedule(repr(sched[("obj", "r1")]))) == 7
