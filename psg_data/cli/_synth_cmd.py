@@ -33,28 +33,37 @@ def _resolution(_ctx: click.Context, _param: click.Parameter, value: str) -> tup
 @click.option("--resolution", default="160x120", show_default=True, callback=_resolution, help="WIDTHxHEIGHT.")
 @click.option("--shift", type=click.Choice(["none", "long-weekend"]), default="none", show_default=True,
               help="Distribution shift of the test days (long-weekend: Mondays and Fridays follow the weekend).")
+@click.option("--generator", type=click.Choice(["steps-v2", "continuous-v1"]), default="steps-v2", show_default=True,
+              help="Schedule generator: bi-hourly steps with routines (stores its exact model), or the first "
+                   "continuous-time one.")
+@click.option("--routine-strength", type=click.FloatRange(0.0, 1.0), default=0.8, show_default=True,
+              help="steps-v2: probability that the routine sets the state at a step (0 random walk, 1 clockwork).")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists.")
 @quiet_option
 @handle_errors
 def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, resolution: tuple[int, int],
-              shift: str, overwrite: bool, quiet: bool) -> None:
+              shift: str, generator: str, routine_strength: float, overwrite: bool, quiet: bool) -> None:
     """Build the synthetic three-room lab (3 rooms, 2 doors, 28 receptacles, 21 objects).
 
-    With no options it writes the default lab: 84 scans (21 days x 4 scans at 09, 11, 13, 15 h
-    America/Toronto), 8 frames each at 160x120, the first 14 days 'train', the last 7 'test'.
+    With no options it writes the default lab: 84 scans (21 days x 4 two-hour intervals from 09,
+    11, 13, 15 h America/Toronto, one scan each), 8 frames each at 160x120, the first 14 days
+    'train', the last 7 'test'; objects move only between intervals, and the generator's exact
+    model is stored in generator/process.json.
 
     \b
     Examples:
       psg-data synth /tmp/lab
       psg-data synth /tmp/lab_shift --shift long-weekend --seed 3 --overwrite
       psg-data synth /tmp/small --days 2 --frames-per-scan 3 --resolution 80x60
+      psg-data synth /tmp/clockwork --routine-strength 1
     """
     from psg_data.errors import DatasetExistsError
     from psg_data.synth import LabConfig, LabModel, build_lab
 
     setup_logging(quiet)
     config = LabConfig(seed=seed, days=days, frames_per_scan=frames_per_scan, width=resolution[0],
-                       height=resolution[1], shift=None if shift == "none" else shift)
+                       height=resolution[1], shift=None if shift == "none" else shift, generator=generator,
+                       routine_strength=routine_strength)
     if out.exists() and not overwrite:
         raise DatasetExistsError(f"{out}: output exists; pass --overwrite to replace it")
     lab = LabModel(config)

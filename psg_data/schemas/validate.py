@@ -10,10 +10,11 @@ import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from psg_data.errors import FormatError
+from psg_data.errors import FormatError, PsgDataError
 from psg_data.schemas._image_headers import parse_image_header, read_image_header
 from psg_data.schemas._manifest import manifest_from_dict
 from psg_data.schemas._tables import (
@@ -310,6 +311,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
             _check_images(c, root, cols["frames"], cams, info.color_encoding)
 
     _check_label_tables(c, cols, scan_bounds)
+    _check_process_file(c, root, info.extra, cols)
 
     # -- manifest counts ------------------------------------------------------------------------
     for name, t in tables.items():
@@ -448,3 +450,49 @@ def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bo
             if vis and (frac <= 0 or fs <= 0):
                 c.add(rel, "visible", "true although nothing was seen (seen_fraction or frames_seen is 0), "
                                       "expected false", i)
+
+
+def _check_process_file(c: _Collector, root: Path, extra: dict[str, Any], cols: dict[str, dict[str, list]]) -> None:
+    """A synthetic dataset's generator model (manifest ``extra.process_file``): present, readable,
+    well formed (shapes, stochastic rows, ranges) and naming objects, doors and receptacles of the
+    dataset (docs/FORMAT.md, "Generator model")."""
+    rel = extra.get("process_file") if isinstance(extra, dict) else None
+    if not rel:
+        return
+    path = root / str(rel)
+    if not path.is_file():
+        c.add(MANIFEST_NAME, "extra.process_file", f"{rel!r} does not exist, expected the generator model file")
+        return
+    from psg_data.synth._process import PROCESS_FORMAT, StepProcess
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        c.add(str(rel), "json", f"not valid JSON ({exc}), expected a {PROCESS_FORMAT} document")
+        return
+    try:
+        proc = StepProcess.from_dict(data, str(rel), check=False)
+    except PsgDataError as exc:
+        msg = str(exc)
+        c.add(str(rel), "process", msg[len(str(rel)) + 2:] if msg.startswith(f"{rel}: ") else msg)
+        return
+    for problem in proc.problems():
+        field, _, what = problem.rpartition(": ")
+        c.add(str(rel), field.replace(": ", ".") or "process", what)
+    objects = set(cols.get("objects", {}).get("object_id", []))
+    doors = set(cols.get("doors", {}).get("door_id", []))
+    recs = set(cols.get("receptacles", {}).get("receptacle_id", []))
+    for eid, ent in proc.entities.items():
+        if ent.kind == "object":
+            if eid not in objects:
+                c.add(str(rel), f"entities.{eid}", "object not in tables/objects.parquet")
+            bad = [s for s in ent.states if s is not None and s not in recs]
+            if bad:
+                c.add(str(rel), f"entities.{eid}.states", f"receptacles {bad} not in tables/receptacles.parquet")
+        elif ent.kind == "door":
+            if eid not in doors:
+                c.add(str(rel), f"entities.{eid}", "door not in tables/doors.parquet")
+            if set(ent.states) - {"open", "closed"}:
+                c.add(str(rel), f"entities.{eid}.states", f"{list(ent.states)}, expected states open/closed")
+        else:
+            c.add(str(rel), f"entities.{eid}.kind", f"{ent.kind!r}, expected object or door")

@@ -2,6 +2,7 @@
 
 Main entry points:
     LabModel(LabConfig(seed=...))        geometry, dense ground-truth schedule, scan plans, renderer
+    load_process(dataset)                the stored generative model of a steps-v2 dataset (exact posterior)
     build_lab(out, config)               write the lab as a canonical psg-dataset
     rerender_frame(dataset, scan, i)     re-render a stored frame with per-pixel instance ids
     write_detections(ds_or_lab, path)    simulated scene-graph detections (Parquet)
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 from psg_data.synth._build import build_lab, object_description, rerender_frame
 from psg_data.synth._catalog import CONFUSABLE, FURNITURE, OBJECTS, FurnitureSpec, ObjectSpec
+from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
 from psg_data.synth._layout import (
     DOOR_ID0,
@@ -24,7 +26,16 @@ from psg_data.synth._layout import (
     LabLayout,
     make_layout,
 )
-from psg_data.synth._model import SYNTH_VERSION, LabConfig, LabModel, ScanPlan, camera_pose
+from psg_data.synth._model import GENERATORS, SYNTH_VERSION, LabConfig, LabModel, ScanPlan, camera_pose
+from psg_data.synth._process import (
+    PROCESS_FILE,
+    EntityProcess,
+    ForwardBelief,
+    StepProcess,
+    llm_schedules,
+    load_process,
+    sample_entity,
+)
 from psg_data.synth._perception import DETECTIONS_SCHEMA, detect, write_detections
 from psg_data.synth._raw_export import RAW_EXPORT_FORMATS, export_raw
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
@@ -32,7 +43,9 @@ from psg_data.synth.persistence_benchmark import BENCHMARK_FEATURES, Persistence
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, DenseSchedule, EntityModel, HourPattern, Timeline, WeekPattern
 
 __all__ = [
-    "LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION",
+    "LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION", "GENERATORS",
+    "StepSchedule", "ProcessParams", "StepProcess", "EntityProcess", "ForwardBelief", "load_process", "llm_schedules",
+    "sample_entity", "PROCESS_FILE",
     "LabLayout", "Instance", "make_layout",
     "ID_NONE", "ID_FLOOR", "ID_CEILING", "WALL_ID0", "DOOR_ID0", "RECEPTACLE_ID0", "OBJECT_ID0",
     "LabSchedule", "DenseSchedule", "EntityModel", "HourPattern", "WeekPattern", "Timeline", "SHIFTS", "WEEKDAYS",

@@ -304,8 +304,9 @@ class StepProcess:
         return json.dumps(self.to_dict(), separators=(",", ":"), allow_nan=False) + "\n"
 
     @staticmethod
-    def from_dict(d: Mapping[str, Any], where: str = "process") -> StepProcess:
-        """Parse and check a process dict; raise :class:`PsgDataError` naming the first problem."""
+    def from_dict(d: Mapping[str, Any], where: str = "process", *, check: bool = True) -> StepProcess:
+        """Parse (and with ``check``, check) a process dict; raise :class:`PsgDataError` naming the
+        first problem (:meth:`problems` lists them all)."""
         if not isinstance(d, Mapping) or d.get("format") != PROCESS_FORMAT:
             raise PsgDataError(f"{where}: format: expected {PROCESS_FORMAT!r}")
         if int(d.get("version", 0)) > PROCESS_VERSION:
@@ -320,7 +321,7 @@ class StepProcess:
                                dict(d.get("parameters", {})))
         except (KeyError, TypeError, ValueError) as exc:
             raise PsgDataError(f"{where}: malformed process ({type(exc).__name__}: {exc})") from None
-        probs = proc.problems()
+        probs = proc.problems() if check else []
         if probs:
             raise PsgDataError(f"{where}: {probs[0]}")
         return proc
