@@ -149,7 +149,8 @@ def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
 
 
 def _synth_dense_ground_truth(ds: Any, step_s: float) -> Any:
-    """Dense ground truth of a synthetic lab, restricted to the daily scanning hours."""
+    """Dense ground truth of a synthetic lab on a grid of ``step_s`` aligned with the clock,
+    restricted to the daily scanning hours."""
     from zoneinfo import ZoneInfo
 
     import pandas as pd
@@ -160,8 +161,12 @@ def _synth_dense_ground_truth(ds: Any, step_s: float) -> Any:
     hours = list(ds.info.extra.get("scan_hours") or [9, 11, 13, 15])
     first_h, last_h = min(hours), max(hours) + 2
 
+    step_ns = int(round(step_s * 1e9))
+
     def dense(start_ns: int, end_ns: int) -> tuple[np.ndarray, dict]:
-        d = lab.schedule.dense(step_s, start_ns, end_ns)
+        # grid aligned with whole multiples of step_s (local quarter hours for 900 s), so that a
+        # state changing at a step start (09:00, 11:00, ...) changes on a grid point, not between two
+        d = lab.schedule.dense(step_s, start_ns - start_ns % step_ns, end_ns)
         local = pd.to_datetime(d.stamps_ns, utc=True).tz_convert(ZoneInfo(ds.info.timezone))
         hod = local.hour.to_numpy() + local.minute.to_numpy() / 60.0
         keep = (hod >= first_h) & (hod <= last_h)
