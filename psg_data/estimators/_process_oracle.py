@@ -21,6 +21,14 @@ update time ``H``, whatever order the filters are built, updated or asked in):
   estimator can know, so the ceiling is reproducible and independent of ``jobs``.
 
 Before any observation (``last_t_s`` None) the prediction is the model's prior marginal.
+
+What the ceiling is a ceiling of: the posterior probability (``output="probability"``, default) is
+the best possible prediction for proper scores (log loss, Brier) and, thresholded at 0.5, the most
+accurate present/absent decision at every time. MAE is not a proper score: its optimum is the
+posterior median, the 0/1 decision ``P >= 0.5`` (``output="median"``); a hard predictor such as
+``last_seen`` can beat the probability's MAE where the state is nearly certain. Balanced accuracy
+and F1 at the fixed threshold 0.5 are not maximised exactly by any fixed rule either (their best
+threshold depends on each edge's class balance); both outputs give the same decisions there.
 Observations are noise-free by default (ground-truth and privileged labels); declare ``p_m`` /
 ``p_f`` for noisy labels. An observation impossible under the model raises
 :class:`~psg_data.errors.EstimatorError` (wrong dataset, or noisy labels with zero noise rates).
@@ -40,7 +48,7 @@ from numpy.typing import NDArray
 from psg_data.errors import EstimatorError, PsgDataError
 from psg_data.estimators._base import EdgeKey, EdgeStream
 from psg_data.estimators._common import BaseEstimator, BaseFilter
-from psg_data.estimators._params import Boolean, MappingParam, Real, Text
+from psg_data.estimators._params import Boolean, MappingParam, Options, Real, Text
 
 __all__ = ["ProcessOracleEstimator", "ProcessOracleFilter"]
 
@@ -76,6 +84,8 @@ class ProcessOracleEstimator(BaseEstimator):
         p_f: P(seen present | absent) of the observations.
         share_updates: also use the post-training observations that sibling filters of the same
             object received (order-dependent; see the module docstring).
+        output: ``probability`` (the posterior P(present)) or ``median`` (its 0/1 median, the
+            Bayes decision for MAE).
     """
 
     name = "process_oracle"
@@ -85,15 +95,17 @@ class ProcessOracleEstimator(BaseEstimator):
         "p_m": Real(0.0, 0.5, closed="left", help="P(seen absent | present) of the labels"),
         "p_f": Real(0.0, 0.5, closed="left", help="P(seen present | absent) of the labels"),
         "share_updates": Boolean(help="filters of one object share their post-training observations"),
+        "output": Options("probability", "median", help="posterior probability, or its 0/1 median (MAE)"),
     }
 
     def __init__(self, *, dataset: str | None = None, model: Mapping[str, Any] | None = None, p_m: float = 0.0,
-                 p_f: float = 0.0, share_updates: bool = False) -> None:
+                 p_f: float = 0.0, share_updates: bool = False, output: str = "probability") -> None:
         self.dataset = dataset
         self.model = model
         self.p_m = p_m
         self.p_f = p_f
         self.share_updates = share_updates
+        self.output = output
 
     def _load(self) -> Any:
         from psg_data.synth._process import load_process
@@ -146,7 +158,8 @@ class ProcessOracleEstimator(BaseEstimator):
         empty = _EntityData(np.zeros(0), np.zeros(0, dtype=object), np.zeros(0, np.int8))
         tracker = self.trackers_.setdefault(eid, _Tracker()) if self.share_updates else None
         return ProcessOracleFilter((eid, label), self.process_, self.observations_.get(eid, empty), tracker,
-                                   float(self.fit_end_s_), float(self.p_m), float(self.p_f))
+                                   float(self.fit_end_s_), float(self.p_m), float(self.p_f),
+                                   median=self.output == "median")
 
     def filter_from_state(self, state: dict[str, Any]) -> ProcessOracleFilter:
         edge = self._check_state(state)
@@ -164,8 +177,9 @@ class ProcessOracleFilter(BaseFilter):
     """One edge of :class:`ProcessOracleEstimator` (exact forward algorithm, cached)."""
 
     def __init__(self, edge: EdgeKey, process: Any, data: _EntityData, tracker: _Tracker | None, fit_end_s: float,
-                 p_m: float, p_f: float) -> None:
+                 p_m: float, p_f: float, *, median: bool = False) -> None:
         super().__init__(edge)
+        self._median = median
         self._process = process
         self._entity = process.entities[edge[0]]
         self._data = data
@@ -265,7 +279,8 @@ class ProcessOracleFilter(BaseFilter):
         while len(self._fc) <= int(steps.max(initial=0)):  # extend the cached forecast to the furthest step
             self._fc_belief.advance()
             self._fc.append(self._fc_belief.state_marginal())
-        return np.asarray(self._fc)[steps, self._index]
+        p = np.asarray(self._fc)[steps, self._index]
+        return (p >= 0.5).astype(np.float64) if self._median else p
 
     def get_state(self) -> dict[str, Any]:
         return {"estimator": ProcessOracleEstimator.name, "edge": [self.edge[0], self.edge[1]],

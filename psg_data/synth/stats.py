@@ -90,7 +90,7 @@ def schedule_statistics(config: Any = None, *, sim_weeks: int = 52) -> dict[str,
             shares.append(1.0 - cond / h)
     sh = np.asarray(shares)
     return {
-        "generator": cfg.generator, "routine_strength": getattr(cfg, "routine_strength", None),
+        "generator": cfg.generator, "routine_strength": cfg.routine_strength if cfg.generator == "steps-v2" else None,
         "moving_objects": len(moving), "moving_edges": int(sh.size), "visits": visits,
         "visits_unseen_by_timing": unseen / max(visits, 1),
         "p_same_next_scan": float(same.mean()), "p_same_next_scan_within_day": float(same[~night].mean()),

@@ -73,6 +73,10 @@ def test_prediction_is_the_posterior_of_its_information_set(proc: StepProcess) -
     q = np.linspace(cut, cut + 5 * 86400, 50)
     obs = [(t, s.edge[1], int(y)) for s in train for t, y in zip(s.t_s, s.y) if s.edge != own.edge or t <= cut]
     np.testing.assert_allclose(f.predict(q), _reference(proc, obs, cut, q, own.edge[1]), atol=1e-12)
+    med = get_estimator("process_oracle", model=proc.to_dict(), p_m=P, p_f=P, output="median").fit(train)
+    m = med.make_filter(own.edge)
+    m.update_many(own.t_s[:12], own.y[:12])
+    np.testing.assert_array_equal(m.predict(q), (f.predict(q) >= 0.5).astype(float))
     # a filter without observations predicts the prior marginal
     g = est.make_filter(train[1].edge)
     np.testing.assert_allclose(g.predict(q[:3]), _reference(proc, [], -np.inf, q[:3], train[1].edge[1]), atol=1e-12)
