@@ -40,10 +40,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.synth._catalog import ObjectSpec
-from psg_data.synth._lab_schedule import DOOR_CLOSED, DOOR_OPEN, _affinity, _pick
+from psg_data.synth._lab_schedule import DOOR_CLOSED, DOOR_OPEN, TimelineSchedule, _affinity, _pick
 from psg_data.synth._layout import LabLayout
 from psg_data.synth._process import EntityPath, EntityProcess, StepProcess, sample_entity
-from psg_data.synth._schedule import WEEKDAYS, DenseSchedule, Timeline, local_midnights_ns
+from psg_data.synth._schedule import Timeline
 
 __all__ = ["ProcessParams", "lab_process", "StepSchedule"]
 
@@ -215,7 +215,7 @@ def lab_process(layout: LabLayout, seed: int, start_date: dt.date, days: int, ti
                         "max_dwell_steps": params.max_dwell_steps})
 
 
-class StepSchedule:
+class StepSchedule(TimelineSchedule):
     """Ground-truth schedules of the lab sampled from its step processes (generator ``steps-v2``).
 
     Same interface as :class:`~psg_data.synth.LabSchedule` (``objects``/``doors`` timelines,
@@ -236,23 +236,11 @@ class StepSchedule:
     def __init__(self, layout: LabLayout, seed: int, start_date: dt.date, days: int, timezone: str,
                  step_hours: tuple[float, ...], params: ProcessParams,
                  shifted_days: frozenset[int] = frozenset()) -> None:
-        self.layout = layout
-        self.seed = int(seed)
-        self.start_date = start_date
-        self.days = int(days)
-        self.timezone = timezone
-        self.shifted_days = frozenset(shifted_days)
-        self.object_ids = layout.object_ids
-        self.receptacle_ids = layout.receptacle_ids
-        self.door_ids = layout.door_ids
-        self.roles = {o.name: o.role for o in layout.objects}
+        self._set_calendar(layout, seed, start_date, days, timezone, shifted_days)
         self.process = lab_process(layout, seed, start_date, days, timezone, step_hours, params, shifted_days)
         n = self.process.n_steps
         self.step_starts_ns = np.array([int(round(self.process.clock.step_start_s(i))) * 1_000_000_000
                                         for i in range(n)], np.int64)
-        mid = local_midnights_ns(start_date, days, timezone)
-        self.day_starts_ns = mid[:-1]
-        self.start_ns, self.end_ns = int(mid[0]), int(mid[-1])
         self.paths: dict[str, EntityPath] = {}
         for i, (eid, ent) in enumerate(self.process.entities.items()):
             self.paths[eid] = sample_entity(self.process, ent, n, np.random.default_rng([self.seed, 621, i]))
@@ -273,26 +261,3 @@ class StepSchedule:
         keep = np.concatenate([[True], seq[1:] != seq[:-1]])
         names = [ent.patterns[p] for p in path.patterns[: self.days]]
         return Timeline(t[keep], value[seq[keep]], names, ["regular"] * len(names))
-
-    def weekday_name(self, day: int) -> str:
-        return WEEKDAYS[(self.start_date + dt.timedelta(days=day)).weekday()]
-
-    def objects_at(self, stamp_ns: int) -> dict[str, str | None]:
-        """``object_id -> receptacle_id`` (None = absent) at ``stamp_ns``."""
-        return {o: (None if (s := int(tl.at(stamp_ns))) < 0 else self.receptacle_ids[s])
-                for o, tl in self.objects.items()}
-
-    def doors_at(self, stamp_ns: int) -> dict[str, bool]:
-        """``door_id -> is_open`` at ``stamp_ns``."""
-        return {d: int(tl.at(stamp_ns)) == DOOR_OPEN for d, tl in self.doors.items()}
-
-    def dense(self, step_s: float = 3600.0, start_ns: int | None = None, end_ns: int | None = None
-              ) -> DenseSchedule:
-        """Ground truth on a regular grid ``[start, end)`` every ``step_s`` seconds (default: hourly, all days)."""
-        a = self.start_ns if start_ns is None else int(start_ns)
-        b = self.end_ns if end_ns is None else int(end_ns)
-        stamps = np.arange(a, b, int(round(step_s * 1e9)), dtype=np.int64)
-        objs = np.stack([self.objects[o].at(stamps) for o in self.object_ids], axis=1).astype(np.int16)
-        doors = np.stack([self.doors[d].at(stamps) == DOOR_OPEN for d in self.door_ids], axis=1)
-        return DenseSchedule(stamps, objs, doors, list(self.object_ids), list(self.receptacle_ids),
-                             list(self.door_ids))

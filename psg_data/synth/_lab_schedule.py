@@ -29,7 +29,7 @@ from psg_data.synth._schedule import (
     local_midnights_ns,
 )
 
-__all__ = ["LabSchedule", "object_model", "door_model", "DOOR_OPEN", "DOOR_CLOSED"]
+__all__ = ["LabSchedule", "TimelineSchedule", "object_model", "door_model", "DOOR_OPEN", "DOOR_CLOSED"]
 
 log = logging.getLogger(__name__)
 
@@ -128,20 +128,25 @@ def door_model(k: int, door_id: str, seed: int) -> EntityModel:
     return EntityModel(door_id, (work, closed, wk_open), (week,))
 
 
-class LabSchedule:
-    """Ground-truth schedules of the lab's objects and doors (continuous time).
+class TimelineSchedule:
+    """Queries shared by the lab's schedules: timelines per object / door, state at a time, dense grid.
 
-    Args:
-        layout: lab geometry (receptacle order defines the state indices).
-        seed: lab seed.
-        start_date: first local date.
-        days: number of days.
-        timezone: IANA site timezone.
-        shifted_days: day indices that follow the weekend pattern (distribution shift).
+    Subclasses set ``object_ids``, ``receptacle_ids``, ``door_ids``, ``start_date``, ``start_ns``,
+    ``end_ns``, ``objects`` and ``doors`` (entity id -> :class:`Timeline`).
     """
 
-    def __init__(self, layout: LabLayout, seed: int, start_date: dt.date, days: int, timezone: str,
-                 shifted_days: frozenset[int] = frozenset()) -> None:
+    object_ids: list[str]
+    receptacle_ids: list[str]
+    door_ids: list[str]
+    start_date: dt.date
+    start_ns: int
+    end_ns: int
+    objects: dict[str, Timeline]
+    doors: dict[str, Timeline]
+
+    def _set_calendar(self, layout: LabLayout, seed: int, start_date: dt.date, days: int, timezone: str,
+                      shifted_days: frozenset[int]) -> None:
+        """The attributes every lab schedule has: ids, roles, calendar and day boundaries."""
         self.layout = layout
         self.seed = int(seed)
         self.start_date = start_date
@@ -152,14 +157,6 @@ class LabSchedule:
         self.receptacle_ids = layout.receptacle_ids
         self.door_ids = layout.door_ids
         self.roles = {o.name: o.role for o in layout.objects}
-        self.object_models = {o.name: object_model(o, j, layout, seed) for j, o in enumerate(layout.objects)}
-        self.door_models = {d: door_model(k, d, seed) for k, d in enumerate(self.door_ids)}
-        self.objects: dict[str, Timeline] = {
-            o: generate_timeline(m, j, seed, start_date, days, timezone, self.shifted_days)
-            for j, (o, m) in enumerate(self.object_models.items())}
-        self.doors: dict[str, Timeline] = {
-            d: generate_timeline(m, 1000 + k, seed, start_date, days, timezone, self.shifted_days)
-            for k, (d, m) in enumerate(self.door_models.items())}
         mid = local_midnights_ns(start_date, days, timezone)
         self.day_starts_ns = mid[:-1]
         self.start_ns, self.end_ns = int(mid[0]), int(mid[-1])
@@ -186,3 +183,28 @@ class LabSchedule:
         doors = np.stack([self.doors[d].at(stamps) == DOOR_OPEN for d in self.door_ids], axis=1)
         return DenseSchedule(stamps, objs, doors, list(self.object_ids), list(self.receptacle_ids),
                              list(self.door_ids))
+
+
+class LabSchedule(TimelineSchedule):
+    """Ground-truth schedules of the lab's objects and doors (continuous time).
+
+    Args:
+        layout: lab geometry (receptacle order defines the state indices).
+        seed: lab seed.
+        start_date: first local date.
+        days: number of days.
+        timezone: IANA site timezone.
+        shifted_days: day indices that follow the weekend pattern (distribution shift).
+    """
+
+    def __init__(self, layout: LabLayout, seed: int, start_date: dt.date, days: int, timezone: str,
+                 shifted_days: frozenset[int] = frozenset()) -> None:
+        self._set_calendar(layout, seed, start_date, days, timezone, shifted_days)
+        self.object_models = {o.name: object_model(o, j, layout, seed) for j, o in enumerate(layout.objects)}
+        self.door_models = {d: door_model(k, d, seed) for k, d in enumerate(self.door_ids)}
+        self.objects: dict[str, Timeline] = {
+            o: generate_timeline(m, j, seed, start_date, days, timezone, self.shifted_days)
+            for j, (o, m) in enumerate(self.object_models.items())}
+        self.doors: dict[str, Timeline] = {
+            d: generate_timeline(m, 1000 + k, seed, start_date, days, timezone, self.shifted_days)
+            for k, (d, m) in enumerate(self.door_models.items())}
