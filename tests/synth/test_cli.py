@@ -28,6 +28,23 @@ def test_synth_canonical_and_existing_output(tmp_path: Path) -> None:
     assert r.exit_code == 0 and open_dataset(out).info.extra["shift"] == "long-weekend"
 
 
+def test_generator_and_routine_strength_options(tmp_path: Path) -> None:
+    from psg_data.synth import PROCESS_FILE, load_process
+
+    out = tmp_path / "clock"
+    r = CliRunner().invoke(synth_cmd, [str(out), *ARGS, "--routine-strength", "1", "--quiet"])
+    assert r.exit_code == 0, r.output
+    ds = open_dataset(out)
+    assert ds.info.extra["routine_strength"] == 1.0 and ds.info.extra["schedule_generator"] == "steps-v2"
+    assert load_process(ds).parameters["routine_strength"] == 1.0
+    old = tmp_path / "v1"
+    r = CliRunner().invoke(synth_cmd, [str(old), *ARGS, "--generator", "continuous-v1", "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert open_dataset(old).info.extra["schedule_generator"] == "continuous-v1" and not (old / PROCESS_FILE).exists()
+    r = CliRunner().invoke(synth_cmd, [str(tmp_path / "x"), "--routine-strength", "1.5"])
+    assert r.exit_code == 2
+
+
 def test_bad_resolution_is_usage_error(tmp_path: Path) -> None:
     r = CliRunner().invoke(synth_cmd, [str(tmp_path / "x"), "--resolution", "big"])
     assert r.exit_code == 2
