@@ -26,13 +26,15 @@ from tests.navigation.conftest import door_grid
 
 
 @pytest.fixture(scope="module")
-def labelled_lab(tmp_path_factory, door_lab_path):  # type: ignore[no-untyped-def]
-    import shutil
-
+def labelled_lab(tmp_path_factory):  # type: ignore[no-untyped-def]
+    """The door lab with lab seed 4: its test day has doors open at some query times and closed at
+    others (with seed 0 both doors stay closed all of the last day, so no door goal is reachable)."""
     from psg_data.labeling import label_dataset
+    from psg_data.synth import LabConfig, LabModel, build_lab
+    from tests.doors.conftest import DOOR_LAB
 
-    dst = tmp_path_factory.mktemp("doorworld") / "lab"
-    shutil.copytree(door_lab_path, dst)
+    lab = LabModel(LabConfig(**{**DOOR_LAB, "seed": 4}))
+    dst = build_lab(tmp_path_factory.mktemp("doorworld") / "lab", lab.config, lab=lab)
     label_dataset(dst, "observed")
     return dst
 
