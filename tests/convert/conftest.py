@@ -162,3 +162,9 @@ def write_bag(path: Path, fmt: str = "ros1", *, n: int = 4, w: int = W, h: int =
         bw.flush(before_ns=t)
     bw.close()
     return path
+
+
+def dataset_bytes(root: Path) -> dict[str, bytes]:
+    """Every file of a dataset (manifest, Parquet tables, image archives) by relative path: two
+    conversions of the same input compare byte for byte (the manifest holds no wall-clock time)."""
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}

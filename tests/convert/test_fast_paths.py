@@ -305,3 +305,49 @@ def test_bag_stays_readable_for_archive_ranges_after_the_recording_closes(tmp_pa
         still = False
     assert not still  # closed with the last range
     pool.close()
+
+
+def test_ros1_fallback_to_rosbags_public_reader_gives_identical_output(tmp_path: Path, monkeypatch) -> None:
+    """With rosbags' ROS 1 internals unavailable (as after an upstream rename), messages come from
+    the public ``Reader.messages`` and the converted dataset is byte for byte the same."""
+    from rosbags.rosbag1 import Reader
+
+    import psg_data.loaders.raw._bag as bag_mod
+    from psg_data.convert import convert
+
+    from .conftest import dataset_bytes
+
+    raw = export_raw(make_dataset(tmp_path / "canon", n_scans=2, n_frames=3), tmp_path / "raw", "ros1",
+                     images="compressed")
+    fast = Path(convert(raw, tmp_path / "fast").output)
+    calls = []
+    public = Reader.messages
+
+    def spy(self, *a, **k):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return public(self, *a, **k)
+
+    bag_mod._rosbags_ros1_internals.cache_clear()
+    monkeypatch.setattr(bag_mod, "_rosbags_ros1_internals", lambda: None)
+    monkeypatch.setattr(Reader, "messages", spy)
+    slow = Path(convert(raw, tmp_path / "slow").output)
+    assert calls, "the public reader was not used"
+    a, b = dataset_bytes(fast), dataset_bytes(slow)
+    assert sorted(a) == sorted(b) and any(k.endswith(".tar") for k in a)
+    assert [k for k in a if a[k] != b[k]] == []
+
+
+def test_ros1_internals_guard_catches_a_renamed_module(monkeypatch) -> None:
+    """An upstream rename of ``rosbags.rosbag1.reader.decompressors`` gives None (the fallback), not ImportError."""
+    import rosbags.rosbag1.reader as reader
+
+    import psg_data.loaders.raw._bag as bag_mod
+
+    bag_mod._rosbags_ros1_internals.cache_clear()
+    try:
+        assert bag_mod._rosbags_ros1_internals() is not None  # the rosbags this suite runs with
+        bag_mod._rosbags_ros1_internals.cache_clear()
+        monkeypatch.delattr(reader, "decompressors")
+        assert bag_mod._rosbags_ros1_internals() is None
+    finally:
+        bag_mod._rosbags_ros1_internals.cache_clear()

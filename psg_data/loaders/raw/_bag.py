@@ -14,7 +14,7 @@ import sqlite3
 import struct
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from psg_data.errors import ConversionError
 from psg_data.loaders.raw._wire import CompressedFields, TfSample, parse_compressed_image, parse_tf_message
@@ -131,6 +131,31 @@ def _record_op(header: bytes) -> int:
     raise ValueError("record header without an op field")
 
 
+class _Ros1Internals(NamedTuple):
+    identity: Any
+    """rosbags' decompressor of uncompressed chunks (``decompressors["none"]``)."""
+
+
+@functools.lru_cache(maxsize=1)
+def _rosbags_ros1_internals() -> _Ros1Internals | None:
+    """The one place that reaches into rosbags' ROS 1 reader beyond its public API, or None.
+
+    The zero-copy loop of :class:`_Ros1Reader` reads ``rosbags.rosbag1.reader.decompressors``,
+    ``Reader.indexes``, ``Reader.chunks`` and ``Chunk.datapos/datasize/decompressor``, none of which
+    rosbags exports (tested with the rosbags versions pyproject.toml admits). When the import fails
+    (an upstream rename) this returns None and messages come from the public ``Reader.messages``
+    instead; the attributes are checked per bag in ``_Ros1Reader._index`` with the same fallback.
+    """
+    try:
+        from rosbags.rosbag1.reader import decompressors
+
+        identity = decompressors["none"]
+    except (ImportError, AttributeError, KeyError, TypeError):
+        log.debug("rosbags' ROS 1 reader internals not found: reading messages through Reader.messages")
+        return None
+    return _Ros1Internals(identity)
+
+
 class _Ros1Reader:
     """A ROS 1 bag: opened and indexed by ``rosbags.rosbag1.Reader``, messages read zero-copy.
 
@@ -184,7 +209,11 @@ class _Ros1Reader:
         self.file = None  # closed now, or when the last FileRange of it is read
         self._bag.close()
 
-    def _index(self, connections: Collection[Any]) -> list[tuple[int, int, int, int, int, Any]] | None:
+    def _index(self, connections: Collection[Any]) -> tuple[list[tuple[int, int, int, int, int, Any]], Any] | None:
+        """``(entries, identity)`` for the zero-copy loop, or None when rosbags' internals differ."""
+        internals = _rosbags_ros1_internals()
+        if internals is None:
+            return None
         try:
             indexes, chunks = self._bag.indexes, self._bag.chunks
             entries = [(e.time, k, j, e.chunk_pos, e.offset, c)
@@ -195,7 +224,7 @@ class _Ros1Reader:
         except (AttributeError, KeyError, TypeError):
             return None
         entries.sort()  # (time, connection order, index order): rosbags' merge order, ties included
-        return entries
+        return entries, internals.identity
 
     def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any, int | None]]:
         """``(connection, time_ns, view, offset)``: ``offset`` is the message's byte offset in the
@@ -203,19 +232,17 @@ class _Ros1Reader:
         import mmap
 
         conns = list(connections) or self.connections
-        entries = self._index(conns)
-        if entries is None:
+        fast = self._index(conns)
+        if fast is None:  # rosbags' public reader (copies each message)
             for c, t, raw in self._bag.messages(connections=conns):
                 yield c, t, raw, None
             return
+        entries, identity = fast
         if not entries:
             return
         if self._mm is None:
             self._mm = mmap.mmap(self.fd, 0, access=mmap.ACCESS_READ)
         whole = memoryview(self._mm)
-        from rosbags.rosbag1.reader import decompressors
-
-        identity = decompressors.get("none")
         chunks = self._bag.chunks
         page = mmap.PAGESIZE
         release = getattr(self._mm, "madvise", None)
