@@ -11,7 +11,7 @@ import bisect
 import logging
 import os
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -27,6 +27,8 @@ from psg_data.schemas._tables import TABLES, table_path
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
     import pyarrow as pa
+
+    from psg_data.loaders._frame_view import FrameView
 
 __all__ = ["open_dataset", "Dataset", "Scan"]
 
@@ -66,6 +68,27 @@ class Dataset:
 
     def __repr__(self) -> str:
         return f"Dataset({str(self.root)!r}, scans={len(self.scan_ids)}, frames={self.table('frames').num_rows})"
+
+    # -- interop: pickling and the frame-indexed view ------------------------------------------
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled as its directory and manifest: no open file, no cached table travels; a copy in
+        another process (a DataLoader worker, a Dask task) reopens tables and archives on first use."""
+        return {"root": self.root, "info": self.info}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.root, self.info = state["root"], state["info"]
+        self._arrow = {}
+        self._images = _ImageFiles(self.root)
+
+    def frame_view(self, scan_ids: Sequence[str] | None = None, *, color: bool = True,
+                   depth: bool = True) -> FrameView:
+        """Every frame of ``scan_ids`` (default: all scans) by one flat index: ``len(view)``, and
+        ``view[i]`` a :class:`~psg_data.loaders.FrameRecord` dict of numpy arrays (colour, depth in
+        metres, ``T_world_camera``, intrinsics, stamp, scan id). Picklable, so it serves as the
+        dataset of a ``torch.utils.data.DataLoader`` with worker processes."""
+        from psg_data.loaders._frame_view import FrameView
+
+        return FrameView(self, scan_ids, color=color, depth=depth)
 
     # -- tables -------------------------------------------------------------------------------
     def has_table(self, name: str) -> bool:
@@ -342,6 +365,12 @@ class _ImageFiles:
         self.root = root
         self._fds: dict[str, int] = {}
         self._lock = threading.Lock()
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"root": self.root}  # descriptors and the lock stay in this process
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["root"])  # type: ignore[misc]
 
     def read(self, rel: str, offset: int, size: int) -> bytes:
         """Bytes of the image stored at ``rel`` (``offset`` < 0: the whole file). FormatError says why not."""
