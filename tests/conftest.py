@@ -72,3 +72,21 @@ def make_dataset(tmp_path: Path) -> Callable[..., Path]:
         return write_tiny_dataset(tmp_path / name, **kwargs)  # type: ignore[arg-type]
 
     return factory
+
+
+@pytest.fixture
+def user_backend(monkeypatch: pytest.MonkeyPatch):  # type: ignore[no-untyped-def]
+    """A user's own matplotlib backend ('svg', as a notebook sets its inline one) that library code
+    must leave alone: fails the test if anything calls ``matplotlib.use`` or the backend changed."""
+    import matplotlib
+
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")
+    calls: list[tuple] = []  # type: ignore[type-arg]
+    monkeypatch.setattr(matplotlib, "use", lambda *a, **k: calls.append((a, k)))
+    yield "svg"
+    monkeypatch.undo()
+    after = matplotlib.get_backend()
+    matplotlib.use(before)
+    assert calls == [], f"library code called matplotlib.use{calls[0]}"
+    assert after == "svg", f"the backend changed from svg to {after}"

@@ -5,11 +5,14 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from psg_data.metrics._persistence_task import PersistenceResult, PredictionTrace
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
 
 __all__ = ["format_persistence_table", "write_persistence_results", "plot_beliefs", "plot_metric_bars",
            "choose_plot_edges"]
@@ -86,31 +89,35 @@ def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *,
     return paths
 
 
-def _pyplot() -> Any:
-    import matplotlib
+def _save(fig: Figure, out_path: str | Path | None, dpi: int = 110) -> Figure:
+    """Write ``fig`` as a PNG at ``out_path`` when one is given; the figure either way."""
+    if out_path is not None:
+        out = Path(out_path)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=dpi)
+    return fig
 
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
 
-    return plt
-
-
-def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path, *, timezone: str = "UTC",
-                 seed: int | None = None, title: str | None = None) -> Path:
+def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path | None = None, *, timezone: str = "UTC",
+                 seed: int | None = None, title: str | None = None) -> Figure:
     """The paper's "Persistence Belief" figure: per edge, each estimator's belief over the test
     window against the ground truth (shaded) and the test observations (ticks), local time axis.
-    """
-    import pandas as pd
 
-    plt = _pyplot()
+    Returns a ``matplotlib.figure.Figure`` (no pyplot, no backend change), written as a PNG at
+    ``out_path`` if given.
+    """
+    import matplotlib
+    import pandas as pd
+    from matplotlib.figure import Figure
+
     if seed is None and traces:
         seed = min(t.seed for t in traces)
     traces = [t for t in traces if t.seed == seed]
     edges = list(dict.fromkeys(t.edge for t in traces))
     names = list(dict.fromkeys(t.estimator for t in traces))
-    fig, axes = plt.subplots(max(1, len(edges)), 1, figsize=(11, 2.1 * max(1, len(edges)) + 0.6), sharex=True,
-                             squeeze=False)
-    colours = plt.get_cmap("tab10")
+    fig = Figure(figsize=(11, 2.1 * max(1, len(edges)) + 0.6))
+    axes = fig.subplots(max(1, len(edges)), 1, sharex=True, squeeze=False)
+    colours = matplotlib.colormaps["tab10"]
 
     def local(t: np.ndarray) -> Any:
         return pd.to_datetime(t, unit="s", utc=True).tz_convert(timezone).tz_localize(None)
@@ -131,27 +138,25 @@ def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path, *, tim
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=min(6, len(names) + 2))
     fig.suptitle(title or f"Persistence belief over the test window (seed {seed}, local time {timezone})", fontsize=10)
     fig.tight_layout()
-    out = Path(out_path)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(fig, out_path)
 
 
-def plot_metric_bars(result: PersistenceResult, out_path: str | Path) -> Path:
-    """Per-estimator bars of MAE, B-Acc and F1 (mean over seeds, error bars = std)."""
-    plt = _pyplot()
+def plot_metric_bars(result: PersistenceResult, out_path: str | Path | None = None) -> Figure:
+    """Per-estimator bars of MAE, B-Acc and F1 (mean over seeds, error bars = std); a
+    ``matplotlib.figure.Figure``, written as a PNG at ``out_path`` if given."""
+    import matplotlib
+    from matplotlib.figure import Figure
+
     names = result.estimators
-    fig, axes = plt.subplots(1, len(_TABLE_METRICS), figsize=(4 * len(_TABLE_METRICS), 3.4))
+    fig = Figure(figsize=(4 * len(_TABLE_METRICS), 3.4))
+    axes = fig.subplots(1, len(_TABLE_METRICS))
     for ax, (key, label, better) in zip(axes, _TABLE_METRICS):
         means = [result.summary[n][key].mean for n in names]
         stds = [result.summary[n][key].std for n in names]
-        ax.bar(range(len(names)), np.nan_to_num(means), yerr=np.nan_to_num(stds), color=plt.get_cmap("tab10")(
+        ax.bar(range(len(names)), np.nan_to_num(means), yerr=np.nan_to_num(stds), color=matplotlib.colormaps["tab10"](
             np.arange(len(names)) % 10), capsize=3)
         ax.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
         ax.set_title(f"{label} ({better} is better)", fontsize=9)
         ax.set_ylim(0, 1)
     fig.tight_layout()
-    out = Path(out_path)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(fig, out_path)

@@ -33,7 +33,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +43,9 @@ from psg_data.estimators._base import EdgeFilter, EdgeStream
 from psg_data.estimators._simple import ConstantFilter
 from psg_data.navigation._grid import OccupancyGrid, grid_from_geometry
 from psg_data.navigation._planner import PlanningCache
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
 
 __all__ = ["DOOR_BASELINES", "DoorWorld", "DoorQuery", "DoorEpisode", "DoorNavigationResult", "fit_door_filters",
            "door_open_probabilities", "run_door_episode", "make_door_queries", "run_door_navigation",
@@ -563,9 +566,10 @@ def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, nois
 
 
 # -- the figure -------------------------------------------------------------------------------------
-def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, out_path: str | Path, *,
-                    title: str | None = None, dpi: int = 120, baseline: DoorEpisode | None = None) -> Path:
-    """PNG like the paper's "Predictive Navigation" figure.
+def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, out_path: str | Path | None = None, *,
+                    title: str | None = None, dpi: int = 120, baseline: DoorEpisode | None = None) -> Figure:
+    """A figure like the paper's "Predictive Navigation" one: a ``matplotlib.figure.Figure``, written
+    as a PNG at ``out_path`` if given (no pyplot, the user's backend is left alone).
 
     Shows the grid (free light, obstacles dark), each door's cells coloured by the predicted
     P(open) (pink = low, teal = high; label with the value and the true state), the path the
@@ -573,16 +577,15 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     true door states (dashed black), the start (blue dot) and the goal receptacle (gold); with
     ``baseline`` also another method's walk (dotted grey, e.g. the all-doors-open planner).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import LinearSegmentedColormap
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+    from matplotlib.figure import Figure
 
     grid = world.grid
     H, W = grid.shape
     cmap = LinearSegmentedColormap.from_list("door_p", ["#e75480", "#f2e6c9", "#008080"])
-    fig, ax = plt.subplots(figsize=(8, 5))
+    fig = Figure(figsize=(8, 5))
+    ax = fig.subplots()
     ext = grid.extent_m
     img = np.where(grid.static_obstacle, 0.25, 0.97)
     ax.imshow(img, origin="lower", extent=ext, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
@@ -623,7 +626,7 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
         ax.plot(bxy[0], bxy[1], "rx", ms=10, mew=2, label="met a closed door")
     sxy = grid.cell_to_world(np.array(query.start_cell))
     ax.plot(sxy[0], sxy[1], "o", color="#1f4fbf", ms=8, label="start")
-    sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, 1))
+    sm = ScalarMappable(cmap=cmap, norm=Normalize(0, 1))
     fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, shrink=0.8, label="predicted P(open)")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -632,8 +635,8 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     short = f"{episode.shortest_m:.1f} m" if math.isfinite(episode.shortest_m) else "none (no route is open)"
     ax.set_title(title or f"query {query.query_id} to {query.goal}\n{episode.method} walked {episode.walked_m:.1f} m; "
                           f"shortest with the true doors {short}", fontsize=10)
-    out = Path(out_path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
-    return out
+    if out_path is not None:
+        out = Path(out_path)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=dpi, bbox_inches="tight")
+    return fig

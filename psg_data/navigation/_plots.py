@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,6 +15,9 @@ from psg_data.navigation._grid import box_footprint
 from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query
 
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
 __all__ = ["plot_query", "pick_door_example", "plot_door_example"]
 
 log = logging.getLogger(__name__)
@@ -23,7 +26,7 @@ log = logging.getLogger(__name__)
 def plot_query(
     env: NavigationEnv,
     query: Query,
-    out_path: str | Path,
+    out_path: str | Path | None = None,
     *,
     beliefs: Mapping[str, float] | None = None,
     trail: NDArray[np.int64] | None = None,
@@ -34,7 +37,8 @@ def plot_query(
     compare: tuple[NDArray[np.int64], str] | None = None,
     label: str = "path",
 ) -> Path:
-    """Write a top-down map of one query as a PNG (matplotlib, Agg backend).
+    """A top-down map of one query: a ``matplotlib.figure.Figure``, written as a PNG at
+    ``out_path`` if given (no pyplot, the user's backend is left alone).
 
     Shows the inflated free space with the true door states at the query time (free light, blocked
     grey, raw obstacles dark), doors (green open, red closed), receptacles coloured by the
@@ -45,7 +49,7 @@ def plot_query(
     Args:
         env: the environment.
         query: the query.
-        out_path: PNG path.
+        out_path: PNG path (None: do not write).
         beliefs: receptacle_id -> belief at the query time.
         trail: flat cell indices of the walked path.
         cache: planning cache (only to reuse its grid); optional.
@@ -57,12 +61,12 @@ def plot_query(
         label: legend label of ``trail``.
 
     Returns:
-        The written path.
+        The figure.
     """
     import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
     from matplotlib.patches import Polygon
 
     grid = cache.grid if cache is not None else env.grid
@@ -72,62 +76,61 @@ def plot_query(
     img = np.where(obs, 0.15, np.where(free, 0.97, 0.75))
     H, W = grid.shape
     aspect = H / max(W, 1)
-    fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect + 1.0)))
-    try:
-        ax.imshow(img, origin="lower", extent=grid.extent_m, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-        cmap = plt.get_cmap("viridis")
-        bel = dict(beliefs or {})
-        for rid, rec in env.receptacles.items():
-            fp = box_footprint(rec.box)
-            b = bel.get(rid)
-            face = cmap(float(b)) if b is not None else (0.85, 0.85, 0.85, 1.0)
-            ax.add_patch(Polygon(fp, closed=True, facecolor=face, edgecolor="black", lw=0.6,
-                                 hatch=None if b is not None else "///"))
-            if rid == query.gt_receptacle:
-                ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="gold", lw=2.5))
-            if rid == query.map_receptacle:
-                ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="magenta", lw=1.5, ls="--"))
-            if b is not None and b >= 0.05:
-                c = fp.mean(axis=0)
-                ax.text(c[0], c[1], f"{b:.2f}", ha="center", va="center", fontsize=6, color="white")
-        _draw_doors(ax, env, query, door_p_open)
-        sx, sy = query.start_xy
-        ax.plot([sx], [sy], "o", color="tab:blue", ms=7, label="start")
-        if compare is not None and np.size(compare[0]):
-            t = np.asarray(compare[0], dtype=np.int64)
-            xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
-            ax.plot(xy[:, 0], xy[:, 1], "--", color="0.35", lw=1.6, label=compare[1])
-            ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="0.35", ms=8, mew=2)
-        if trail is not None and np.size(trail):
-            t = np.asarray(trail, dtype=np.int64)
-            xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
-            ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", lw=2, label=label)
-            ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="black", ms=9, mew=2, label="final")
-        sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, 1))
-        fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, label="predicted P(object on receptacle)")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_aspect("equal")
-        from matplotlib.patches import Patch
+    fig = Figure(figsize=(10, max(3.0, 10 * aspect + 1.0)))
+    ax = fig.subplots()
+    ax.imshow(img, origin="lower", extent=grid.extent_m, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    cmap = matplotlib.colormaps["viridis"]
+    bel = dict(beliefs or {})
+    for rid, rec in env.receptacles.items():
+        fp = box_footprint(rec.box)
+        b = bel.get(rid)
+        face = cmap(float(b)) if b is not None else (0.85, 0.85, 0.85, 1.0)
+        ax.add_patch(Polygon(fp, closed=True, facecolor=face, edgecolor="black", lw=0.6,
+                             hatch=None if b is not None else "///"))
+        if rid == query.gt_receptacle:
+            ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="gold", lw=2.5))
+        if rid == query.map_receptacle:
+            ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="magenta", lw=1.5, ls="--"))
+        if b is not None and b >= 0.05:
+            c = fp.mean(axis=0)
+            ax.text(c[0], c[1], f"{b:.2f}", ha="center", va="center", fontsize=6, color="white")
+    _draw_doors(ax, env, query, door_p_open)
+    sx, sy = query.start_xy
+    ax.plot([sx], [sy], "o", color="tab:blue", ms=7, label="start")
+    if compare is not None and np.size(compare[0]):
+        t = np.asarray(compare[0], dtype=np.int64)
+        xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
+        ax.plot(xy[:, 0], xy[:, 1], "--", color="0.35", lw=1.6, label=compare[1])
+        ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="0.35", ms=8, mew=2)
+    if trail is not None and np.size(trail):
+        t = np.asarray(trail, dtype=np.int64)
+        xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
+        ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", lw=2, label=label)
+        ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="black", ms=9, mew=2, label="final")
+    sm = ScalarMappable(cmap=cmap, norm=Normalize(0, 1))
+    fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, label="predicted P(object on receptacle)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal")
+    from matplotlib.patches import Patch
 
-        proxies = [Patch(facecolor="none", edgecolor="gold", lw=2.5, label="true receptacle"),
-                   Patch(facecolor="none", edgecolor="magenta", ls="--", lw=1.5, label="receptacle at the last map"),
-                   Patch(facecolor=(0.85, 0.85, 0.85), edgecolor="black", hatch="///", label="no edge (never seen there)")]
-        if door_p_open is None:
-            proxies += [Patch(facecolor="limegreen", edgecolor="black", label="door open (truth)"),
-                        Patch(facecolor="red", edgecolor="black", label="door closed (truth)")]
-        else:
-            proxies += [Patch(facecolor=_DOOR_CMAP[0], edgecolor="black", label="door predicted closed"),
-                        Patch(facecolor=_DOOR_CMAP[2], edgecolor="black", label="door predicted open")]
-        handles, _ = ax.get_legend_handles_labels()
-        ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.2))
-        ax.set_title(title or f"{query.object_id} ({query.category}), query {query.query_id}")
+    proxies = [Patch(facecolor="none", edgecolor="gold", lw=2.5, label="true receptacle"),
+               Patch(facecolor="none", edgecolor="magenta", ls="--", lw=1.5, label="receptacle at the last map"),
+               Patch(facecolor=(0.85, 0.85, 0.85), edgecolor="black", hatch="///", label="no edge (never seen there)")]
+    if door_p_open is None:
+        proxies += [Patch(facecolor="limegreen", edgecolor="black", label="door open (truth)"),
+                    Patch(facecolor="red", edgecolor="black", label="door closed (truth)")]
+    else:
+        proxies += [Patch(facecolor=_DOOR_CMAP[0], edgecolor="black", label="door predicted closed"),
+                    Patch(facecolor=_DOOR_CMAP[2], edgecolor="black", label="door predicted open")]
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.2))
+    ax.set_title(title or f"{query.object_id} ({query.category}), query {query.query_id}")
+    if out_path is not None:
         out = Path(out_path)
         out.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=dpi, bbox_inches="tight")
-    finally:
-        plt.close(fig)
-    return out
+    return fig
 
 
 _DOOR_CMAP = ("#e75480", "#f2e6c9", "#008080")  # pink (predicted closed) .. teal (predicted open)
@@ -177,8 +180,8 @@ def pick_door_example(result: Any, label: str) -> tuple[int, int] | None:
     return None
 
 
-def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: str | Path, *,
-                      estimator: Any = None, settings: Mapping[str, Any] | None = None) -> Path:
+def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: str | Path | None = None, *,
+                      estimator: Any = None, settings: Mapping[str, Any] | None = None) -> Figure:
     """The paper's "Predictive Navigation" figure for an object query: doors coloured by the
     estimator's P(open), the walk with its predicted doors (blue) and with all doors open (grey).
 
@@ -187,7 +190,10 @@ def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: s
         label: the estimator label; ``estimator`` (default ``label``) is refitted on the door streams
             to show P(open).
         key: (seed, query_id), e.g. from :func:`pick_door_example`.
-        out_path: PNG path.
+        out_path: PNG path (None: do not write).
+
+    Returns:
+        The figure (:func:`plot_query`).
     """
     from psg_data.navigation._doors import door_open_probabilities, fit_door_filters
 

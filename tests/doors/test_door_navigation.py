@@ -118,5 +118,15 @@ def test_predictive_planner_beats_all_open(loop_world, tmp_path) -> None:  # typ
     # the figure
     q = next(q for q, e in zip(r.queries, r.episodes["perpetua_star"]) if not q.doors_open["door_ab"]
              and e.p_open["door_ab"] < 0.5)
-    out = plot_door_query(loop_world, q, r.episodes["perpetua_star"][q.query_id], tmp_path / "doors.png")
+    out = tmp_path / "doors.png"
+    plot_door_query(loop_world, q, r.episodes["perpetua_star"][q.query_id], out)
     assert out.stat().st_size > 10_000 and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_door_plot_returns_a_figure_and_leaves_the_backend(loop_world, user_backend) -> None:  # type: ignore[no-untyped-def]
+    from matplotlib.figure import Figure
+
+    r = run_door_navigation(loop_world, ["last_seen"], n_queries=3)
+    q = r.queries[0]
+    fig = plot_door_query(loop_world, q, r.episodes["last_seen"][q.query_id])
+    assert isinstance(fig, Figure) and fig.axes

@@ -185,7 +185,8 @@ def test_plot_query_png(nav_env, tmp_path):
     res = run_navigation(nav_env, ["oracle"], seed=0, n_queries=15)
     rec = res.records
     qid = int(rec.loc[rec["path_m"] > 0.5, "query_id"].iloc[0])
-    p = res.plot("oracle", qid, tmp_path / "q.png")
+    p = tmp_path / "q.png"
+    res.plot("oracle", qid, p)
     img = mpimg.imread(p)
     assert img.ndim == 3 and img.shape[0] > 200 and img.shape[1] > 400
     assert float(img[..., :3].std()) > 0.05  # not blank
@@ -193,8 +194,8 @@ def test_plot_query_png(nav_env, tmp_path):
     blue = np.array([0x1F, 0x77, 0xB4]) / 255
     assert np.any(np.all(np.abs(img[..., :3] - blue) < 0.03, axis=-1))
     q = res.queries[0][qid]
-    p2 = plot_query(nav_env, q, tmp_path / "bare.png")  # no beliefs, no path
-    assert mpimg.imread(p2).size > 0
+    plot_query(nav_env, q, tmp_path / "bare.png")  # no beliefs, no path
+    assert mpimg.imread(tmp_path / "bare.png").size > 0
 
 
 def test_bad_arguments(nav_env):
@@ -252,3 +253,13 @@ def test_door_belief_from_filters(nav_env, scripted):
     assert reach[same]["success"].all()
     other = reach[~same]
     assert not other["success"].any() and (other["outcome"] == "no_path").all() and (other["path_m"] == 0).all()
+
+
+def test_plot_query_returns_a_figure_and_leaves_the_backend(nav_env, user_backend):  # type: ignore[no-untyped-def]
+    from matplotlib.figure import Figure
+
+    res = run_navigation(nav_env, ["oracle"], seed=0, n_queries=3)
+    q = res.queries[0][0]
+    fig = plot_query(nav_env, q)
+    assert isinstance(fig, Figure) and fig.axes[0].get_xlabel() == "x (m)"
+    assert isinstance(res.plot("oracle", q.query_id), Figure)

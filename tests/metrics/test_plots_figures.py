@@ -1,0 +1,51 @@
+"""Plotting functions build ``matplotlib.figure.Figure`` objects, return them, write a PNG only
+when asked, and never touch the user's backend (no ``matplotlib.use``, no pyplot)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+
+from psg_data.estimators import EdgeStream
+from psg_data.metrics import evaluate_persistence, plot_beliefs, plot_metric_bars
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_no_backend_switch_or_pyplot_anywhere_in_the_package() -> None:
+    found = []
+    for p in sorted((ROOT / "psg_data").rglob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "use" \
+                    and isinstance(node.func.value, ast.Name) and node.func.value.id == "matplotlib":
+                found.append(f"{p.name}:{node.lineno} matplotlib.use")
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            found += [f"{p.name}:{node.lineno} imports {n}" for n in names if n.startswith("matplotlib.pyplot")]
+    assert found == []
+
+
+def _result():  # type: ignore[no-untyped-def]
+    t0, day = 1_700_000_000.0, 86_400.0
+    edges = [("mug", "table"), ("book", "shelf")]
+    train = [EdgeStream(e, t0 + day * np.arange(10), (np.arange(10) + k) % 2) for k, e in enumerate(edges)]
+    test = [EdgeStream(e, t0 + day * (10 + np.arange(4)), (np.arange(4) + k) % 2) for k, e in enumerate(edges)]
+    grid = t0 + day * 10 + 3600.0 * np.arange(96)
+    gt = {e: (grid, ((grid - grid[0]) // day + k).astype(int) % 2) for k, e in enumerate(edges)}
+    return evaluate_persistence(["last_seen", "always_present"], train, test, gt, keep_predictions=edges)
+
+
+def test_persistence_plots_return_figures_and_leave_the_backend(tmp_path: Path, user_backend: str) -> None:
+    from matplotlib.figure import Figure
+
+    res = _result()
+    fig = plot_beliefs(res.traces)
+    assert isinstance(fig, Figure) and len(fig.axes) == 2 and not list(tmp_path.iterdir())
+    bars = plot_metric_bars(res, tmp_path / "sub" / "bars.png")
+    assert isinstance(bars, Figure) and len(bars.axes) == 3
+    plot_beliefs(res.traces, tmp_path / "belief.png")
+    for p in (tmp_path / "sub" / "bars.png", tmp_path / "belief.png"):
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [ln.get_label() for ln in fig.axes[0].get_lines()][:2] == ["last_seen", "always_present"]
