@@ -5,8 +5,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 __all__ = ["demo", "cache_dir", "DEMO_VERSION"]
 
@@ -60,7 +61,7 @@ def _lock(path: Path) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def demo(*, rebuild: bool = False) -> Path:
+def demo(*, rebuild: bool = False, progress: Callable[..., Any] | None = None) -> Path:
     """Path of the demo dataset: the default synthetic lab (84 scans, 8 frames each, 160x120).
 
     Built on first use (about 15 s) into :func:`cache_dir` under :data:`DEMO_VERSION`; rebuilt if
@@ -68,6 +69,7 @@ def demo(*, rebuild: bool = False) -> Path:
 
     Args:
         rebuild: rebuild even if a valid copy is cached.
+        progress: called as ``progress(1)`` per scan built (only when it is built).
     """
     root = cache_dir() / f"demo-{DEMO_VERSION}"
     with _lock(cache_dir() / f".demo-{DEMO_VERSION}.lock"):
@@ -75,5 +77,5 @@ def demo(*, rebuild: bool = False) -> Path:
             from psg_data.synth import LabConfig, build_lab
 
             log.info("building the demo dataset into %s", root)
-            build_lab(root, LabConfig(), overwrite=True)
+            build_lab(root, LabConfig(), overwrite=True, progress=progress)
     return root

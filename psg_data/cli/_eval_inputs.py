@@ -136,9 +136,15 @@ def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
     """``demo`` (default: the built-in lab, built once into the cache), ``persistence-benchmark``
     (the paper's Sec. V-A streams) or a dataset directory."""
     if value in (None, DEMO):
+        from psg_data.cli._progress import Progress
         from psg_data.datasets import demo
+        from psg_data.synth import LabConfig
 
-        return DatasetChoice("dataset", Path(demo()), "demo lab")
+        cfg = LabConfig()
+        with Progress("building the demo lab (once)", total=cfg.days * len(cfg.scan_hours), unit="scans",
+                      quiet=quiet) as prog:
+            root = demo(progress=prog)
+        return DatasetChoice("dataset", Path(root), "demo lab")
     if value == BENCHMARK:
         return DatasetChoice("benchmark", None, BENCHMARK)
     path = Path(value)
