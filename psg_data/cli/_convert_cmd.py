@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from psg_data._executors import SCHEDULER_HELP
 from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
 
 
@@ -34,10 +35,12 @@ from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_lo
               help="CPUs to use (-1: all): scans in parallel worker processes, or encoding threads "
                    "within a scan when there are fewer scans than jobs. 1: one core.")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists (once the new dataset is complete).")
+@click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT",
+              help=SCHEDULER_HELP + " Remote workers must see INPUT and OUT (a shared filesystem).")
 @quiet_option
 @handle_errors
 def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bool, jobs: int, overwrite: bool,
-                **opts: object) -> None:
+                scheduler: str | None, **opts: object) -> None:
     """Convert raw recordings in INPUT into the psg-dataset OUT.
 
     INPUT is a recording (ROS 1 .bag, ROS 2 bag directory with sqlite3 or MCAP storage, .mcap
@@ -62,7 +65,8 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     cfg = load_config(config_file) if config_file else ConvertConfig()
     cfg = cfg.merged(**opts)
     progress = Progress("convert", unit="frames", quiet=quiet)
-    report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress)
+    report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress,
+                     scheduler=scheduler)
     progress.close()
     skipped = ", ".join(f"{k} {v}" for k, v in report.skipped.items())
     click.echo(f"converted {len(report.scans)} scans, {report.frames} frames to {report.output} in "

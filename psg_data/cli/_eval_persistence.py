@@ -14,12 +14,10 @@ __all__ = ["run_persistence"]
 
 
 def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int], jobs: int,
-                     out: Path, no_plots: bool, quiet: bool) -> bool:
-    from psg_data.cli._eval_inputs import persistence_tasks, require_hints, resolve_dataset, with_hints
+                     out: Path, no_plots: bool, quiet: bool, *, scheduler: str | None = None) -> bool:
+    from psg_data.cli._eval_inputs import persistence_tasks, require_hints, resolve_dataset
     from psg_data.metrics import (
-        RegistryFactory,
         choose_plot_edges,
-        evaluate_persistence,
         format_persistence_table,
         merge_results,
         plot_beliefs,
@@ -32,22 +30,9 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
     require_hints(specs, tasks[0].estimator_hints, choice.label)
     n_edges = len(tasks[0].ground_truth)
     prog = Progress("evaluating", total=len(specs) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
-    offset = 0
-    results = []
     plot_edges = choose_plot_edges(tasks[0].ground_truth, k=4)
-    run_seeds = [[s] for s in seeds] if len(tasks) > 1 else [seeds]
-    for task, task_seeds in zip(tasks, run_seeds):
-        factories = {s.label: RegistryFactory(s.name, with_hints(s, task.estimator_hints).settings) for s in specs}
-
-        def progress(done: int, total: int, base: int = offset) -> None:
-            prog.done = base + done
-            prog.update(0)
-
-        results.append(evaluate_persistence(
-            factories, task.train_streams, task.test_streams, task.ground_truth, val_streams=task.val_streams,
-            setting=setting, timezone=task.timezone, seeds=task_seeds, jobs=jobs, progress=progress,
-            keep_predictions=plot_edges if task is tasks[0] else ()))
-        offset += len(specs) * len(task_seeds) * len(task.ground_truth)
+    with _executor(jobs, scheduler) as executor:
+        results = _evaluate(specs, tasks, seeds, setting, jobs, executor, prog, plot_edges)
     prog.close()
     result = results[0] if len(results) == 1 else merge_results(results)
     info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **info,
@@ -64,3 +49,41 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
         for e in result.errors[:20]:
             click.echo(f"error: {e.message}", err=True)
     return result.ok
+
+
+def _executor(jobs: int, scheduler: str | None) -> Any:
+    """One executor for every task of the run (Dask or a local pool), or none for ``--jobs 1``."""
+    import contextlib
+
+    from psg_data._executors import open_executor
+
+    if scheduler is None and jobs == 1:
+        return contextlib.nullcontext(None)
+    if jobs == -1:
+        from psg_data._cpus import available_cpus
+
+        jobs = available_cpus()
+    return open_executor(jobs, scheduler)
+
+
+def _evaluate(specs: list[Any], tasks: list[Any], seeds: list[int], setting: str, jobs: int, executor: Any,
+              prog: Any, plot_edges: list[Any]) -> list[Any]:
+    from psg_data.cli._eval_inputs import with_hints
+    from psg_data.metrics import RegistryFactory, evaluate_persistence
+
+    offset = 0
+    results = []
+    run_seeds = [[s] for s in seeds] if len(tasks) > 1 else [seeds]
+    for task, task_seeds in zip(tasks, run_seeds):
+        factories = {s.label: RegistryFactory(s.name, with_hints(s, task.estimator_hints).settings) for s in specs}
+
+        def progress(done: int, total: int, base: int = offset) -> None:
+            prog.done = base + done
+            prog.update(0)
+
+        results.append(evaluate_persistence(
+            factories, task.train_streams, task.test_streams, task.ground_truth, val_streams=task.val_streams,
+            setting=setting, timezone=task.timezone, seeds=task_seeds, jobs=jobs, progress=progress,
+            keep_predictions=plot_edges if task is tasks[0] else (), executor=executor))
+        offset += len(specs) * len(task_seeds) * len(task.ground_truth)
+    return results

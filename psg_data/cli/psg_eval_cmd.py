@@ -16,6 +16,7 @@ from pathlib import Path
 import click
 
 from psg_data import __version__
+from psg_data._executors import SCHEDULER_HELP, check_scheduler
 from psg_data.cli._common import EXIT_PROBLEMS, handle_errors, quiet_option, setup_logging
 
 __all__ = ["main"]
@@ -84,6 +85,7 @@ def _finish_dir(tmp: Path, out: Path) -> None:
               help="Output directory (default: psg-eval-out/<timestamp>).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --out directory.")
 @click.option("--jobs", "-j", type=int, default=1, show_default=True, help="Worker processes (-1: all CPUs).")
+@click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT", help=SCHEDULER_HELP)
 @click.option("--list-estimators", is_flag=True, help="List registered estimators (built-ins and plugins) and exit.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @quiet_option
@@ -92,7 +94,7 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 @handle_errors
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
          setting: str, labels: str, protocol: str, door_belief: str | None, seeds: int, queries: int | None,
-         delta: float, reachable_only: bool, out: Path | None, overwrite: bool, jobs: int,
+         delta: float, reachable_only: bool, out: Path | None, overwrite: bool, jobs: int, scheduler: str | None,
          list_estimators: bool, no_plots: bool, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1, mean +- std over seeds).
 
@@ -125,6 +127,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
         have = {s.name for s in specs}
         specs += [parse_estimator_spec(r) for r in REFERENCE_ESTIMATORS if r not in have]
     check_estimators(specs)
+    check_scheduler(scheduler)
     nav_options = None
     if task in ("navigation", "doors"):
         from psg_data.cli._eval_navigation import door_task_options, navigation_options
@@ -142,7 +145,8 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
 
     try:
         if task == "persistence":
-            ok = run_persistence(specs, dataset, setting, labels, list(range(seeds)), jobs, tmp, no_plots, quiet)
+            ok = run_persistence(specs, dataset, setting, labels, list(range(seeds)), jobs, tmp, no_plots, quiet,
+                                 scheduler=scheduler)
         elif task == "doors":
             ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet)
         else:

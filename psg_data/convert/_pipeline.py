@@ -166,13 +166,16 @@ def _init_worker() -> None:
     sys.setswitchinterval(_SWITCH_INTERVAL_S)
     gc.freeze()
 
-def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None) -> list[ScanResult]:
-    import multiprocessing
-    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None,
+                  scheduler: str | None = None) -> list[ScanResult]:
+    """Convert each source in a worker: the local spawn pool of ``procs`` processes, or Dask
+    (``scheduler``, see :func:`psg_data._executors.open_executor`)."""
+    from concurrent.futures import FIRST_EXCEPTION, wait
+
+    from psg_data._executors import open_executor
 
     results: list[ScanResult] = []
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=procs, mp_context=ctx, initializer=_init_worker) as pool:
+    with open_executor(procs, scheduler, initializer=_init_worker) as pool:
         futs = {pool.submit(run_task, t): t for t in tasks}
         pending = set(futs)
         while pending:
@@ -244,6 +247,7 @@ def convert(
     jobs: int = 1,
     threads: int | None = None,
     progress: Callable[..., Any] | None = None,
+    scheduler: str | None = None,
 ) -> ConversionReport:
     """Convert raw recordings into a psg-dataset at ``out``.
 
@@ -261,6 +265,9 @@ def convert(
             either way.
         threads: image-encoding threads per process (default: from ``jobs``).
         progress: called as ``progress(n_frames, nbytes)``.
+        scheduler: run the sources on Dask distributed instead of local worker processes:
+            ``"local"`` (a cluster of ``jobs`` workers here) or ``"tcp://HOST:PORT"``, whose
+            workers must see ``input_path`` and ``out``; the dataset is the same byte for byte.
 
     Returns:
         A :class:`ConversionReport`.
@@ -271,13 +278,18 @@ def convert(
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
     """
     try:
-        return _convert(input_path, out, config, overwrite, jobs, threads, progress)
+        if scheduler is not None:
+            from psg_data._executors import check_scheduler
+
+            check_scheduler(scheduler)
+        return _convert(input_path, out, config, overwrite, jobs, threads, progress, scheduler)
     finally:
         release_kept()
 
 
 def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | None, overwrite: bool, jobs: int,
-             threads: int | None, progress: Callable[..., Any] | None) -> ConversionReport:
+             threads: int | None, progress: Callable[..., Any] | None,
+             scheduler: str | None = None) -> ConversionReport:
     from psg_data.writers import DatasetWriter
 
     t_start = time.perf_counter()
@@ -334,8 +346,8 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
         procs, worker_threads = plan_parallelism(jobs, len(tasks), threads)
         for t in tasks:
             t.threads, t.direct_io, t.image_layout = worker_threads, cfg.direct_io, cfg.image_layout
-        if procs > 1:
-            results = _run_parallel(tasks, procs, progress)
+        if tasks and (procs > 1 or scheduler is not None):
+            results = _run_parallel(tasks, procs, progress, scheduler)
         elif tasks:
             results = _run_here(tasks, progress)
         else:

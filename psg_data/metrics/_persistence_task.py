@@ -33,17 +33,18 @@ Protocol (what :func:`evaluate_persistence` does for every estimator, seed and e
    Breakdowns per object, receptacle and local weekday use the same weighting.
 
 Runs ``(estimator, seed)`` fits and edge chunks in a ``ProcessPoolExecutor`` (``spawn``) when
-``jobs > 1``; factories and fitted estimators must then be picklable. Results do not depend on
-``jobs``.
+``jobs > 1``, or on any ``concurrent.futures.Executor`` passed as ``executor`` (Dask distributed);
+factories and fitted estimators must then be picklable. Results do not depend on ``jobs`` or the
+executor.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
-import multiprocessing
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
@@ -663,6 +664,7 @@ def evaluate_persistence(
     jobs: int = 1,
     progress: ProgressCallback | None = None,
     keep_predictions: Sequence[EdgeKey] = (),
+    executor: Executor | None = None,
 ) -> PersistenceResult:
     """Evaluate persistence estimators on a test window against dense ground truth.
 
@@ -695,6 +697,9 @@ def evaluate_persistence(
             units after each finishes.
         keep_predictions: edges whose beliefs at every evaluation time are kept in
             ``result.traces`` (for plots).
+        executor: run fits and edge chunks on this ``concurrent.futures.Executor`` (e.g. from
+            :func:`psg_data._executors.open_executor`: Dask distributed) instead of a local pool
+            of ``jobs`` processes; the result is the same.
 
     Returns:
         A :class:`PersistenceResult`; check ``result.ok`` / ``result.errors``.
@@ -797,7 +802,7 @@ def evaluate_persistence(
         if progress is not None:
             progress(done, total)
 
-    if jobs == 1:
+    if jobs == 1 and executor is None:
         for name in names:
             for seed in seeds:
                 est, err = _fit(name, factories[name], seed, train_list, val_list, timezone)
@@ -813,8 +818,7 @@ def evaluate_persistence(
     else:
         n_chunks = max(1, min(len(edge_jobs), 4 * jobs))
         chunks = [list(range(k, len(edge_jobs), n_chunks)) for k in range(n_chunks)]
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+        with _executor(jobs, executor) as pool:
             pending: dict[Future[Any], tuple[str, str, int, list[int]]] = {}
             for name in names:
                 for seed in seeds:
@@ -903,6 +907,15 @@ def evaluate_persistence(
     result = PersistenceResult(config=config, edges=edges, weekdays=weekdays, errors=errors, traces=traces)
     _fill_summary(result)
     return result
+
+
+def _executor(jobs: int, executor: Executor | None) -> contextlib.AbstractContextManager[Executor]:
+    """The executor given (left open: its owner closes it), else a local spawn pool of ``jobs``."""
+    if executor is not None:
+        return contextlib.nullcontext(executor)
+    from psg_data._executors import open_executor
+
+    return open_executor(jobs)
 
 
 def _fill_summary(result: PersistenceResult) -> None:
