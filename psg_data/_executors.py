@@ -78,6 +78,7 @@ def open_executor(workers: int, scheduler: str | None = None, *,
         return
     check_scheduler(scheduler)
     distributed = _distributed()
+    logging.getLogger("distributed").setLevel(logging.WARNING)  # not a line per worker start and stop
     cluster = None
     try:
         if scheduler == "local":

@@ -14,7 +14,8 @@ __all__ = ["run_persistence"]
 
 
 def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels: str, seeds: list[int], jobs: int,
-                     out: Path, no_plots: bool, quiet: bool, *, scheduler: str | None = None) -> bool:
+                     out: Path, no_plots: bool, quiet: bool, *, scheduler: str | None = None,
+                     rerun_file: Path | None = None, overwrite: bool = False) -> bool:
     from psg_data.cli._eval_inputs import persistence_tasks, require_hints, resolve_dataset
     from psg_data.metrics import (
         choose_plot_edges,
@@ -31,6 +32,8 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
     n_edges = len(tasks[0].ground_truth)
     prog = Progress("evaluating", total=len(specs) * len(seeds) * n_edges, unit="edge runs", quiet=quiet)
     plot_edges = choose_plot_edges(tasks[0].ground_truth, k=4)
+    if rerun_file is not None:  # every scored edge's beliefs are kept for the recording
+        plot_edges = list(tasks[0].ground_truth)
     with _executor(jobs, scheduler) as executor:
         results = _evaluate(specs, tasks, seeds, setting, jobs, executor, prog, plot_edges)
     prog.close()
@@ -38,8 +41,10 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
     info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **info,
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
     write_persistence_results(result, out, info=info)
+    if rerun_file is not None:
+        _save_beliefs(result, rerun_file, overwrite)
     if not no_plots:
-        plot_beliefs(result.traces, out / "belief.png", timezone=tasks[0].timezone)
+        plot_beliefs(_plotted(result.traces, tasks[0].ground_truth), out / "belief.png", timezone=tasks[0].timezone)
         plot_metric_bars(result, out / "bars.png")
     click.echo(f"\nPersistence estimation on {choice.label} ({info.get('edges')} edges, labels {labels}, "
                f"{setting}, seeds {seeds[0]}..{seeds[-1]})")
@@ -49,6 +54,23 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
         for e in result.errors[:20]:
             click.echo(f"error: {e.message}", err=True)
     return result.ok
+
+
+def _plotted(traces: list[Any], truth: Any) -> list[Any]:
+    """The traces of the edges the belief plot shows (all traces are kept when --rerun asks for them)."""
+    from psg_data.metrics import choose_plot_edges
+
+    keep = set(choose_plot_edges(truth, k=4))
+    return [t for t in traces if t.edge in keep]
+
+
+def _save_beliefs(result: Any, path: Path, overwrite: bool) -> None:
+    """The --rerun hook: beliefs of every estimator over time, per scored edge, first seed."""
+    from psg_data.viewer import log_beliefs, recording
+
+    with recording(path, application_id="psg-eval", overwrite=overwrite) as rec:
+        n = log_beliefs(rec, result.traces)
+    click.echo(f"beliefs of {len(result.estimators)} estimators on {n} edges written to {path}")
 
 
 def _executor(jobs: int, scheduler: str | None) -> Any:

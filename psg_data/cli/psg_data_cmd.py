@@ -19,6 +19,7 @@ _COMMANDS = {
     "synth": "psg_data.cli._synth_cmd:synth_cmd",
     "convert": "psg_data.cli._convert_cmd:convert_cmd",
     "label": "psg_data.cli._label_cmd:label_cmd",
+    "view": "psg_data.cli._view_cmd:view_cmd",
 }
 
 
@@ -32,4 +33,5 @@ def main() -> None:
       psg-data synth /tmp/lab            # the built-in synthetic lab (84 scans)
       psg-data validate /tmp/lab         # OK, or one line per problem and exit 1
       psg-data info /tmp/lab             # summary: scans, frames, rooms, receptacles, ...
+      psg-data view /tmp/lab --save lab.rrd   # a Rerun recording (psg-data[viewer])
     """

@@ -50,6 +50,20 @@ def _finish_dir(tmp: Path, out: Path) -> None:
         os.replace(tmp, out)
 
 
+def _check_rerun(path: Path | None, task: str, overwrite: bool) -> None:
+    from psg_data.errors import EvaluationError
+
+    if path is None:
+        return
+    if task != "persistence":
+        raise EvaluationError(f"--rerun: beliefs are recorded for --task persistence, not {task}")
+    if path.exists() and not overwrite:
+        raise EvaluationError(f"{path}: output exists; pass --overwrite to replace it")
+    from psg_data.viewer._recording import import_rerun
+
+    import_rerun()  # says which extra to install before any work is done
+
+
 @click.group(invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--dataset", "dataset", default=None, metavar="PATH|demo|persistence-benchmark",
               help="Dataset to evaluate on (default: demo, the built-in synthetic lab).")
@@ -86,6 +100,9 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 @click.option("--overwrite", is_flag=True, help="Replace an existing --out directory.")
 @click.option("--jobs", "-j", type=int, default=1, show_default=True, help="Worker processes (-1: all CPUs).")
 @click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT", help=SCHEDULER_HELP)
+@click.option("--rerun", "rerun_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              metavar="FILE.rrd", help="Also save every estimator's beliefs over time for the scored edges (first "
+                                       "seed) as a Rerun recording (needs psg-data[viewer]).")
 @click.option("--list-estimators", is_flag=True, help="List registered estimators (built-ins and plugins) and exit.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @quiet_option
@@ -95,6 +112,7 @@ def _finish_dir(tmp: Path, out: Path) -> None:
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
          setting: str, labels: str, protocol: str, door_belief: str | None, seeds: int, queries: int | None,
          delta: float, reachable_only: bool, out: Path | None, overwrite: bool, jobs: int, scheduler: str | None,
+         rerun_file: Path | None,
          list_estimators: bool, no_plots: bool, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1, mean +- std over seeds).
 
@@ -128,6 +146,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
         specs += [parse_estimator_spec(r) for r in REFERENCE_ESTIMATORS if r not in have]
     check_estimators(specs)
     check_scheduler(scheduler)
+    _check_rerun(rerun_file, task, overwrite)
     nav_options = None
     if task in ("navigation", "doors"):
         from psg_data.cli._eval_navigation import door_task_options, navigation_options
@@ -146,7 +165,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     try:
         if task == "persistence":
             ok = run_persistence(specs, dataset, setting, labels, list(range(seeds)), jobs, tmp, no_plots, quiet,
-                                 scheduler=scheduler)
+                                 scheduler=scheduler, rerun_file=rerun_file, overwrite=overwrite)
         elif task == "doors":
             ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet)
         else:

@@ -1,0 +1,111 @@
+"""``psg-data view`` and ``psg-eval --rerun``: the saved recordings, read back with Rerun's own
+reader (``rerun.chunk.RrdReader``), hold the expected entities and row counts."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from psg_data.cli.psg_data_cmd import main
+from psg_data.loaders import open_dataset
+
+pytest.importorskip("rerun")  # a [dev] requirement: present in CI
+
+
+def _read(path: Path) -> tuple[Counter, dict]:  # type: ignore[type-arg]
+    from rerun.chunk import RrdReader
+
+    rows: Counter[str] = Counter()
+    batches: dict[str, list] = {}  # type: ignore[type-arg]
+    for chunk in RrdReader(str(path)).store().stream():
+        rows[chunk.entity_path] += chunk.num_rows
+        batches.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
+    return rows, batches
+
+
+def _column(batches: list, suffix: str) -> list:  # type: ignore[type-arg]
+    out = []
+    for b in batches:
+        name = next(n for n in b.schema.names if n.endswith(suffix))
+        out += b.column(name).to_pylist()
+    return out
+
+
+def test_view_saves_a_recording_with_every_scan(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    root = make_dataset(scans=3, frames=4)
+    out = tmp_path / "lab.rrd"
+    r = CliRunner().invoke(main, ["view", str(root), "--save", str(out), "-q"])
+    assert r.exit_code == 0, r.output
+    assert r.stdout.strip().startswith(f"wrote {out} (3 scans, 12 frames, ")
+    rows, batches = _read(out)
+    for entity, n in {"/world/camera": 12, "/world/camera/rgb": 12, "/world/camera/depth": 12,
+                      "/world/receptacles": 3, "/world/doors": 3, "/world/points": 3, "/world/trajectory": 3}.items():
+        assert rows[entity] == n, entity
+    # doors coloured by state: the fixture's door1 is open in scans 0 and 2, closed in scan 1
+    colours = _column(batches["/world/doors"], ":colors")
+    assert len({tuple(c) for c in colours}) == 2 and colours[0] == colours[2] != colours[1]
+    # label streams: the schedule's present edges and the door, one row per scan
+    assert rows["/labels/gt/redmug/table"] == 3 and rows["/labels/gt/doors/door1"] == 3
+    assert _column(batches["/labels/gt/doors/door1"], ":scalars") == [[1.0], [0.0], [1.0]]
+    ds = open_dataset(root)
+    assert _column(batches["/world/camera/depth"], ":meter")[0] == [pytest.approx(1 / ds.cameras["d435"].depth_scale_m)]
+    assert not (tmp_path / "lab.rrd.partial").exists()
+
+
+def test_view_selects_scans_and_refuses_to_overwrite(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    root = make_dataset(scans=3, frames=2)
+    out = tmp_path / "one.rrd"
+    r = CliRunner().invoke(main, ["view", str(root), "--scan", "scan_001", "--save", str(out), "-q"])
+    assert r.exit_code == 0, r.output
+    rows, _ = _read(out)
+    assert rows["/world/camera/rgb"] == 2 and rows["/world/receptacles"] == 1
+    r = CliRunner().invoke(main, ["view", str(root), "--save", str(out), "-q"])
+    assert r.exit_code == 1 and "output exists; pass --overwrite" in r.stderr
+    r = CliRunner().invoke(main, ["view", str(root), "--scan", "nope", "--save", str(tmp_path / "x.rrd"), "-q"])
+    assert r.exit_code == 1 and r.stderr.startswith("error: --scan nope: no such scan")
+
+
+def test_beliefs_recording_holds_every_estimator_and_edge(tmp_path: Path) -> None:
+    from psg_data.estimators import EdgeStream
+    from psg_data.metrics import evaluate_persistence
+    from psg_data.viewer import log_beliefs, recording
+
+    t0, day = 1_700_000_000.0, 86_400.0
+    edges = [("mug", "table"), ("book", "shelf"), ("cup", "desk")]
+    train = [EdgeStream(e, t0 + day * np.arange(10), (np.arange(10) + k) % 2) for k, e in enumerate(edges)]
+    test = [EdgeStream(e, t0 + day * (10 + np.arange(4)), (np.arange(4) + k) % 2) for k, e in enumerate(edges)]
+    grid = t0 + day * 10 + 3600.0 * np.arange(96)
+    gt = {e: (grid, ((grid - grid[0]) // day + k).astype(int) % 2) for k, e in enumerate(edges)}
+    res = evaluate_persistence(["last_seen", "fremen"], train, test, gt, seeds=(0, 1), keep_predictions=edges)
+    out = tmp_path / "beliefs.rrd"
+    with recording(out) as rec:
+        assert log_beliefs(rec, res.traces) == 3
+    rows, batches = _read(out)
+    tr = next(t for t in res.traces if t.seed == 0 and t.estimator == "fremen" and t.edge == ("mug", "table"))
+    assert rows["/beliefs/mug/table/fremen"] == len(tr.t_s)
+    assert [v[0] for v in _column(batches["/beliefs/mug/table/fremen"], ":scalars")] == pytest.approx(tr.belief)
+    assert {e for e in rows if e.startswith("/beliefs/")} == {
+        f"/beliefs/{o}/{r}/{k}" for o, r in edges for k in ("last_seen", "fremen", "ground_truth", "observations")}
+
+
+def test_psg_eval_rerun_records_every_scored_edge(tmp_path: Path) -> None:
+    from psg_data.cli.psg_eval_cmd import main as eval_main
+
+    out = tmp_path / "b.rrd"
+    r = CliRunner().invoke(eval_main, ["--dataset", "persistence-benchmark", "--seeds", "1", "-e", "last_seen",
+                                       "--no-references", "--no-plots", "--rerun", str(out),
+                                       "--out", str(tmp_path / "res"), "-q"])
+    assert r.exit_code == 0, r.output
+    rows, _ = _read(out)
+    import json
+
+    n_edges = json.loads((tmp_path / "res" / "results.json").read_text())["config"]["n_edges"]
+    assert len({e for e in rows if e.endswith("/last_seen")}) == n_edges
+    assert len({e for e in rows if e.endswith("/ground_truth")}) == n_edges
+    r = CliRunner().invoke(eval_main, ["--task", "doors", "--rerun", str(tmp_path / "d.rrd"), "-q"])
+    assert r.exit_code == 1 and "--rerun: beliefs are recorded for --task persistence" in r.stderr
