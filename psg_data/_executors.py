@@ -3,7 +3,8 @@
 :func:`open_executor` gives the local pool of spawned worker processes by default, or the
 executor of a Dask distributed cluster (``Client.get_executor()``, extra ``psg-data[dask]``):
 
-- ``scheduler=None``: ``ProcessPoolExecutor`` with the ``spawn`` start method, ``workers`` processes;
+- ``scheduler=None``: :func:`psg_data._pool.process_pool`, ``workers`` spawned processes that stop
+  at once on Ctrl-C or an error;
 - ``scheduler="local"``: a ``LocalCluster`` of ``workers`` single-threaded worker processes on this
   machine, started and stopped with the executor;
 - ``scheduler="tcp://HOST:PORT"``: the workers of a running cluster (``dask scheduler`` /
@@ -69,11 +70,9 @@ def open_executor(workers: int, scheduler: str | None = None, *,
         PsgDataError: a bad scheduler value, Dask not installed, or no scheduler at the address.
     """
     if scheduler is None:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        from psg_data._pool import process_pool
 
-        with ProcessPoolExecutor(max_workers=max(1, workers), mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=initializer) as pool:
+        with process_pool(max(1, workers), initializer) as pool:
             yield pool
         return
     check_scheduler(scheduler)
