@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import distributed  # [dev] installs psg-data[dask]; a missing extra fails loudly
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -17,8 +18,6 @@ from psg_data.estimators import EdgeStream
 from psg_data.metrics import evaluate_persistence
 from psg_data.synth._raw_export import export_raw
 from tests.convert.conftest import dataset_bytes, make_dataset
-
-distributed = pytest.importorskip("distributed")  # a [dev] requirement: present in CI
 
 
 @pytest.fixture(scope="module")

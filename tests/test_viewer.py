@@ -9,12 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rerun  # noqa: F401  - [dev] installs psg-data[viewer]; a missing extra fails loudly
 from click.testing import CliRunner
 
 from psg_data.cli.psg_data_cmd import main
 from psg_data.loaders import open_dataset
-
-pytest.importorskip("rerun")  # a [dev] requirement: present in CI
 
 
 def _read(path: Path) -> tuple[Counter, dict]:  # type: ignore[type-arg]
