@@ -16,6 +16,7 @@ __all__ = [
     "FormatError",
     "ValidationError",
     "DatasetExistsError",
+    "UnsafeOutputError",
     "ConversionError",
     "LabelingError",
     "EstimatorError",
@@ -44,6 +45,10 @@ class ValidationError(FormatError):
 
 class DatasetExistsError(PsgDataError, FileExistsError):
     """The output path exists and overwriting was not requested."""
+
+
+class UnsafeOutputError(PsgDataError, ValueError):
+    """Writing the output could destroy something psg-data did not write (an input, a foreign file)."""
 
 
 class ConversionError(PsgDataError, ValueError):

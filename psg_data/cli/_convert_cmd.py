@@ -28,6 +28,9 @@ from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_lo
               help="Metres per unit of 16-bit depth input (default 0.001; TUM folders 0.0002).")
 @click.option("--sync-tolerance", "sync_tolerance_s", type=float, default=None,
               help="Largest colour/depth stamp difference paired, seconds (default 0.02).")
+@click.option("--side-dir", "side_dir", type=click.Path(path_type=str),
+              help="Folder of side files (site.json, door_states.csv, schedule.csv, scans.csv); default: INPUT when "
+                   "it is a directory of recordings (a single recording converts without side files).")
 @click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet"]), default=None)
 @click.option("--image-layout", type=click.Choice(["tar", "files"]), default=None,
               help="Images in one tar archive per scan (default) or one file per image.")

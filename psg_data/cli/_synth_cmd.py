@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import re
 import shutil
-import tempfile
 from pathlib import Path
 
 import click
@@ -57,15 +56,15 @@ def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, r
       psg-data synth /tmp/small --days 2 --frames-per-scan 3 --resolution 80x60
       psg-data synth /tmp/clockwork --routine-strength 1
     """
-    from psg_data.errors import DatasetExistsError
     from psg_data.synth import LabConfig, LabModel, build_lab
+    from psg_data.writers._safe_output import check_output, commit_tree, make_staging
 
     setup_logging(quiet)
     config = LabConfig(seed=seed, days=days, frames_per_scan=frames_per_scan, width=resolution[0],
                        height=resolution[1], shift=None if shift == "none" else shift, generator=generator,
                        routine_strength=routine_strength)
-    if out.exists() and not overwrite:
-        raise DatasetExistsError(f"{out}: output exists; pass --overwrite to replace it")
+    kind = "dataset" if fmt == "canonical" else "recordings"
+    check_output(out, overwrite=overwrite, kind=kind)
     lab = LabModel(config)
     prog = Progress("synth", total=len(lab.scans), unit="scans", quiet=quiet)
     if fmt == "canonical":
@@ -75,13 +74,12 @@ def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, r
         return
     from psg_data.synth._raw_export import export_raw  # written by the raw-export helper
 
-    tmp = Path(tempfile.mkdtemp(prefix="psg-synth-"))
+    stage = make_staging(out.with_name(out.name + ".partial"))  # beside OUT: the final move is a rename
     try:
-        build_lab(tmp / "lab", config, progress=prog, lab=lab)
+        build_lab(stage / "canonical", config, progress=prog, lab=lab)
         prog.close()
-        if out.exists() and overwrite:
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-        export_raw(tmp / "lab", out, fmt)
+        export_raw(stage / "canonical", stage / "recordings", fmt)
+        commit_tree(stage / "recordings", out, kind="recordings")
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(stage, ignore_errors=True)
     click.echo(f"wrote {out} ({fmt}, {len(lab.scans)} scans)")

@@ -7,7 +7,6 @@ completes for the others and the problems are listed); 2 bad command line.
 from __future__ import annotations
 
 import logging
-import os
 import shutil
 import sys
 import time
@@ -27,27 +26,33 @@ DEFAULT_ESTIMATOR = "perpetua_star"
 REFERENCE_ESTIMATORS = ("perpetua", "fremen")
 
 
-def _out_dir(out: Path | None, overwrite: bool) -> Path:
-    from psg_data.errors import EvaluationError
+def _out_dir(out: Path | None, overwrite: bool, inputs: list[Path | None]) -> Path:
+    """The results folder: ``--out`` (checked by the safe-output rule) or a new ``psg-eval-out/<timestamp>``."""
+    from psg_data.writers._safe_output import check_output
 
     if out is None:
-        return Path("psg-eval-out") / time.strftime("%Y%m%d-%H%M%S")
-    if out.exists() and not overwrite:
-        raise EvaluationError(f"{out}: output exists; pass --overwrite to replace it (or choose another --out)")
+        base = Path("psg-eval-out") / time.strftime("%Y%m%d-%H%M%S")
+        out, k = base, 1
+        while out.exists() or out.with_name(out.name + ".partial").exists():
+            k += 1
+            out = base.with_name(f"{base.name}-{k}")
+        overwrite = False
+    check_output(out, overwrite=overwrite, kind="results", inputs=inputs)
     return out
 
 
-def _finish_dir(tmp: Path, out: Path) -> None:
-    """Move the completed results from ``tmp`` into ``out`` (replacing it) in one rename."""
-    if out.exists():
-        old = out.with_name(out.name + ".old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(out, old)
-        os.replace(tmp, out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(tmp, out)
+def _eval_inputs(dataset: str | None, labels: str) -> list[Path | None]:
+    """Paths psg-eval reads (``--out`` may not be, contain or lie inside one)."""
+    paths: list[Path | None] = []
+    if dataset not in (None, "demo", "persistence-benchmark", "door-loop", "door-loop-lab"):
+        paths.append(Path(dataset))  # type: ignore[arg-type]
+    if labels.startswith("detections:"):
+        paths.append(Path(labels.split(":", 1)[1]))
+    if dataset in (None, "demo"):
+        from psg_data.datasets import cache_dir
+
+        paths.append(cache_dir())
+    return paths
 
 
 def _check_rerun(path: Path | None, task: str, overwrite: bool) -> None:
@@ -155,10 +160,10 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
                                           setting=setting, delta=delta, reachable_only=reachable_only,
                                           door_belief=door_belief) if task == "navigation" else
                        door_task_options(labels=labels, seeds=list(range(seeds)), queries=queries))
-    out_dir = _out_dir(out, overwrite)
-    tmp = out_dir.with_name(out_dir.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
+    from psg_data.writers._safe_output import commit_tree, make_staging
+
+    out_dir = _out_dir(out, overwrite, _eval_inputs(dataset, labels))
+    tmp = make_staging(out_dir.with_name(out_dir.name + ".partial"))
     from psg_data.cli._eval_navigation import run_doors_task, run_navigation_task
     from psg_data.cli._eval_persistence import run_persistence
 
@@ -173,7 +178,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    _finish_dir(tmp, out_dir)
+    commit_tree(tmp, out_dir, kind="results")
     click.echo(f"results written to {out_dir}/")
     if not ok:
         sys.exit(EXIT_PROBLEMS)

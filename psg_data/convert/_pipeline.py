@@ -20,11 +20,12 @@ from typing import Any
 from psg_data._cpus import available_cpus
 from psg_data.convert._config import ConvertConfig
 from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, open_task_writer, run_task
-from psg_data.errors import ConversionError, DatasetExistsError, PsgDataError
+from psg_data.errors import ConversionError, PsgDataError
 from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format, release_kept
 from psg_data.loaders.raw._folders import folder_format
 from psg_data.loaders.raw._images import inspect_encoded
 from psg_data.loaders.raw._side import SideData, read_side_files
+from psg_data.writers._safe_output import check_output
 
 __all__ = ["convert", "ConversionReport", "plan_sources", "plan_parallelism"]
 
@@ -117,6 +118,16 @@ def plan_sources(path: Path, cfg: ConvertConfig) -> list[tuple[Path, str]]:
     return sources
 
 
+def _input_paths(src: Path, cfg: ConvertConfig) -> list[Path]:
+    """Every path a conversion reads (the output may not be, contain or lie inside one)."""
+    paths = [src]
+    if cfg.side_dir:
+        paths.append(Path(cfg.side_dir))
+    if cfg.poses and cfg.poses.startswith("tum:"):
+        paths.append(Path(cfg.poses[4:]))
+    return paths
+
+
 def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
     if cfg.color_encoding != "auto":
         return cfg.color_encoding
@@ -140,14 +151,19 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
 
 
 def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None]:
+    """Side files: from ``side_dir`` when given, else from INPUT when it is a directory of recordings.
+
+    A single recording or frame folder converts on its own: the files beside it are not read.
+    """
     if cfg.side_dir:
         d: Path | None = Path(cfg.side_dir)
         if not d.is_dir():  # type: ignore[union-attr]
-            raise ConversionError(f"{cfg.side_dir}: side_dir not found")
+            raise ConversionError(f"{cfg.side_dir}: side_dir: not a directory; expected the folder holding "
+                                  f"site.json, door_states.csv, schedule.csv or scans.csv")
     elif path.is_dir() and recording_format(path) is None and folder_format(path) is None:
         d = path
     else:
-        d = path.parent
+        return SideData(), None
     return read_side_files(d), d
 
 
@@ -296,8 +312,8 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     cfg = config or ConvertConfig()
     src = Path(input_path)
     out = Path(out)
-    if out.exists() and not overwrite:
-        raise DatasetExistsError(f"{out}: output exists; pass --overwrite to replace it")
+    inputs = _input_paths(src, cfg)
+    check_output(out, overwrite=overwrite, kind="dataset", inputs=inputs)
     sources = plan_sources(src, cfg)
     side, side_dir = _resolve_side(src, cfg)
     color_encoding = _auto_color_encoding(sources[0][0], sources[0][1], cfg)
@@ -318,7 +334,7 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     try:
         writer = DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding,
                                overwrite=overwrite, resume=resume, threads=0, image_layout=cfg.image_layout,
-                               direct_io=cfg.direct_io)
+                               direct_io=cfg.direct_io, inputs=inputs)
     except PsgDataError:
         raise
     except Exception as exc:

@@ -3,7 +3,7 @@
 Order of operations: every new Parquet file, the new ``tables/files.parquet`` and the new
 ``dataset.json`` are first written to temporary files beside their targets (nothing visible
 changes if any of this fails; the temporaries are removed); then each is moved into place with
-``os.replace`` (atomic per file), tables first, then the files table, then the manifest. A crash
+``os.replace`` (atomic per file, fsynced first), tables first, then the files table, then the manifest. A crash
 between the renames can leave a dataset whose checksums disagree (``psg-data validate`` reports
 it; re-running the same command repairs it).
 """
@@ -16,9 +16,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from psg_data.errors import FormatError
+from psg_data.errors import FormatError, UnsafeOutputError
 from psg_data.schemas._manifest import read_manifest
 from psg_data.schemas._tables import MANIFEST_NAME, TABLES, table_path
+from psg_data.writers._safe_output import replace_file
 
 __all__ = ["add_tables"]
 
@@ -38,7 +39,9 @@ def add_tables(root: str | Path, tables: Mapping[str, Any], *, overwrite: bool =
         root: dataset directory.
         tables: table name -> Arrow table. Names of the label tables are cast to their schemas;
             required core tables and ``files`` cannot be written this way.
-        overwrite: replace tables that already exist (otherwise that is an error).
+        overwrite: replace tables that already exist (otherwise that is an error). Only a table
+            psg-data wrote (listed in ``tables/files.parquet``) is replaced; a file of that name it
+            did not write is refused.
 
     Returns:
         the paths written.
@@ -84,6 +87,12 @@ def add_tables(root: str | Path, tables: Mapping[str, Any], *, overwrite: bool =
         files = pq.read_table(files_path).to_pylist()
     except (OSError, pa.ArrowException) as exc:
         raise FormatError(f"{files_path}: unreadable ({exc}); validate the dataset first") from exc
+    listed = {r["path"] for r in files}
+    for name in cast:
+        p = root / table_path(name)
+        if (p.exists() or p.is_symlink()) and (table_path(name) not in listed or p.is_symlink()):
+            raise UnsafeOutputError(f"{p}: exists but psg-data did not write it (not listed in tables/files.parquet); "
+                                    f"refusing to replace it; move it away to write table {name!r}")
     temps: list[tuple[Path, Path]] = []
     try:
         entries = {r["path"]: r for r in files}
@@ -114,7 +123,7 @@ def add_tables(root: str | Path, tables: Mapping[str, Any], *, overwrite: bool =
             tmp.unlink(missing_ok=True)
         raise
     for tmp, final in temps:
-        os.replace(tmp, final)
+        replace_file(tmp, final)
     written = [final for _, final in temps[:-2]]
     log.info("added %s to %s", ", ".join(table_path(n) for n in cast), root)
     return written

@@ -28,7 +28,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from psg_data.errors import DatasetExistsError, FormatError
+from psg_data.errors import FormatError
 from psg_data.schemas._manifest import DatasetInfo
 from psg_data.schemas._records import CameraIntrinsics, Door, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import (
@@ -41,6 +41,7 @@ from psg_data.schemas._tables import (
     TABLES,
     table_path,
 )
+from psg_data.writers._safe_output import check_output, commit_tree, make_staging
 from psg_data.writers._tar_archive import BufferPool, FileRange, TarArchiveWriter
 
 __all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "encode_color", "encode_depth", "PNG_LEVEL", "JPEG_QUALITY"]
@@ -389,12 +390,20 @@ class DatasetWriter:
         timezone: IANA timezone of the site.
         color_encoding: ``png`` (lossless) or ``jpeg``.
         overwrite: replace an existing dataset at ``root`` (only once the new one is complete).
+            Only a psg-dataset whose every file psg-data wrote, or an empty folder, is replaced
+            (see :mod:`psg_data.writers._safe_output`); anything else is refused.
         resume: reuse the scans of an interrupted write found in ``ROOT.partial``.
         threads: image-encoding threads (OpenCV releases the GIL); 0 encodes in the calling thread.
         image_layout: ``tar`` (one archive per scan, the default) or ``files`` (one file per image);
             see docs/FORMAT.md.
         direct_io: write scan archives with ``O_DIRECT`` where the file system supports it.
         extra: provenance stored in the manifest's ``extra``.
+        inputs: paths the dataset is made from: ``root`` may not be, contain or lie inside one.
+
+    Raises:
+        DatasetExistsError: ``root`` exists and ``overwrite`` is False.
+        UnsafeOutputError: ``root`` is not something this writer may replace, or ``ROOT.partial``
+            exists without psg-data's marker.
     """
 
     def __init__(
@@ -410,14 +419,14 @@ class DatasetWriter:
         image_layout: str = "tar",
         direct_io: bool = True,
         extra: Mapping[str, Any] | None = None,
+        inputs: Iterable[str | Path | None] = (),
     ) -> None:
         self.root = Path(root)
         if color_encoding not in ("png", "jpeg"):
             raise FormatError(f"color_encoding: expected 'png' or 'jpeg', got {color_encoding!r}")
         if image_layout not in IMAGE_LAYOUTS:
             raise FormatError(f"image_layout: expected one of {', '.join(IMAGE_LAYOUTS)}, got {image_layout!r}")
-        if self.root.exists() and not overwrite:
-            raise DatasetExistsError(f"{self.root}: output exists; pass --overwrite (overwrite=True) to replace it")
+        check_output(self.root, overwrite=overwrite, kind="dataset", inputs=inputs)
         self.name = name or self.root.name
         self.timezone = timezone
         self.color_encoding = color_encoding
@@ -425,9 +434,7 @@ class DatasetWriter:
         self.direct_io = direct_io
         self.extra: dict[str, Any] = dict(extra or {})
         self.tmp = self.root.with_name(self.root.name + _PARTIAL_SUFFIX)
-        if self.tmp.exists() and not resume:
-            shutil.rmtree(self.tmp)
-        self.tmp.mkdir(parents=True, exist_ok=True)
+        make_staging(self.tmp, resume=resume)
         self._tmp_str = str(self.tmp)
         self._threads = max(0, int(threads))
         self._pool = ThreadPoolExecutor(max_workers=self._threads) if self._threads else None
@@ -694,14 +701,6 @@ class DatasetWriter:
                            created_by=f"psg-data {_package_version()}", extra=self.extra)
         (self.tmp / MANIFEST_NAME).write_text(info.to_json(), encoding="utf-8")
         self._closed = True
-        if self.root.exists():
-            trash = self.root.with_name(self.root.name + ".old")
-            shutil.rmtree(trash, ignore_errors=True)
-            os.replace(self.root, trash)
-            os.replace(self.tmp, self.root)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            self.root.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(self.tmp, self.root)
+        commit_tree(self.tmp, self.root, kind="dataset")
         log.info("wrote %s (%d scans, %d frames)", self.root, len(scans), frames.num_rows)
         return self.root

@@ -142,8 +142,14 @@ def test_output_exists(tmp_path: Path) -> None:
     code, _, stderr = run(str(bag), str(out))
     assert code == 1 and stderr.startswith("error: ") and "output exists" in stderr
     assert (out / "keep.txt").read_text() == "x"
-    code, _, stderr = run(str(bag), str(out), "--overwrite")
-    assert code == 0 and not (out / "keep.txt").exists()
+    code, _, stderr = run(str(bag), str(out), "--overwrite")  # a folder psg-data did not write: refused
+    assert code == 1 and "is not a psg-dataset (no readable dataset.json) and holds keep.txt" in stderr
+    assert (out / "keep.txt").read_text() == "x" and sorted(p.name for p in tmp_path.iterdir()) == ["a.bag", "out"]
+    (out / "keep.txt").unlink()  # an empty folder is replaced, and then the dataset written there
+    for _ in range(2):
+        code, _, stderr = run(str(bag), str(out), "--overwrite")
+        assert code == 0 and (out / "dataset.json").is_file(), stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bag", "out"]  # no OUT.old, no OUT.partial
 
 
 def test_bad_options(tmp_path: Path) -> None:
