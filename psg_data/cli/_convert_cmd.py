@@ -8,12 +8,13 @@ import click
 
 from psg_data._executors import SCHEDULER_HELP
 from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+from psg_data.cli._errors import ContractCommand, check_jobs
 
 
-@click.command("convert")
+@click.command("convert", cls=ContractCommand)
 @click.argument("input_path", metavar="INPUT", type=click.Path(path_type=Path))
 @click.argument("out", metavar="OUT", type=click.Path(path_type=Path))
-@click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+@click.option("--config", "config_file", type=click.Path(path_type=Path),
               help="YAML/JSON file with any conversion setting (command-line options win).")
 @click.option("--color-topic", help="Colour topic (sensor_msgs/Image or CompressedImage).")
 @click.option("--depth-topic", help="Depth topic (Image 16UC1/32FC1 or compressedDepth).")
@@ -34,7 +35,7 @@ from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_lo
 @click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet"]), default=None)
 @click.option("--image-layout", type=click.Choice(["tar", "files"]), default=None,
               help="Images in one tar archive per scan (default) or one file per image.")
-@click.option("--jobs", "-j", type=int, default=1, show_default=True,
+@click.option("--jobs", "-j", type=int, default=1, show_default=True, callback=check_jobs,
               help="CPUs to use (-1: all): scans in parallel worker processes, or encoding threads "
                    "within a scan when there are fewer scans than jobs. 1: one core.")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists (once the new dataset is complete).")
@@ -63,8 +64,6 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     setup_logging(quiet)
     from psg_data.convert import ConvertConfig, convert, load_config
 
-    if jobs == 0 or jobs < -1:
-        raise click.BadParameter(f"{jobs}: expected a number of CPUs >= 1, or -1 for all", param_hint="'--jobs'")
     cfg = load_config(config_file) if config_file else ConvertConfig()
     cfg = cfg.merged(**opts)
     progress = Progress("convert", unit="frames", quiet=quiet)

@@ -8,11 +8,12 @@ from pathlib import Path
 import click
 
 from psg_data.cli._common import EXIT_PROBLEMS, handle_errors
+from psg_data.cli._errors import ContractCommand
 
 __all__ = ["validate_cmd", "info_cmd"]
 
 
-@click.command("validate")
+@click.command("validate", cls=ContractCommand)
 @click.argument("path", type=click.Path(path_type=Path))
 @click.option("--no-checksums", is_flag=True, help="Check file sizes only, not SHA-256 checksums (faster).")
 @handle_errors
@@ -32,7 +33,7 @@ def validate_cmd(path: Path, no_checksums: bool) -> None:
     if problems:
         for p in problems:
             click.echo(str(p))
-        click.echo(f"{len(problems)} problem(s) in {path}", err=True)
+        click.echo(f"error: {path}: {len(problems)} problem(s), listed above", err=True)
         sys.exit(EXIT_PROBLEMS)
     click.echo("OK")
 
@@ -45,7 +46,7 @@ def _fmt_bytes(n: float) -> str:
     return f"{n:.1f} GB"  # pragma: no cover
 
 
-@click.command("info")
+@click.command("info", cls=ContractCommand)
 @click.argument("path", type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @handle_errors

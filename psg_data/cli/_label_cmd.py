@@ -5,17 +5,18 @@ from __future__ import annotations
 import click
 
 from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+from psg_data.cli._errors import ContractCommand
 
 __all__ = ["label_cmd"]
 
 
-@click.command("label")
-@click.argument("path", type=click.Path(exists=True, file_okay=False))
+@click.command("label", cls=ContractCommand)
+@click.argument("path", type=click.Path())
 @click.option("--source", "-s", required=True, metavar="SOURCE",
               help="gt | privileged | noisy:P[,P_F] | observed (door states read from the depth) | "
                    "detections:FILE (.parquet or .json).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the noise (noisy sources).")
-@click.option("--valid", "valid_file", type=click.Path(exists=True, dir_okay=False), default=None,
+@click.option("--valid", "valid_file", type=click.Path(), default=None,
               help="JSON {object_id: [receptacle_id, ...]} of valid receptacles (default: the schedule's support).")
 @click.option("--observed", type=click.Choice(["matched", "visibility", "either"]), default="matched",
               show_default=True, help="detections: when a receptacle counts as observed in a scan.")

@@ -7,11 +7,13 @@ from typing import Any
 
 import click
 
+from psg_data.cli._errors import ContractGroup
+
 __all__ = ["LazyGroup"]
 
 
-class LazyGroup(click.Group):
-    """``lazy_commands`` maps a command name to ``"module:attribute"``."""
+class LazyGroup(ContractGroup):
+    """``lazy_commands`` maps a command name to ``"module:attribute"`` (errors as one line, see ``_errors``)."""
 
     def __init__(self, *args: Any, lazy_commands: dict[str, str] | None = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+from psg_data.cli._errors import ContractCommand
 
 __all__ = ["synth_cmd"]
 
@@ -22,7 +23,7 @@ def _resolution(_ctx: click.Context, _param: click.Parameter, value: str) -> tup
     return int(m.group(1)), int(m.group(2))
 
 
-@click.command("synth")
+@click.command("synth", cls=ContractCommand)
 @click.argument("out", type=click.Path(path_type=Path))
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="canonical", show_default=True,
               help="canonical psg-dataset, or raw recordings (one bag per scan) for the converter.")

@@ -1,7 +1,8 @@
 """``psg-eval``: score persistence estimators (and navigation with them) on a dataset.
 
-Exit codes: 0 success; 1 bad input, or an estimator returned invalid predictions (the run still
-completes for the others and the problems are listed); 2 bad command line.
+Exit codes: 0 success; 1 bad input or output, or an estimator returned invalid predictions (the run
+still completes for the others and the problems are listed); 2 bad command line; 130 interrupted
+(see ``psg_data.cli._errors``).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import click
 from psg_data import __version__
 from psg_data._executors import SCHEDULER_HELP, check_scheduler
 from psg_data.cli._common import EXIT_PROBLEMS, handle_errors, quiet_option, setup_logging
+from psg_data.cli._errors import ContractGroup, check_jobs
 
 __all__ = ["main"]
 
@@ -69,7 +71,7 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool) -> None:
     import_rerun()  # says which extra to install before any work is done
 
 
-@click.group(invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=ContractGroup, invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--dataset", "dataset", default=None, metavar="PATH|demo|persistence-benchmark",
               help="Dataset to evaluate on (default: demo, the built-in synthetic lab).")
 @click.option("--estimator", "-e", "estimators", multiple=True, metavar="NAME[:key=value,...]",
@@ -103,7 +105,8 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool) -> None:
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output directory (default: psg-eval-out/<timestamp>).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --out directory.")
-@click.option("--jobs", "-j", type=int, default=1, show_default=True, help="Worker processes (-1: all CPUs).")
+@click.option("--jobs", "-j", type=int, default=1, show_default=True, callback=check_jobs,
+              help="Worker processes (-1: all CPUs).")
 @click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT", help=SCHEDULER_HELP)
 @click.option("--rerun", "rerun_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
               metavar="FILE.rrd", help="Also save every estimator's beliefs over time for the scored edges (first "
@@ -163,6 +166,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     from psg_data.writers._safe_output import commit_tree, make_staging
 
     out_dir = _out_dir(out, overwrite, _eval_inputs(dataset, labels))
+    new_parent = not out_dir.parent.exists()
     tmp = make_staging(out_dir.with_name(out_dir.name + ".partial"))
     from psg_data.cli._eval_navigation import run_doors_task, run_navigation_task
     from psg_data.cli._eval_persistence import run_persistence
@@ -177,6 +181,8 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
             ok = run_navigation_task(specs, dataset, nav_options, tmp, no_plots, quiet)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        if new_parent and not any(out_dir.parent.iterdir()):
+            out_dir.parent.rmdir()  # e.g. psg-eval-out/, created for this run
         raise
     commit_tree(tmp, out_dir, kind="results")
     click.echo(f"results written to {out_dir}/")

@@ -123,6 +123,8 @@ def load_config(path: str | Path) -> ConvertConfig:
         ConversionError: unreadable file, not a mapping, unknown keys or bad values.
     """
     p = Path(path)
+    if not p.is_file():
+        raise ConversionError(f"{p}: config file not found; expected a YAML or JSON file of conversion settings")
     try:
         text = p.read_text(encoding="utf-8")
         if p.suffix == ".json":

@@ -425,8 +425,9 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
         }
         shutil.rmtree(tmp / STATE_DIR, ignore_errors=True)
         writer.close()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         writer.abort(keep_partial=True)
+        exc.resume_hint = f"{tmp} is kept: rerun the same command to resume"  # type: ignore[attr-defined]
         raise
     except OSError as exc:  # disk full, permissions, a file gone mid-run: scans done so far are kept
         writer.abort(keep_partial=True)
