@@ -40,11 +40,17 @@ def images(i: int, scan: int, w: int = W, h: int = H) -> tuple[np.ndarray, np.nd
     return color, depth
 
 
+def camera_for(w: int, h: int) -> CameraIntrinsics:
+    """:data:`CAMERA` scaled to ``w`` x ``h`` pixels."""
+    if (w, h) == (W, H):
+        return CAMERA
+    return CameraIntrinsics("cam0", w, h, 30.0 * w / W, 31.0 * w / W, w / 2 - 0.5, h / 2 - 0.5,
+                            frame_id="camera_color_optical_frame")
+
+
 def make_dataset(root: Path, *, n_scans: int = 2, n_frames: int = 4, color_encoding: str = "png",
                  period_ns: int = 100_000_000, w: int = W, h: int = H) -> Path:
-    cam = CAMERA if (w, h) == (W, H) else CameraIntrinsics("cam0", w, h, 30.0 * w / W, 31.0 * w / W,
-                                                            w / 2 - 0.5, h / 2 - 0.5,
-                                                            frame_id="camera_color_optical_frame")
+    cam = camera_for(w, h)
     rooms = [Room("kitchen", "Kitchen", np.array([[0, 0], [4, 0], [4, 3], [0, 3.0]])), Room("office", "Office")]
     recs = [Receptacle("table1", "Table", "kitchen", Box(np.array([1.0, 2.0, 0.4]), np.array([1.2, 0.8, 0.8]),
                                                          rot([0, 0, 1], 0.3)), "table"),
@@ -148,7 +154,7 @@ def write_bag(path: Path, fmt: str = "ros1", *, n: int = 4, w: int = W, h: int =
             else:
                 bw.push("/camera/aligned_depth_to_color/image_raw", t + 8_000_000, msgs.image(t, fid, dd, depth))
         if info:
-            bw.push("/camera/color/camera_info", t + 6_000_000, msgs.camera_info(t, fid, CAMERA))
+            bw.push("/camera/color/camera_info", t + 6_000_000, msgs.camera_info(t, fid, camera_for(w, h)))
         if tf:
             T = pose(i, 0)
             if nan_pose_at == i:
