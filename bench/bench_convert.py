@@ -18,6 +18,8 @@ and the conversion back to back, so they share the machine's conditions):
   raw vs minimal loop:    convert --jobs 1 (rgb8 + 16UC1 -> PNG level 1) vs a minimal loop doing the
                           same read / deserialise / encode / write (one file per recording) steps
   raw --jobs 2 vs 1:      the same conversion with two worker processes vs --jobs 1 (one core)
+  checks (--cases checks): the compressed conversion with each image_check level (structure, the
+                          default; full) vs image_check none, in rotating order within each repeat
   memory:                 peak RSS of a conversion in a fresh subprocess (ru_maxrss, workers included)
 
 Recordings are ROS 1 bags exported from one synthetic canonical scan and hard-linked ``--recordings``
@@ -168,11 +170,11 @@ def minimal_raw_loop(rec_dir: Path, out: Path) -> float:
     return time.perf_counter() - t
 
 
-def timed_convert(src: Path, out: Path, jobs: int) -> float:
-    from psg_data.convert import convert
+def timed_convert(src: Path, out: Path, jobs: int, image_check: str = "structure") -> float:
+    from psg_data.convert import ConvertConfig, convert
 
     t = time.perf_counter()
-    convert(src, out, jobs=jobs)
+    convert(src, out, jobs=jobs, config=ConvertConfig(image_check=image_check))
     return time.perf_counter() - t
 
 
@@ -211,6 +213,8 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
     print(f"building {n_rec} recordings x {n_cmp} frames (compressed) and x {n_raw} frames (raw), {w}x{h}, "
           f"in {tmp} ...", file=sys.stderr)
     rec_cmp = build_recordings(tmp, "rec_cmp", n_rec, n_cmp, w, h, "compressed") if "compressed" in cases else None
+    if "checks" in cases and rec_cmp is None:
+        rec_cmp = build_recordings(tmp, "rec_cmp", n_rec, n_cmp, w, h, "compressed")
     rec_raw = build_recordings(tmp, "rec_raw", n_rec, n_raw, w, h, "raw") if "raw" in cases else None
     mb_cmp = dir_size(rec_cmp) / 1e6 if rec_cmp else 0.0
     mb_raw = dir_size(rec_raw) / 1e6 if rec_raw else 0.0
@@ -228,6 +232,11 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
             r["iterate_lowlevel"] = iterate_raw_lowlevel(rec_cmp)
             r["minimal_cmp"] = passthrough_minimal(rec_cmp, o / "minimal_cmp")
             _rm(o / "minimal_cmp")
+        if "checks" in cases:
+            levels = ["none", "structure", "full"]
+            for lvl in levels[k % 3:] + levels[:k % 3]:
+                r[f"check_{lvl}"] = timed_convert(rec_cmp, o / "out_chk", 1, image_check=lvl)
+                _rm(o / "out_chk")
         if rec_raw is not None:
             r["minimal_raw"] = minimal_raw_loop(rec_raw, o / "minimal")
             _rm(o / "minimal")
@@ -244,6 +253,8 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
         ("compressed: convert vs minimal pass-through", mb_cmp, "convert_cmp", "minimal_cmp", None),
         ("raw: convert vs minimal loop", mb_raw, "convert_raw_j1", "minimal_raw", 0.7),
         ("raw: --jobs 2 vs --jobs 1", mb_raw, "convert_raw_j2", "convert_raw_j1", 1.6),
+        ("compressed: image_check structure vs none", mb_cmp, "check_structure", "check_none", 0.9),
+        ("compressed: image_check full vs none", mb_cmp, "check_full", "check_none", None),
     ):
         if conv not in reps[0]:
             continue

@@ -38,6 +38,11 @@ from psg_data.cli._errors import ContractCommand, check_jobs
 @click.option("--jobs", "-j", type=int, default=1, show_default=True, callback=check_jobs,
               help="CPUs to use (-1: all): scans in parallel worker processes, or encoding threads "
                    "within a scan when there are fewer scans than jobs. 1: one core.")
+@click.option("--image-check", type=click.Choice(["none", "structure", "full"]), default=None,
+              help="Integrity check of every input image (default structure: PNG chunk CRCs, JPEG markers "
+                   "through EOI; full: also inflate PNG data and decode JPEG).")
+@click.option("--strict", is_flag=True, default=None,
+              help="Refuse the conversion at the first corrupt image (default: skip its frame with a warning).")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists (once the new dataset is complete).")
 @click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT",
               help=SCHEDULER_HELP + " Remote workers must see INPUT and OUT (a shared filesystem).")
@@ -70,8 +75,10 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress,
                      scheduler=scheduler)
     progress.close()
-    skipped = ", ".join(f"{k} {v}" for k, v in report.skipped.items())
+    units = {"color": "colour images", "depth": "depth images", "frames": "frames"}
+    skipped = "; ".join(f"{sum(r.values())} {units[kind]} ({', '.join(f'{k} {v}' for k, v in r.items())})"
+                        for kind, r in report.skipped_by_kind.items() if r)
     click.echo(f"converted {len(report.scans)} scans, {report.frames} frames to {report.output} in "
                f"{report.seconds:.1f} s ({report.mb_per_s:.1f} MB/s)"
                + (f"; resumed {len(report.resumed)} scans" if report.resumed else "")
-               + (f"; skipped {report.n_skipped} frames ({skipped})" if report.n_skipped else ""))
+               + (f"; skipped {skipped}" if skipped else ""))

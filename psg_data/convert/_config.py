@@ -44,6 +44,10 @@ class ConvertConfig:
         name / timezone: dataset name and IANA timezone (default: site file, else input name / UTC).
         image_layout: ``tar`` (one archive per scan, default) or ``files`` (one file per image).
         direct_io: write scan archives with ``O_DIRECT`` where the file system supports it.
+        image_check: integrity check of every encoded input image, passed through or decoded:
+            ``structure`` (PNG chunk CRCs and zlib header, JPEG markers through EOI; default),
+            ``full`` (also PNG inflated, JPEG decoded) or ``none`` (see docs/RAW_FORMATS.md).
+        strict: refuse the conversion at the first corrupt image instead of skipping its frame.
     """
 
     input_format: str = "auto"
@@ -71,10 +75,16 @@ class ConvertConfig:
     timezone: str | None = None
     image_layout: str = "tar"
     direct_io: bool = True
+    image_check: str = "structure"
+    strict: bool = False
 
     def __post_init__(self) -> None:
         if self.image_layout not in ("tar", "files"):
             raise ConversionError(f"config: image_layout: expected tar or files, got {self.image_layout!r}")
+        if self.image_check not in ("none", "structure", "full"):
+            raise ConversionError(f"config: image_check: expected none, structure or full, got {self.image_check!r}")
+        if not isinstance(self.strict, bool):
+            raise ConversionError(f"config: strict: expected true or false, got {self.strict!r}")
         if not isinstance(self.direct_io, bool):
             raise ConversionError(f"config: direct_io: expected true or false, got {self.direct_io!r}")
         if self.input_format not in ("auto", "ros1", "ros2", "mcap", "tum", "scannet"):

@@ -19,7 +19,16 @@ from typing import Any
 
 from psg_data._cpus import available_cpus
 from psg_data.convert._config import ConvertConfig
-from psg_data.convert._scan import STATE_DIR, ScanResult, ScanTask, discover_topics, open_task_writer, run_task
+from psg_data.convert._scan import (
+    SKIP_KINDS,
+    SKIP_REASONS,
+    STATE_DIR,
+    ScanResult,
+    ScanTask,
+    discover_topics,
+    open_task_writer,
+    run_task,
+)
 from psg_data.errors import ConversionError, PsgDataError
 from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format, release_kept
 from psg_data.loaders.raw._folders import folder_format
@@ -48,7 +57,8 @@ class ConversionReport:
         output: dataset directory.
         scans: converted scan ids (including resumed ones).
         frames: frames written.
-        skipped: frames that could not be associated, by reason (see ``SKIP_REASONS``).
+        skipped: images and frames left out, by reason (see ``SKIP_REASONS``; ``skipped_by_kind``
+            groups them into colour images, depth images and frames).
         keyframe_dropped: frames left out by ``--keyframes``.
         resumed: scans kept from an interrupted run (verified by checksum).
         bytes_in: bytes of input read.
@@ -71,8 +81,17 @@ class ConversionReport:
         return self.bytes_in / 1e6 / max(self.seconds, 1e-9)
 
     @property
+    def skipped_by_kind(self) -> dict[str, dict[str, int]]:
+        """``skipped`` grouped by what each reason counts: ``color`` images, ``depth`` images, ``frames``."""
+        out: dict[str, dict[str, int]] = {"color": {}, "depth": {}, "frames": {}}
+        for reason, n in self.skipped.items():
+            out[SKIP_KINDS.get(reason, "frames")][reason] = n
+        return out
+
+    @property
     def n_skipped(self) -> int:
-        return sum(self.skipped.values())
+        """Colour images that did not become frames (every reason but ``no_color``, which counts depth images)."""
+        return sum(n for r, n in self.skipped.items() if SKIP_KINDS.get(r) != "depth")
 
 
 def plan_sources(path: Path, cfg: ConvertConfig) -> list[tuple[Path, str]]:
@@ -437,8 +456,10 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
         writer.abort(keep_partial=False)
         raise
     report.seconds = time.perf_counter() - t_start
-    for reason, n in report.skipped.items():
-        log.warning("%s: %d frames skipped: %s", src, n, reason)
+    units = {"color": "colour images", "depth": "depth images", "frames": "frames"}
+    for kind, reasons in report.skipped_by_kind.items():
+        for reason, n in reasons.items():
+            log.warning("%s: %d %s skipped: %s (%s)", src, n, units[kind], reason, SKIP_REASONS[reason])
     return report
 
 

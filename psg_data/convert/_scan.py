@@ -29,6 +29,7 @@ from psg_data.errors import ConversionError
 from psg_data.loaders.raw._folders import FolderRecording, read_scannet_folder, read_tum_folder, read_tum_poses
 from psg_data.loaders.raw._images import (
     EncodedInfo,
+    ImageDataError,
     compressed_depth_png,
     decode_color_image,
     decode_compressed_color,
@@ -37,17 +38,24 @@ from psg_data.loaders.raw._images import (
 )
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer
 from psg_data.loaders.raw._wire import parse_compressed_image, parse_tf_message
+from psg_data.schemas._camera_checks import intrinsics_problems
+from psg_data.schemas._image_check import DamagedImage
+from psg_data.schemas._image_check import check_image, looks_like_image
 from psg_data.schemas._image_headers import parse_image_header_end
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.writers._dataset_writer import encode_color, encode_depth
 from psg_data.writers._tar_archive import FileRange
 
-__all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS"]
+__all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS",
+           "SKIP_KINDS", "explain_nothing"]
 
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".psg_convert"
 """Directory inside ``OUT.partial`` holding per-scan conversion records (removed on completion)."""
+
+_MAX_WARNINGS = 10
+"""Corrupt images warned about one by one per recording (the rest are counted in the report)."""
 
 SKIP_REASONS = {
     "no_depth": "colour frame without a depth image within the sync tolerance",
@@ -56,6 +64,7 @@ SKIP_REASONS = {
     "nonfinite_pose": "pose with NaN or infinite values",
     "duplicate_stamp": "second colour frame with an already used header stamp",
     "out_of_order": "colour frame older than one already written",
+    "corrupt_image": "frame whose colour or depth image is truncated or damaged (see image_check)",
 }
 
 _PREADV = hasattr(os, "preadv")  # FileRange payloads need os.preadv (not on Windows)
@@ -183,6 +192,11 @@ def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> Ca
     D = np.asarray(getattr(msg, "D", None) if hasattr(msg, "D") else msg.d, dtype=float)
     if K.size != 9 or not np.all(np.isfinite(K)) or K[0] <= 0 or K[4] <= 0:
         raise ConversionError(f"{where}: CameraInfo K: expected a finite 3x3 matrix with fx, fy > 0, got {K.tolist()}")
+    for field, what in intrinsics_problems(int(msg.width), int(msg.height), float(K[0]), float(K[4]), float(K[2]),
+                                           float(K[5]))[:1]:
+        raise ConversionError(f"{where}: CameraInfo {field}: {what}")
+    if not np.all(np.isfinite(D)):
+        raise ConversionError(f"{where}: CameraInfo D: expected finite distortion coefficients, got {D.tolist()}")
     model = str(msg.distortion_model or "")
     if D.size == 0 or not np.any(D):
         model, coeffs = "none", ()
@@ -200,7 +214,11 @@ def _first(item: tuple[int, Any]) -> int:
 
 
 class _Assembler:
-    """Pairs colour and depth on header stamps within a tolerance, in stamp order."""
+    """Pairs colour and depth on header stamps within a tolerance, releasing colour frames in stamp order.
+
+    Log time plays no part: the horizons are the newest header stamps seen per stream, and the
+    caller releases the oldest colour frame once its partners can no longer arrive (see ``_run_bag``).
+    """
 
     def __init__(self, tol_ns: int) -> None:
         self.tol = tol_ns
@@ -209,15 +227,23 @@ class _Assembler:
         self.depths: dict[int, _Payload] = {}
         self.seen_colors: set[int] = set()
         self.last_emitted = -(1 << 62)
+        self.depth_h = -(1 << 62)
+        """Newest depth header stamp seen."""
+        self.image_h = -(1 << 62)
+        """Newest colour or depth header stamp seen."""
+        self.nearest_miss_ns: int | None = None
+        """Smallest distance from a colour frame without depth to the nearest depth image."""
         self.skipped: Counter[str] = Counter()
 
     def add_color(self, stamp: int, p: _Payload) -> None:
         if stamp in self.seen_colors or stamp == self.last_emitted:
             self.skipped["duplicate_stamp"] += 1
             return
-        if stamp <= self.last_emitted:
+        if stamp < self.last_emitted:  # its successor was released already: it drops itself only
             self.skipped["out_of_order"] += 1
             return
+        if stamp > self.image_h:
+            self.image_h = stamp
         self.seen_colors.add(stamp)
         if not self.colors or stamp > self.colors[-1][0]:  # the usual case: in stamp order
             self.colors.append((stamp, p))
@@ -227,39 +253,50 @@ class _Assembler:
     def add_depth(self, stamp: int, p: _Payload) -> None:
         if stamp in self.depths:
             return
+        if stamp > self.depth_h:
+            self.depth_h = stamp
+            if stamp > self.image_h:
+                self.image_h = stamp
         if not self.depth_stamps or stamp > self.depth_stamps[-1]:
             self.depth_stamps.append(stamp)
         else:
             bisect.insort(self.depth_stamps, stamp)
         self.depths[stamp] = p
 
-    def ready(self, before_ns: int | None) -> Iterator[tuple[int, _Payload, _Payload]]:
-        """Pop colour frames with stamp < ``before_ns`` (all if None), paired with their depth."""
-        while self.colors and (before_ns is None or self.colors[0][0] < before_ns):
-            stamp, cp = self.colors.pop(0)
-            self.seen_colors.discard(stamp)  # pending stamps only: memory bounded by the window
-            # depth older than this colour's window can no longer match anything
-            while self.depth_stamps and self.depth_stamps[0] < stamp - self.tol:
-                self.depths.pop(self.depth_stamps.pop(0))
-                self.skipped["no_color"] += 1
-            i = bisect.bisect_left(self.depth_stamps, stamp - self.tol)
-            best = None
-            for j in range(i, len(self.depth_stamps)):
-                d = self.depth_stamps[j]
-                if d > stamp + self.tol:
-                    break
-                if best is None or abs(d - stamp) < abs(self.depth_stamps[best] - stamp):
-                    best = j
-            if best is None:
-                self.skipped["no_depth"] += 1
-                continue
-            dstamp = self.depth_stamps.pop(best)
-            self.last_emitted = stamp
-            yield stamp, cp, self.depths.pop(dstamp)
-        if before_ns is None:
-            self.skipped["no_color"] += len(self.depth_stamps)
-            self.depth_stamps.clear()
-            self.depths.clear()
+    def pop(self) -> tuple[int, _Payload, _Payload] | None:
+        """Release the oldest colour frame with its nearest depth (None, counted, if it has none)."""
+        stamp, cp = self.colors.pop(0)
+        self.seen_colors.discard(stamp)  # pending stamps only: memory bounded by the window
+        self.last_emitted = stamp
+        ds = self.depth_stamps
+        while ds and ds[0] < stamp - self.tol:  # depth older than this colour's window matches nothing now
+            self.depths.pop(ds.pop(0))
+            self.skipped["no_color"] += 1
+        i = bisect.bisect_left(ds, stamp - self.tol)
+        best = None
+        for j in range(i, len(ds)):
+            d = ds[j]
+            if d > stamp + self.tol:
+                break
+            if best is None or abs(d - stamp) < abs(ds[best] - stamp):
+                best = j
+        if best is None:
+            self.skipped["no_depth"] += 1
+            near = [abs(ds[j] - stamp) for j in (i - 1, i) if 0 <= j < len(ds)]
+            if near and (self.nearest_miss_ns is None or min(near) < self.nearest_miss_ns):
+                self.nearest_miss_ns = min(near)
+            return None
+        return stamp, cp, self.depths.pop(ds.pop(best))
+
+    def drain(self) -> Iterator[tuple[int, _Payload, _Payload]]:
+        """Release every colour frame left (end of the recording); left-over depth images are counted."""
+        while self.colors:
+            item = self.pop()
+            if item is not None:
+                yield item
+        self.skipped["no_color"] += len(self.depth_stamps)
+        self.depth_stamps.clear()
+        self.depths.clear()
 
 
 class _PoseSource:
@@ -314,13 +351,8 @@ class _PoseSource:
         self.series.add(_stamp(msg.header), (p.position.x, p.position.y, p.position.z),
                         (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w))
 
-    def horizon(self) -> int | None:
-        """Newest stamp up to which every needed dynamic pose sample may have arrived."""
-        if self.kind == "tf":
-            return self.tf.last_dynamic_stamp()
-        return self.series.last_stamp
-
-    def at(self, stamp: int) -> NDArray[np.float64] | None:
+    def _targets(self) -> tuple[str, bool]:
+        """(frame looked up from the world frame, whether the optical frame is appended from TF)."""
         key = (self.kind, self.frame, self.optical)
         if self._resolved != key:  # what to look up, decided again whenever the frames change
             self.resolve_auto()
@@ -328,7 +360,43 @@ class _PoseSource:
             extra = bool(target and self.optical and target.lstrip("/") != self.optical.lstrip("/"))
             self._plan = (target, extra)
             self._resolved = (self.kind, self.frame, self.optical)
-        target, extra = self._plan
+        return self._plan
+
+    def ready(self, stamp: int) -> bool:
+        """Whether every pose sample a lookup at ``stamp`` (header time) may use has arrived: each
+        dynamic edge of the path has a sample at or after ``stamp`` (static paths and pose files: always)."""
+        if self.kind == "tum":
+            return True
+        if self.kind == "odom":
+            last = self.series.last_stamp
+            if last is None or last < stamp:
+                return False
+        elif self.kind is None and not self.tf.frames:
+            return False  # no TF yet: the pose source is not known
+        try:
+            target, extra = self._targets()
+        except ConversionError:
+            return False  # no 'map' / 'odom' frame (yet)
+        if self.kind == "tf":
+            h = self.tf.horizon(self.world, target)
+            if h is None or h < stamp:
+                return False
+        if extra:
+            h = self.tf.horizon(target, self.optical)
+            if h is None or h < stamp:
+                return False
+        return True
+
+    def span(self) -> tuple[int, int] | None:
+        """First and last stamp of the pose samples seen (dynamic ones), or None."""
+        if self.kind in ("odom", "tum"):
+            st = self.series.stamps
+            return (st[0], st[-1]) if st else None
+        stamps = [s for series in self.tf.dynamic.values() for s in (series.stamps[:1] + series.stamps[-1:])]
+        return (min(stamps), max(stamps)) if stamps else None
+
+    def at(self, stamp: int) -> NDArray[np.float64] | None:
+        target, extra = self._targets()
         if self.kind == "tf":
             T = self.tf.lookup(self.world, target, stamp, self.where)
         else:
@@ -351,13 +419,19 @@ def _passthrough_ok(info: EncodedInfo, encoding: str) -> bool:
 
 
 class _FrameWriter:
-    """Turns a (colour, depth) payload pair into stored images, passing encoded bytes through."""
+    """Turns a (colour, depth) payload pair into stored images, passing encoded bytes through.
 
-    def __init__(self, encoding: str, depth_scale_m: float, where: str) -> None:
+    Every encoded image is checked at ``image_check`` (:mod:`psg_data.schemas._image_check`) whether
+    it is passed through or decoded; a damaged one raises :class:`ImageDataError` (the frame is
+    skipped, or refused with ``strict``).
+    """
+
+    def __init__(self, encoding: str, depth_scale_m: float, where: str, image_check: str = "structure") -> None:
         self.encoding = encoding
         self.depth_scale_m = depth_scale_m
         self.scale_is_mm = abs(depth_scale_m - 0.001) < 1e-12
         self.where = where
+        self.level = image_check
         self._headers: dict[str, tuple[bytes, EncodedInfo]] = {}
         self._cd_formats: dict[str, bool] = {}
         """format string -> whether it names a compressedDepth payload."""
@@ -376,50 +450,77 @@ class _FrameWriter:
         self._headers[slot] = (bytes(data[:end]), info)
         return info
 
-    def _where(self, topic: str) -> str:
+    def _where(self, topic: str, p: _Payload) -> str:
+        if p.kind == "file":
+            return str(p.obj)
         where = self._wheres.get(topic)
         if where is None:
             where = self._wheres[topic] = f"{self.where}: {topic}"
         return where
 
+    @staticmethod
+    def _bytes(p: _Payload, where: str) -> Any:
+        if p.kind == "bytes":
+            return p.obj  # a view of the message
+        try:
+            return Path(p.obj).read_bytes()
+        except OSError as exc:
+            raise ConversionError(f"{p.obj}: cannot read the image ({exc.strerror or exc})") from exc
+
+    def _encoded(self, slot: str, data: Any, fmt: str, where: str, what: str) -> EncodedInfo:
+        """Header of an encoded image, checked at the configured level."""
+        info = self._inspect(slot, data)
+        if info is None:
+            kind = looks_like_image(data) or next((k for k in ("png", "jpeg") if k in fmt.lower()), None)
+            if kind is None and fmt != "file":
+                raise ConversionError(f"{where}: unknown {what} format {fmt!r}: the data is neither PNG nor JPEG "
+                                      f"(starts with {bytes(memoryview(data)[:4]).hex()}); expected PNG or JPEG data")
+            raise ImageDataError(where, f"corrupt {(kind or 'image').upper()}: unreadable header")
+        if self.level != "none":
+            try:
+                check_image(data, self.level, header=info)
+            except DamagedImage as exc:
+                raise ImageDataError(where, f"corrupt {info.kind.upper()}: {exc}") from None
+        return info
+
     def color(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
+        where = self._where(topic, p)
         if p.kind == "msg":
-            arr = decode_color_image(p.obj, self._where(topic))
+            arr = decode_color_image(p.obj, where)
             return None, arr, (arr.shape[1], arr.shape[0])
-        data = p.obj if p.kind == "bytes" else Path(p.obj).read_bytes()  # bytes: a view of the message
-        info = self._inspect("color", data)
-        if info is not None and _passthrough_ok(info, self.encoding):
+        data = self._bytes(p, where)
+        info = self._encoded("color", data, p.fmt or "file", where, "colour image")
+        if _passthrough_ok(info, self.encoding):
             self.passthrough["color"] += 1
             return (data if p.span is None else p.span), None, (info.width, info.height)
-        arr = decode_compressed_color(data, p.fmt or "file", self._where(topic))
+        arr = decode_compressed_color(data, p.fmt or "file", where)
         return None, arr, (arr.shape[1], arr.shape[0])
 
     def depth(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
-        where = self._where(topic)
+        where = self._where(topic, p)
         if p.kind == "msg":
             arr = decode_depth_image(p.obj, where, self.depth_scale_m)
             return None, arr, (arr.shape[1], arr.shape[0])
         fmt = p.fmt
-        data = p.obj if p.kind == "bytes" else Path(p.obj).read_bytes()  # bytes: a view of the message
+        data = self._bytes(p, where)
         compressed_depth = self._cd_formats.get(fmt)
         if compressed_depth is None:
             compressed_depth = self._cd_formats[fmt] = "compresseddepth" in fmt.lower()
         png, src = data, "16UC1"
         if compressed_depth:
             png, src, _ = compressed_depth_png(data, fmt, where)
-        info = self._inspect("depth", png)
-        if info is None:
-            raise ConversionError(f"{where}: unknown depth image format {fmt or 'file'!r}; expected a 16-bit PNG "
+        info = self._encoded("depth", png, fmt or "file", where, "depth image")
+        if info.kind != "png":
+            raise ConversionError(f"{where}: depth image is a {info.kind.upper()}; expected a 16-bit PNG "
                                   f"('16UC1; compressedDepth png')")
-        if self.scale_is_mm and src.upper() in ("16UC1", "MONO16") and info.kind == "png" and info.bit_depth == 16 \
-                and info.channels == 1:
+        if self.scale_is_mm and src.upper() in ("16UC1", "MONO16") and info.bit_depth == 16 and info.channels == 1:
             self.passthrough["depth"] += 1
             if p.span is not None:  # the PNG is the tail of the payload (after the compressedDepth header)
                 skip = len(data) - len(png)
                 sp = p.span
                 return FileRange(sp.fd, sp.offset + skip, len(png), sp.owner), None, (info.width, info.height)
             return png, None, (info.width, info.height)
-        if info.kind == "png" and info.bit_depth != 16:
+        if info.bit_depth != 16:
             raise ConversionError(f"{where}: depth PNG is {info.bit_depth}-bit; expected 16-bit depth")
         arr = decode_compressed_depth(data, fmt if compressed_depth else "png", where, self.depth_scale_m)
         return None, arr, (arr.shape[1], arr.shape[0])
@@ -450,6 +551,10 @@ class _ScanSink:
         self.bytes_in = 0
         self.skip_current = False
         self.frames_in_scan = 0
+        self.stamp_span: tuple[int, int] | None = None
+        """First and last stamp of the colour + depth pairs received."""
+        self.diagnosis: dict[str, Any] = {"names": names}
+        """What explains a conversion without frames (filled in by the runner)."""
 
     def _scan_for(self, stamp: int) -> str:
         if self.split is None:
@@ -466,8 +571,8 @@ class _ScanSink:
             return
         if self.sw is not None:
             if self.sw.n_frames == 0:
-                raise ConversionError(f"{self.task.source}: scan {self.scan_id}: no frame could be converted "
-                                      f"(skipped: {dict(self.skipped) or 'none'})")
+                raise ConversionError(f"{self.task.source}: scan {self.scan_id}: no frame could be converted: "
+                                      f"{explain_nothing(self.skipped, self.cfg, self.diagnosis)}")
             self.sw.close()
             assert self.camera is not None
             res = ScanResult(self.scan_id, asdict(self.camera), self.sw.n_frames, dict(self.skipped),
@@ -499,6 +604,10 @@ class _ScanSink:
         return bool(np.linalg.norm(dT[:3, 3]) >= a or ang >= b)
 
     def frame(self, stamp: int, T: NDArray[np.float64] | None, cp: _Payload, dp: _Payload, nbytes: int) -> None:
+        if self.stamp_span is None:
+            self.stamp_span = (stamp, stamp)
+        else:
+            self.stamp_span = (self.stamp_span[0], stamp)
         scan_id = self.task.scan_id if self.split is None else self._scan_for(stamp)
         self.last_stamp = stamp
         if scan_id != self.scan_id:
@@ -525,8 +634,12 @@ class _ScanSink:
         assert self.camera is not None
         if self.camera.camera_id not in self.w._cameras:
             self.w.add_camera(self.camera)
-        cb, ca, csize = self.fw.color(cp, self.names[0])
-        db, da, dsize = self.fw.depth(dp, self.names[1])
+        try:
+            cb, ca, csize = self.fw.color(cp, self.names[0])
+            db, da, dsize = self.fw.depth(dp, self.names[1])
+        except ImageDataError as exc:
+            self._corrupt(stamp, exc)
+            return
         cam = self.camera
         if ca is not None and self.task.kind == "scannet" and csize != dsize:
             import cv2
@@ -551,6 +664,17 @@ class _ScanSink:
         if self.progress is not None:
             self.progress(1, nbytes)
 
+    def _corrupt(self, stamp: int, exc: ImageDataError) -> None:
+        """A damaged image: refused with ``strict``, else the frame is skipped with a warning."""
+        where = f"{exc.where}: frame at stamp {stamp / 1e9:.9f} s ({stamp} ns)"
+        if self.cfg.strict:
+            raise ConversionError(f"{where}: {exc.reason}; refused by --strict (without it the frame is skipped)")
+        self.skipped["corrupt_image"] += 1
+        n = self.skipped["corrupt_image"]
+        if n <= _MAX_WARNINGS:
+            log.warning("%s: %s; frame skipped%s", where, exc.reason,
+                        "" if n < _MAX_WARNINGS else " (further corrupt images of this recording are only counted)")
+
     def abort_scan(self) -> None:
         """Drop the scan being written (an error stops the task)."""
         if self.sw is not None:
@@ -560,10 +684,48 @@ class _ScanSink:
     def finish(self, asm_skipped: Counter[str]) -> list[ScanResult]:
         self.skipped.update(asm_skipped)
         if self.scan_id is None and not self.results:
-            raise ConversionError(f"{self.task.source}: no frame could be converted (skipped: "
-                                  f"{dict(self.skipped) or 'no colour frames'}); check the topics and tolerances")
+            raise ConversionError(f"{self.task.source}: no frame could be converted: "
+                                  f"{explain_nothing(self.skipped, self.cfg, self.diagnosis)}")
         self._close_scan()
         return self.results
+
+
+SKIP_KINDS = {"no_depth": "color", "duplicate_stamp": "color", "out_of_order": "color", "no_color": "depth",
+              "no_pose": "frames", "nonfinite_pose": "frames", "corrupt_image": "frames"}
+"""What each skip reason counts: colour images, depth images or (colour + depth) frames."""
+
+
+def _span_s(span: tuple[int, int] | None) -> str:
+    return "none" if span is None else f"[{span[0] / 1e9:.3f}, {span[1] / 1e9:.3f}] s"
+
+
+def explain_nothing(skipped: Counter[str], cfg: ConvertConfig, diag: dict[str, Any]) -> str:
+    """Why no frame was converted, and which settings would help (one line)."""
+    color_topic, depth_topic = diag.get("names", ("colour", "depth"))
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(skipped.items()) if v) or "none"
+    main = max(((v, k) for k, v in skipped.items() if v and k != "no_color"), default=(0, ""))[1]
+    if not main:
+        hint = (f"no colour image was read from {color_topic}" if not skipped.get("no_color") else
+                f"{skipped['no_color']} depth images but no colour image on {color_topic}; check --color-topic")
+    elif main == "no_depth":
+        near = diag.get("nearest_miss_ns")
+        hint = (f"no depth image within sync_tolerance_s = {cfg.sync_tolerance_s:g} s of the colour stamps"
+                + (f" (the nearest was {near / 1e9:.3f} s away)" if near is not None else
+                   f" (no depth image on {depth_topic} near them)")
+                + "; raise --sync-tolerance or check --depth-topic")
+    elif main == "no_pose":
+        hint = (f"no pose within max_pose_gap_s = {cfg.max_pose_gap_s:g} s / pose_tolerance_s = "
+                f"{cfg.pose_tolerance_s:g} s of the frame stamps (pose samples span "
+                f"{_span_s(diag.get('pose_span'))}, frames {_span_s(diag.get('frame_span'))}); check --poses, or "
+                f"raise max_pose_gap_s, pose_tolerance_s or buffer_s (now {cfg.buffer_s:g} s) with --config")
+    elif main == "nonfinite_pose":
+        hint = "every pose has NaN or infinite values; check the pose source (--poses)"
+    elif main == "corrupt_image":
+        hint = "every frame has a damaged image (see the warnings above; --image-check sets the check)"
+    else:
+        hint = (f"colour header stamps repeat or go backwards by more than buffer_s = {cfg.buffer_s:g} s; "
+                f"raise buffer_s with --config")
+    return f"{hint} (skipped: {counts})"
 
 
 def open_task_writer(task: ScanTask) -> Any:
@@ -572,6 +734,31 @@ def open_task_writer(task: ScanTask) -> Any:
 
     return DatasetWriter(task.out, color_encoding=task.color_encoding, overwrite=True, resume=True,
                          threads=task.threads, direct_io=task.direct_io, image_layout=task.image_layout)
+
+
+def _release_rule(asm: _Assembler, poses: _PoseSource, cfg: ConvertConfig) -> Callable[[], bool]:
+    """Whether the oldest held colour frame is due, by header stamps only (log time plays no part).
+
+    It is due once the image streams' header time has moved ``buffer_s`` past it (later colour
+    frames that arrive out of order are sorted in meanwhile) and its partners are complete: a depth
+    image stamped beyond its sync tolerance has arrived and every pose sample its lookup uses
+    (:meth:`_PoseSource.ready`); or, whatever is missing, once the image streams have moved
+    ``buffer_s + max_pose_gap_s`` past it (a partner that late is taken to be lost). Memory is
+    bounded by that window of frames.
+    """
+    hold = int(cfg.buffer_s * 1e9)
+    window = int((cfg.buffer_s + cfg.max_pose_gap_s) * 1e9)
+    tol = asm.tol
+    colors = asm.colors
+
+    def due() -> bool:
+        s = colors[0][0]
+        late = asm.image_h - s
+        if late > window:
+            return True
+        return late >= hold and asm.depth_h >= s + tol and poses.ready(s)
+
+    return due
 
 
 def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None, writer: Any
@@ -589,32 +776,32 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
         if cfg.poses and poses.kind == "tf" and not topics["tf"] and not topics["tf_static"] and not cfg.static_transforms:
             raise ConversionError(f"{where}: /tf: no tf2_msgs/TFMessage topic for --poses {cfg.poses}")
         asm = _Assembler(int(cfg.sync_tolerance_s * 1e9))
-        fw = _FrameWriter(task.color_encoding, cfg.depth_scale_m or 0.001, where)
+        fw = _FrameWriter(task.color_encoding, cfg.depth_scale_m or 0.001, where, cfg.image_check)
         try:
             sink = _ScanSink(task, cfg, writer, fw, (topics["color"], topics["depth"]), progress)
             wanted = {topics["color"], topics["depth"], topics["camera_info"], *topics["tf"], *topics["tf_static"]}
             if poses.odom_topic:
                 wanted.add(poses.odom_topic)
-            window = int((cfg.buffer_s + cfg.max_pose_gap_s) * 1e9)
             color_t, depth_t, info_t = topics["color"], topics["depth"], topics["camera_info"]
             static_t = set(topics["tf_static"])
             pending_bytes = 0
-
             colors = asm.colors
+            due = _release_rule(asm, poses, cfg)
 
-            def emit(before: int | None) -> None:
+            def emit(final: bool = False) -> None:
+                """Write the held colour frames whose partners can no longer arrive (all if ``final``)."""
                 nonlocal pending_bytes
-                if before is not None and (not colors or colors[0][0] >= before):
-                    return  # nothing old enough yet (checked per message: keep it cheap)
                 if sink.camera is None:
-                    if before is not None:
+                    if not final:
                         return
                     raise ConversionError(f"{where}: {info_t}: no CameraInfo message; expected the colour camera's "
                                           f"intrinsics")
-                for stamp, cp, dp in asm.ready(before):
-                    T = poses.at(stamp)
-                    sink.frame(stamp, T, cp, dp, pending_bytes)
-                    pending_bytes = 0
+                while colors and (final or due()):
+                    item = asm.pop()
+                    if item is not None:
+                        stamp, cp, dp = item
+                        sink.frame(stamp, poses.at(stamp), cp, dp, pending_bytes)
+                        pending_bytes = 0
 
             # intrinsics come from the first CameraInfo: read it first, then leave the topic out
             for conn, _, raw in rec.raw_messages({info_t}):
@@ -628,7 +815,7 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                 wanted.discard(info_t)
             read_bytes = 0
             src_file, cdr = rec.file, rec.is_cdr
-            for conn, log_t, raw, foff in rec.located_messages(wanted):
+            for conn, _, raw, foff in rec.located_messages(wanted):
                 topic = conn.topic
                 n_raw = len(raw)
                 pending_bytes += n_raw
@@ -649,21 +836,25 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                             poses.optical = cfg.camera_frame or frame_id.lstrip("/")
                     else:
                         asm.add_depth(stamp, payload)
-                    if colors and colors[0][0] < log_t - window:
-                        emit(log_t - window)
+                    if colors:
+                        emit()
                     continue
                 if conn.msgtype == _TF:
                     static = topic in static_t
                     samples = parse_tf_message(raw, cdr)  # header, frames and 7 floats: no full message
                     for smp in (rec.tf_transforms(raw, topic) if samples is None else samples):
                         tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
-                    if colors and colors[0][0] < log_t - window:
-                        emit(log_t - window)
+                    if colors:
+                        emit()
                     continue
                 if topic == poses.odom_topic:
                     poses.add_odom(rec.deserialize(raw, conn.msgtype, topic))
-                emit(log_t - window)
-            emit(None)
+                if colors:
+                    emit()
+            emit(final=True)
+            asm.skipped.update(Counter(no_color=len(asm.depth_stamps)))
+            sink.diagnosis.update(nearest_miss_ns=asm.nearest_miss_ns, pose_span=poses.span(),
+                                  frame_span=sink.stamp_span)
             # the report counts the whole recording as input (topics not needed were not read)
             sink.bytes_in += max(0, rec.size_bytes - read_bytes)
             return sink.finish(asm.skipped)
@@ -692,18 +883,20 @@ def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
         asm.add_color(s, _Payload("file", p))
     for s, p in fr.depths:
         asm.add_depth(s, _Payload("file", p))
-    fw = _FrameWriter(task.color_encoding, fr.depth_scale_m, where)
+    fw = _FrameWriter(task.color_encoding, fr.depth_scale_m, where, cfg.image_check)
     sink = _ScanSink(task, cfg, writer, fw, ("rgb", "depth"), progress)
     try:
         cid = cfg.camera_id or task.camera_ids.get("") or "camera"
         sink.camera = CameraIntrinsics(cid, fr.width, fr.height, *fr.K, depth_scale_m=0.001)
-        for stamp, cp, dp in asm.ready(None):
+        for stamp, cp, dp in asm.drain():
             if fr.poses_exact and not cfg.poses:
                 T = fr.poses_exact.get(stamp)
             else:
                 T = poses.at(stamp)
             nbytes = Path(cp.obj).stat().st_size + Path(dp.obj).stat().st_size
             sink.frame(stamp, T, cp, dp, nbytes)
+        sink.diagnosis.update(nearest_miss_ns=asm.nearest_miss_ns, pose_span=poses.span(),
+                              frame_span=sink.stamp_span)
         return sink.finish(asm.skipped)
     except BaseException:
         sink.abort_scan()

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from psg_data.errors import FormatError, PsgDataError
+from psg_data.schemas._camera_checks import intrinsics_problems
 from psg_data.schemas._image_headers import parse_image_header, read_image_header
 from psg_data.schemas._manifest import manifest_from_dict
 from psg_data.schemas._tables import (
@@ -217,16 +218,8 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
         cam = cols["cameras"]
         for i, cid in enumerate(cam["camera_id"]):
             w, h = cam["width"][i], cam["height"][i]
-            fx, fy, cx, cy = cam["fx"][i], cam["fy"][i], cam["cx"][i], cam["cy"][i]
-            if w <= 0 or h <= 0:
-                c.add(rel, "width/height", f"image size {w}x{h}, expected positive", i)
-            for fname, v in (("fx", fx), ("fy", fy)):
-                if not (np.isfinite(v) and 0 < v <= 50 * max(w, h, 1)):
-                    c.add(rel, fname, f"focal length {v}, expected a finite value in (0, 50 x image size]", i)
-            if not (np.isfinite(cx) and -0.5 <= cx <= w - 0.5 + 1e-9):
-                c.add(rel, "cx", f"principal point x {cx}, expected within [-0.5, width - 0.5] = [-0.5, {w - 0.5}]", i)
-            if not (np.isfinite(cy) and -0.5 <= cy <= h - 0.5 + 1e-9):
-                c.add(rel, "cy", f"principal point y {cy}, expected within [-0.5, height - 0.5] = [-0.5, {h - 0.5}]", i)
+            for fname, what in intrinsics_problems(w, h, cam["fx"][i], cam["fy"][i], cam["cx"][i], cam["cy"][i]):
+                c.add(rel, fname, what, i)
             if not (np.isfinite(cam["depth_scale_m"][i]) and cam["depth_scale_m"][i] > 0):
                 c.add(rel, "depth_scale_m", f"{cam['depth_scale_m'][i]}, expected a positive number (0.001 for mm)", i)
             if cam["distortion_model"][i] not in ("none", "plumb_bob", "rational_polynomial", "equidistant"):

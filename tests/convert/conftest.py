@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -86,12 +88,28 @@ def tiny_dataset(tmp_path: Path) -> Path:
     return make_dataset(tmp_path / "canon")
 
 
+COLOR_TOPIC = "/camera/color/image_raw"
+DEPTH_TOPIC = "/camera/aligned_depth_to_color/image_raw"
+
+
 def write_bag(path: Path, fmt: str = "ros1", *, n: int = 4, w: int = W, h: int = H, color: str | None = "rgb8",
               depth: str | None = "16UC1", info: bool = True, tf: bool = True, tf_static: bool = True,
               depth_size: tuple[int, int] | None = None, duplicate: bool = False, nan_pose_at: int | None = None,
               t0: int = 1_700_000_000_000_000_000, period_ns: int = 100_000_000,
-              extra_topics: bool = False) -> Path:
-    """A hand-made recording with chosen defects (poses: pose(i, 0) in the map frame)."""
+              extra_topics: bool = False, log_lag_ns: int = 0, image_latency_ns: int = 0, tf_latency_ns: int = 0,
+              late: dict[int, int] | None = None, tf_period: int = 1, depth_stamp_offset_ns: int = 0,
+              tf_stamp_offset_ns: int = 0,
+              payload: Callable[[str, int, bytes], bytes] | None = None) -> Path:
+    """A hand-made recording with chosen defects (poses: pose(i, 0) in the map frame).
+
+    ``header.stamp`` of frame i is ``t0 + i * period_ns``; its log time is that plus a few ms, plus
+    ``log_lag_ns`` (every message: a re-recorded bag), ``image_latency_ns`` (colour, depth and
+    CameraInfo: a camera's latency) or ``tf_latency_ns`` (/tf), plus ``late[i]`` for the colour and
+    depth images of frame i (logged after later frames: out of order in header time). /tf is
+    published every ``tf_period`` frames; depth and /tf header stamps may be offset from the colour
+    stamps by ``depth_stamp_offset_ns`` / ``tf_stamp_offset_ns``. ``color``: an Image encoding, or ``jpeg`` / ``png`` for a
+    CompressedImage; ``payload(topic, i, data)`` may replace the encoded bytes of a CompressedImage.
+    """
     from psg_data.synth._raw_export import (
         STATIC_BASE_CAMERA_LINK,
         R_CAMERA_LINK_OPTICAL,
@@ -110,12 +128,14 @@ def write_bag(path: Path, fmt: str = "ros1", *, n: int = 4, w: int = W, h: int =
                                             "rtabmap_ros/msg/Info"))
     bw = _BagWriter(path, fmt, msgs)
     fid = "camera_color_optical_frame"
+    compressed_color = color in ("jpeg", "png")
+    color_topic = COLOR_TOPIC + ("/compressed" if compressed_color else "")
+    depth_topic = DEPTH_TOPIC + ("/compressedDepth" if depth == "compressedDepth" else "")
     if color:
-        bw.connection("/camera/color/image_raw", "sensor_msgs/msg/Image")
+        bw.connection(color_topic, "sensor_msgs/msg/CompressedImage" if compressed_color else "sensor_msgs/msg/Image")
     if depth:
-        t = "sensor_msgs/msg/CompressedImage" if depth == "compressedDepth" else "sensor_msgs/msg/Image"
-        name = "/camera/aligned_depth_to_color/image_raw" + ("/compressedDepth" if depth == "compressedDepth" else "")
-        bw.connection(name, t)
+        bw.connection(depth_topic, "sensor_msgs/msg/CompressedImage" if depth == "compressedDepth" else
+                      "sensor_msgs/msg/Image")
     if info:
         bw.connection("/camera/color/camera_info", "sensor_msgs/msg/CameraInfo")
     if tf:
@@ -127,45 +147,64 @@ def write_bag(path: Path, fmt: str = "ros1", *, n: int = 4, w: int = W, h: int =
     cl_opt = np.eye(4)
     cl_opt[:3, :3] = R_CAMERA_LINK_OPTICAL
     T_base_opt = STATIC_BASE_CAMERA_LINK @ cl_opt
+    events: list[tuple[int, int, str, Any]] = []
+
+    def push(topic: str, log_ns: int, msg: Any) -> None:
+        events.append((log_ns + log_lag_ns, len(events), topic, msg))
+
     if tf_static:
-        bw.push("/tf_static", t0 - 10_000_000, msgs.tf_message(t0, [("base_link", "camera_link", STATIC_BASE_CAMERA_LINK),
-                                                                   ("camera_link", fid, cl_opt)]))
+        push("/tf_static", t0 - 10_000_000, msgs.tf_message(t0, [("base_link", "camera_link", STATIC_BASE_CAMERA_LINK),
+                                                                ("camera_link", fid, cl_opt)]))
+    late = late or {}
     for i in range(n):
         t = t0 + i * period_ns
+        lat = image_latency_ns + late.get(i, 0)
         c, d = images(i, 0, w, h)
         if color:
-            m = msgs.image(t, fid, c, "rgb8")
-            if color != "rgb8":
-                m = msgs.T["sensor_msgs/msg/Image"](header=m.header, height=m.height, width=m.width, encoding=color,
-                                                    is_bigendian=0, step=m.step, data=m.data)
-            bw.push("/camera/color/image_raw", t + 7_000_000, m)
+            if compressed_color:
+                ext = ".jpg" if color == "jpeg" else ".png"
+                data = cv2.imencode(ext, cv2.cvtColor(c, cv2.COLOR_RGB2BGR))[1].tobytes()
+                if payload is not None:
+                    data = payload(color_topic, i, data)
+                m = msgs.compressed(t, fid, f"rgb8; {color} compressed bgr8", data)
+            else:
+                m = msgs.image(t, fid, c, "rgb8")
+                if color != "rgb8":
+                    m = msgs.T["sensor_msgs/msg/Image"](header=m.header, height=m.height, width=m.width,
+                                                        encoding=color, is_bigendian=0, step=m.step, data=m.data)
+            push(color_topic, t + 7_000_000 + lat, m)
             if duplicate and i == 1:
-                bw.push("/camera/color/image_raw", t + 9_000_000, msgs.image(t, fid, c, "rgb8"))
+                push(color_topic, t + 9_000_000 + lat, msgs.image(t, fid, c, "rgb8"))
+        td = t + depth_stamp_offset_ns
         if depth:
             dw, dh = depth_size or (w, h)
             dd = cv2.resize(d, (dw, dh), interpolation=cv2.INTER_NEAREST)
             if depth == "compressedDepth":
                 png = cv2.imencode(".png", dd)[1].tobytes()
-                bw.push("/camera/aligned_depth_to_color/image_raw/compressedDepth", t + 8_000_000,
-                        msgs.compressed(t, fid, "16UC1; compressedDepth png", make_compressed_depth(png)))
+                if payload is not None:
+                    png = payload(depth_topic, i, png)
+                push(depth_topic, t + 8_000_000 + lat,
+                     msgs.compressed(td, fid, "16UC1; compressedDepth png", make_compressed_depth(png)))
             elif depth == "32FC1":
-                bw.push("/camera/aligned_depth_to_color/image_raw", t + 8_000_000,
-                        msgs.image(t, fid, dd.astype(np.float32) / 1000.0, "32FC1"))
+                push(depth_topic, t + 8_000_000 + lat, msgs.image(td, fid, dd.astype(np.float32) / 1000.0, "32FC1"))
             else:
-                bw.push("/camera/aligned_depth_to_color/image_raw", t + 8_000_000, msgs.image(t, fid, dd, depth))
+                push(depth_topic, t + 8_000_000 + lat, msgs.image(td, fid, dd, depth))
         if info:
-            bw.push("/camera/color/camera_info", t + 6_000_000, msgs.camera_info(t, fid, camera_for(w, h)))
-        if tf:
+            push("/camera/color/camera_info", t + 6_000_000 + image_latency_ns, msgs.camera_info(t, fid, camera_for(w, h)))
+        if tf and (i % tf_period == 0 or i == n - 1):
             T = pose(i, 0)
             if nan_pose_at == i:
                 T = T.copy()
                 T[0, 3] = np.nan
             T_ob = T @ invert(T_base_opt)
-            bw.push("/tf", t + 12_000_000, msgs.tf_message(t, [("map", "odom", np.eye(4)), ("odom", "base_link", T_ob)]))
+            push("/tf", t + 12_000_000 + tf_latency_ns,
+                 msgs.tf_message(t + tf_stamp_offset_ns, [("map", "odom", np.eye(4)), ("odom", "base_link", T_ob)]))
         if extra_topics:
-            bw.push("/rtabmap/info", t + 15_000_000, msgs.T["rtabmap_ros/msg/Info"](
+            push("/rtabmap/info", t + 15_000_000, msgs.T["rtabmap_ros/msg/Info"](
                 header=msgs.header(t, "map"), ref_id=i, loop_closure=0.0))
-        bw.flush(before_ns=t)
+    for log_ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):  # recorded in log-time order
+        bw.push(topic, log_ns, msg)
+    bw.flush()
     bw.close()
     return path
 

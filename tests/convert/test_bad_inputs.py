@@ -112,8 +112,8 @@ def test_duplicate_timestamps_are_skipped_and_reported(tmp_path: Path) -> None:
     bag = write_bag(tmp_path / "a.bag", duplicate=True)
     res = CliRunner().invoke(main, ["convert", str(bag), str(tmp_path / "out")])
     assert res.exit_code == 0
-    assert "skipped 1 frames (duplicate_stamp 1)" in res.stdout
-    assert "1 frames skipped: duplicate_stamp" in res.stderr
+    assert "skipped 1 colour images (duplicate_stamp 1)" in res.stdout
+    assert "1 colour images skipped: duplicate_stamp" in res.stderr
     ds = open_dataset(tmp_path / "out")
     assert len(ds.scan("a")) == 4 and ds.info.extra["convert"]["report"]["skipped"] == {"duplicate_stamp": 1}
 

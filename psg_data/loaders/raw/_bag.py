@@ -12,6 +12,7 @@ import logging
 import os
 import sqlite3
 import struct
+import zlib
 from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -293,10 +294,81 @@ class _Ros1Reader:
         return _ros1_typestore(msgtype, c.digest, c.msgdef.data).deserialize_ros1(bytes(raw), msgtype)
 
 
+@functools.lru_cache(maxsize=256)
+def _ros2_typestore(msgtype: str, fmt: str, msgdef: str) -> Any:
+    """A typestore holding ``msgtype`` from its connection's definition (ROS 2 / MCAP recordings).
+
+    Built only for the types a conversion deserialises, so that a topic whose definition rosbags
+    cannot parse (e.g. rosbag2 service events, whose schema is the raw ``.srv`` text) does not
+    make the recording unreadable. Without a definition, the ROS 2 Humble types are used.
+    """
+    from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+    if fmt not in ("MSG", "IDL") or not msgdef.strip():
+        return get_typestore(Stores.ROS2_HUMBLE)
+    ts = get_typestore(Stores.EMPTY)
+    if fmt == "MSG":
+        ts.register(get_types_from_msg(msgdef, msgtype))
+    else:
+        sep = "=" * 80 + "\n"
+        parts = [p.split("\n", 1)[1] for p in msgdef.split(sep)[1:]] if msgdef.startswith(f"{sep}IDL: ") else [msgdef]
+        for idl in parts:
+            ts.register(get_types_from_idl(idl))
+    return ts
+
+
+class _Ros2Reader:
+    """A ROS 2 bag (sqlite3 or MCAP storage) or a bare MCAP file, read with ``rosbags.rosbag2.Reader``.
+
+    Unlike rosbags' AnyReader, message definitions are parsed per type when a message of that type
+    is deserialised, not for every topic when the recording is opened.
+    """
+
+    is2 = True
+    fd = None
+    file = None
+
+    def __init__(self, path: Path) -> None:
+        from rosbags.rosbag2 import Reader
+
+        self.path = path
+        self._bag = Reader(path)
+        self.connections: list[Any] = []
+        self._by_type: dict[str, Any] = {}
+
+    def open(self) -> None:
+        self._bag.open()
+        self.connections = list(self._bag.connections)
+        for c in self.connections:
+            self._by_type.setdefault(c.msgtype, c)
+
+    def close(self) -> None:
+        self._bag.close()
+
+    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any]]:
+        yield from self._bag.messages(connections=list(connections) or self.connections)
+
+    def deserialize(self, raw: Any, msgtype: str) -> Any:
+        c = self._by_type[msgtype]
+        md = c.msgdef
+        return _ros2_typestore(msgtype, md.format.name, md.data or "").deserialize_cdr(bytes(raw), msgtype)
+
+
+_READ_ERRORS = (OSError, EOFError, struct.error, sqlite3.DatabaseError, AssertionError, KeyError, ValueError,
+                IndexError, MemoryError, zlib.error)
+_READER_MODULES = ("rosbags", "apsw", "mcap", "lz4", "zstandard", "backports.zstd", "zstd")
+"""Exceptions of these libraries while reading a recording are the recording's fault (corrupt data)."""
+
+
+def _is_read_error(exc: BaseException) -> bool:
+    return isinstance(exc, _READ_ERRORS) or any(type(exc).__module__.startswith(m) for m in _READER_MODULES)
+
+
 def _wrap(path: Path, exc: BaseException) -> ConversionError:
-    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return ConversionError(f"{path}: unreadable or truncated recording ({text}); expected a complete, indexed "
-                           f"ROS 1 bag, ROS 2 bag or MCAP file")
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    what = type(exc).__name__ + (f": {text}" if text else "")
+    return ConversionError(f"{path}: unreadable or truncated recording ({what[:200]}); expected a complete, "
+                           f"indexed ROS 1 bag, ROS 2 bag or MCAP file")
 
 
 class RosRecording:
@@ -332,23 +404,19 @@ class RosRecording:
         self.close()
 
     def open(self) -> None:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-
         kept = _KEPT.pop(self._key(), None)
         if kept is not None:  # opened (and indexed) moments ago by another RosRecording of this file
             self._reader = kept
             return
         try:
-            if self.format == "ros1":
-                self._reader = _Ros1Reader(self.path)
-            else:
-                self._reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+            self._reader = _Ros1Reader(self.path) if self.format == "ros1" else _Ros2Reader(self.path)
             self._reader.open()
         except ConversionError:
             raise
         except Exception as exc:  # rosbags raises many types for damaged files
             self._reader = None
+            if not _is_read_error(exc):
+                raise
             raise _wrap(self.path, exc) from exc
 
     def close(self, keep: bool = False) -> None:
@@ -404,12 +472,10 @@ class RosRecording:
             else:
                 for c, t, raw in self._reader.messages(connections=conns):
                     yield c, t, raw, None
-        except (OSError, EOFError, struct.error, sqlite3.DatabaseError, AssertionError, KeyError, ValueError) as exc:
+        except Exception as exc:  # corrupt data found while reading (every reader library's own types)
+            if not _is_read_error(exc):
+                raise
             raise _wrap(self.path, exc) from exc
-        except Exception as exc:
-            if type(exc).__module__.startswith("rosbags"):
-                raise _wrap(self.path, exc) from exc
-            raise
 
     def deserialize(self, raw: bytes, msgtype: str, topic: str) -> Any:
         try:

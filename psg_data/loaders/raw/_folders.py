@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from psg_data.errors import ConversionError
 
 __all__ = ["FolderRecording", "folder_format", "read_tum_folder", "read_scannet_folder", "parse_stamp_s",
-           "read_tum_poses"]
+           "read_tum_poses", "check_intrinsics"]
 
 
 def parse_stamp_s(text: str, where: str) -> int:
@@ -72,15 +72,49 @@ def folder_format(path: str | Path) -> str | None:
     return None
 
 
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConversionError(f"{path}: not a text file (byte {exc.start} is not UTF-8); expected {what}") from exc
+    except OSError as exc:
+        raise ConversionError(f"{path}: cannot read ({exc.strerror or exc}); expected {what}") from exc
+
+
 def _list_file(path: Path) -> list[list[str]]:
     if not path.is_file():
         raise ConversionError(f"{path}: missing; expected a TUM RGB-D list file")
     rows = []
-    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for n, line in enumerate(_read_text(path, "a TUM RGB-D list file").splitlines(), start=1):
         line = line.strip()
         if line and not line.startswith("#"):
             rows.append([f"{path}:{n}", *line.split()])
     return rows
+
+
+def _image_list(folder: Path, name: str) -> list[tuple[int, Path]]:
+    """``timestamp filename`` rows of a TUM list file, every listed image present."""
+    out = []
+    for where, *cols in _list_file(folder / name):
+        if len(cols) != 2:
+            raise ConversionError(f"{where}: expected 'timestamp filename', got {len(cols)} value(s)")
+        f = folder / cols[1]
+        if not f.is_file():
+            raise ConversionError(f"{where}: {cols[1]}: listed image not found in {folder}; expected every image "
+                                  f"listed in {name} to exist")
+        out.append((parse_stamp_s(cols[0], where), f))
+    return out
+
+
+def _numbers(text: str, where: str, what: str) -> NDArray[np.float64]:
+    """Whitespace- or comma-separated numbers (NaN and inf are refused)."""
+    try:
+        vals = np.array([float(t) for t in text.replace(",", " ").split()], dtype=float)
+    except ValueError as exc:
+        raise ConversionError(f"{where}: expected {what} as numbers ({exc})") from exc
+    if not np.all(np.isfinite(vals)):
+        raise ConversionError(f"{where}: expected {what} as finite numbers, got {text.split()}")
+    return vals
 
 
 def read_tum_poses(path: str | Path) -> list[tuple[int, NDArray[np.float64], NDArray[np.float64]]]:
@@ -89,10 +123,7 @@ def read_tum_poses(path: str | Path) -> list[tuple[int, NDArray[np.float64], NDA
     for where, *cols in _list_file(Path(path)):
         if len(cols) != 8:
             raise ConversionError(f"{where}: expected 'timestamp tx ty tz qx qy qz qw', got {len(cols)} values")
-        try:
-            vals = np.array([float(c) for c in cols[1:]])
-        except ValueError as exc:
-            raise ConversionError(f"{where}: expected numbers ({exc})") from exc
+        vals = _numbers(" ".join(cols[1:]), where, "'tx ty tz qx qy qz qw'")
         out.append((parse_stamp_s(cols[0], where), vals[:3], vals[3:]))
     return out
 
@@ -100,17 +131,39 @@ def read_tum_poses(path: str | Path) -> list[tuple[int, NDArray[np.float64], NDA
 def _image_size(path: Path) -> tuple[int, int]:
     from psg_data.loaders.raw._images import inspect_encoded
 
-    with open(path, "rb") as fh:
-        info = inspect_encoded(fh.read(65536))
+    try:
+        with open(path, "rb") as fh:
+            info = inspect_encoded(fh.read(65536))
+    except OSError as exc:
+        raise ConversionError(f"{path}: cannot read ({exc.strerror or exc}); expected a PNG or JPEG image") from exc
     if info is None:
-        raise ConversionError(f"{path}: not a PNG or JPEG image")
+        raise ConversionError(f"{path}: not a PNG or JPEG image (unreadable header); expected the first frame's image")
     return info.width, info.height
+
+
+def check_intrinsics(K: tuple[float, ...], width: int, height: int, where: str) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` checked like CameraInfo and like ``psg-data validate``.
+
+    Raises:
+        ConversionError: naming ``where``, the field and the range expected.
+    """
+    from psg_data.schemas._camera_checks import intrinsics_problems
+
+    try:
+        fx, fy, cx, cy = (float(v) for v in K)
+    except (TypeError, ValueError) as exc:
+        raise ConversionError(f"{where}: expected numbers fx, fy, cx, cy, got {list(K)}") from exc
+    problems = intrinsics_problems(int(width), int(height), fx, fy, cx, cy)
+    if problems:
+        field, what = problems[0]
+        raise ConversionError(f"{where}: {field}: {what} (images are {width}x{height})")
+    return fx, fy, cx, cy
 
 
 def _intrinsics_file(path: Path) -> tuple[float, float, float, float] | None:
     if not path.is_file():
         return None
-    vals = np.array(path.read_text().split(), dtype=float)
+    vals = _numbers(_read_text(path, "intrinsics"), str(path), "'fx fy cx cy' or a 3x3/4x4 intrinsic matrix")
     if vals.size == 4:
         return tuple(float(v) for v in vals)  # type: ignore[return-value]
     if vals.size in (9, 16):
@@ -121,21 +174,33 @@ def _intrinsics_file(path: Path) -> tuple[float, float, float, float] | None:
 
 def read_tum_folder(path: str | Path, intrinsics: list[float] | None, depth_scale_m: float | None) -> FolderRecording:
     p = Path(path)
-    colors = [(parse_stamp_s(c[1], c[0]), p / c[2]) for c in _list_file(p / "rgb.txt")]
-    depths = [(parse_stamp_s(c[1], c[0]), p / c[2]) for c in _list_file(p / "depth.txt")]
+    colors = _image_list(p, "rgb.txt")
+    depths = _image_list(p, "depth.txt")
     if not colors:
         raise ConversionError(f"{p / 'rgb.txt'}: no colour frames listed")
     if not depths:
         raise ConversionError(f"{p / 'depth.txt'}: no depth frames listed; expected a recording with depth")
-    K = _intrinsics_file(p / "intrinsics.txt") or (tuple(intrinsics) if intrinsics else None)
+    K_file = _intrinsics_file(p / "intrinsics.txt")
+    K = K_file or (tuple(intrinsics) if intrinsics else None)
     if K is None or len(K) != 4:
         raise ConversionError(f"{p}: no camera intrinsics; add intrinsics.txt ('fx fy cx cy') or set "
                               f"'intrinsics: [fx, fy, cx, cy]' in the config")
     w, h = _image_size(colors[0][1])
+    K = check_intrinsics(K, w, h, str(p / "intrinsics.txt") if K_file else "config: intrinsics")
     gt = p / "groundtruth.txt"
     poses = read_tum_poses(gt) if gt.is_file() else []
     return FolderRecording(p, "tum", sorted(colors), sorted(depths), w, h, K,  # type: ignore[arg-type]
                            depth_scale_m or 1.0 / 5000.0, poses_tum=poses)
+
+
+def _pose_values(f: Path) -> NDArray[np.float64]:
+    """The numbers of a ScanNet pose file (non-finite ones kept: SensReader writes -inf for a frame
+    without a pose, and such frames are skipped as ``nonfinite_pose``)."""
+    text = _read_text(f, "a 4x4 camera-to-world matrix")
+    try:
+        return np.array([float(t) for t in text.replace(",", " ").split()], dtype=float)
+    except ValueError as exc:
+        raise ConversionError(f"{f}: expected a 4x4 camera-to-world matrix as numbers ({exc})") from exc
 
 
 def read_scannet_folder(path: str | Path, fps: float, start_stamp_ns: int, depth_scale_m: float | None,
@@ -159,15 +224,22 @@ def read_scannet_folder(path: str | Path, fps: float, start_stamp_ns: int, depth
     exact: dict[int, NDArray[np.float64]] = {}
     for i, f in poses.items():
         if i in stamp:
-            vals = np.array(f.read_text().replace(",", " ").split(), dtype=float)
+            vals = _pose_values(f)
             if vals.size != 16:
                 raise ConversionError(f"{f}: expected a 4x4 camera-to-world matrix, got {vals.size} values")
             exact[stamp[i]] = vals.reshape(4, 4)
     w, h = _image_size(deps[min(deps)])
-    K = (_intrinsics_file(p / "intrinsic" / "intrinsic_depth.txt") or _intrinsics_file(p / "intrinsics.txt")
-         or (tuple(intrinsics) if intrinsics else None))
-    if K is None:
+    sources = [p / "intrinsic" / "intrinsic_depth.txt", p / "intrinsics.txt"]
+    K, where = None, "config: intrinsics"
+    for src in sources:
+        K = _intrinsics_file(src)
+        if K is not None:
+            where = str(src)
+            break
+    K = K or (tuple(intrinsics) if intrinsics else None)
+    if K is None or len(K) != 4:
         raise ConversionError(f"{p}: no camera intrinsics; expected intrinsic/intrinsic_depth.txt")
+    K = check_intrinsics(K, w, h, where)
     return FolderRecording(p, "scannet", [(stamp[i], cols[i]) for i in sorted(cols)],
                            [(int(start_stamp_ns + round(i * period)), deps[i]) for i in sorted(deps)],
                            w, h, K, depth_scale_m or 0.001, poses_exact=exact)  # type: ignore[arg-type]

@@ -22,6 +22,7 @@ __all__ = [
     "DEPTH_ENCODINGS",
     "COMPRESSED_DEPTH_HEADER_SIZE",
     "EncodedInfo",
+    "ImageDataError",
     "inspect_encoded",
     "decode_color_image",
     "decode_depth_image",
@@ -38,6 +39,15 @@ COMPRESSED_DEPTH_HEADER_SIZE = 12
 """``compressed_depth_image_transport`` ConfigHeader: int32 format, float32 depthQuantA, depthQuantB."""
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+class ImageDataError(ConversionError):
+    """The data of one image is damaged or does not fit its description (``where``: recording and
+    topic or file; ``reason``: what is wrong). Unlike other ConversionErrors it concerns one frame."""
+
+    def __init__(self, where: str, reason: str) -> None:
+        super().__init__(f"{where}: {reason}")
+        self.where, self.reason = where, reason
 
 
 EncodedInfo = ImageHeader
@@ -58,9 +68,11 @@ def inspect_encoded(data: bytes | memoryview | NDArray[np.uint8]) -> EncodedInfo
 def _rows(msg: Any, bpp: int, where: str) -> NDArray[np.uint8]:
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     data = np.asarray(msg.data, dtype=np.uint8)
+    if h <= 0 or w <= 0:
+        raise ImageDataError(where, f"image of {w}x{h} pixels; expected a positive size")
     if step < w * bpp or data.size < h * step:
-        raise ConversionError(f"{where}: image data holds {data.size} bytes, expected {h}x{step} "
-                              f"(height x step) for {w} pixels of {bpp} bytes per row")
+        raise ImageDataError(where, f"image data holds {data.size} bytes, expected {h}x{step} "
+                                    f"(height x step) for {w} pixels of {bpp} bytes per row")
     return data[: h * step].reshape(h, step)[:, : w * bpp]
 
 
@@ -121,10 +133,14 @@ def decode_compressed_color(data: Any, fmt: str, where: str) -> NDArray[np.uint8
     buf = np.frombuffer(memoryview(data), dtype=np.uint8)
     info = inspect_encoded(buf)
     if info is None:
-        raise ConversionError(f"{where}: unknown compressed image format {fmt!r}; expected JPEG or PNG data")
+        head = bytes(buf[:8])
+        if head[:2] != b"\xff\xd8" and head != _PNG_MAGIC and not any(k in fmt.lower() for k in ("jpeg", "jpg", "png")):
+            raise ConversionError(f"{where}: unknown compressed image format {fmt!r}: the data is neither JPEG nor "
+                                  f"PNG (starts with {head[:4].hex()}); expected JPEG or PNG data")
+        raise ImageDataError(where, f"corrupt image (format {fmt!r}): unreadable JPEG/PNG header")
     img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise ConversionError(f"{where}: corrupt {info.kind.upper()} data in CompressedImage (format {fmt!r})")
+        raise ImageDataError(where, f"corrupt {info.kind.upper()}: OpenCV cannot decode it (format {fmt!r})")
     if img.dtype != np.uint8:
         raise ConversionError(f"{where}: colour {info.kind.upper()} is {img.dtype}; expected 8 bits per channel")
     if img.ndim == 2:
@@ -153,8 +169,8 @@ def compressed_depth_png(data: Any, fmt: str, where: str) -> tuple[memoryview, s
     if len(raw) > n and raw[n:n + 8] == _PNG_MAGIC:
         _, qa, qb = struct.unpack_from("<iff", raw, 0)
         return raw[n:], src_enc, (float(qa), float(qb))
-    raise ConversionError(f"{where}: compressedDepth payload ({len(raw)} bytes, format {fmt!r}) is not a PNG "
-                          f"after the {n}-byte header; expected '16UC1; compressedDepth png'")
+    raise ImageDataError(where, f"compressedDepth payload ({len(raw)} bytes, format {fmt!r}) is not a PNG "
+                                f"after the {n}-byte header; expected '16UC1; compressedDepth png'")
 
 
 def decode_compressed_depth(data: Any, fmt: str, where: str, depth_scale_m: float = 0.001) -> NDArray[np.uint16]:
@@ -171,7 +187,7 @@ def decode_compressed_depth(data: Any, fmt: str, where: str, depth_scale_m: floa
         png, src_enc, qa, qb = memoryview(data).cast("B"), "16UC1", 0.0, 0.0
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise ConversionError(f"{where}: corrupt PNG in depth CompressedImage (format {fmt!r})")
+        raise ImageDataError(where, f"corrupt PNG: OpenCV cannot decode it (format {fmt!r})")
     if img.dtype != np.uint16 or img.ndim != 2:
         raise ConversionError(f"{where}: depth PNG is {img.dtype} with shape {img.shape}; expected single-channel "
                               f"16-bit (format {fmt!r})")

@@ -323,6 +323,26 @@ class TfBuffer:
                 plan.append((p, c, forward))
         return plan
 
+    def horizon(self, source: str, target: str) -> int | None:
+        """Newest stamp up to which every dynamic edge on the path ``source`` -> ``target`` has samples
+        (the smallest of their newest stamps; a static path has no limit), or None without a path."""
+        key = (source, target)
+        plan = self._plans.get(key)
+        if plan is None:
+            edges = self.path(source, target)
+            if edges is None:
+                return None
+            plan = self._plans[key] = self._plan(edges)
+        h = 1 << 62
+        for step in plan:
+            if len(step) == 3:
+                last = self.dynamic[(step[0], step[1])].last_stamp
+                if last is None:
+                    return None
+                if last < h:
+                    h = last
+        return h
+
     def last_dynamic_stamp(self) -> int | None:
         """Smallest over dynamic edges of their newest sample (None if no dynamic edge)."""
         last = [s.last_stamp for s in self.dynamic.values() if s.last_stamp is not None]
