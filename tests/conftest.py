@@ -90,3 +90,35 @@ def user_backend(monkeypatch: pytest.MonkeyPatch):  # type: ignore[no-untyped-de
     matplotlib.use(before)
     assert calls == [], f"library code called matplotlib.use{calls[0]}"
     assert after == "svg", f"the backend changed from svg to {after}"
+
+
+def assert_dataset_agrees(root: Path) -> int:
+    """convert + validate + the loader agree on ``root``: it validates (every image decoded) and every
+    frame of every scan loads. Returns the number of frames."""
+    from psg_data.loaders import open_dataset
+    from psg_data.schemas.validate import validate_dataset
+
+    problems = validate_dataset(root)
+    assert problems == [], [str(p) for p in problems]
+    n = 0
+    with open_dataset(root) as ds:
+        for scan in ds.scans:
+            for fr in scan.frames(prefetch=0):
+                assert fr.color.shape[:2] == fr.depth_m.shape == (fr.camera.height, fr.camera.width)
+                n += 1
+    return n
+
+
+@pytest.fixture(autouse=True)
+def _converted_datasets_agree(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every dataset a test converts is validated and loaded frame by frame as soon as it is written."""
+    from psg_data.convert import _pipeline
+
+    real = _pipeline._convert
+
+    def checked(*args, **kwargs):  # type: ignore[no-untyped-def]
+        report = real(*args, **kwargs)
+        assert assert_dataset_agrees(Path(report.output)) == report.frames
+        return report
+
+    monkeypatch.setattr(_pipeline, "_convert", checked)

@@ -16,9 +16,13 @@ __all__ = ["validate_cmd", "info_cmd"]
 @click.command("validate", cls=ContractCommand)
 @click.argument("path", type=click.Path(path_type=Path))
 @click.option("--no-checksums", is_flag=True, help="Check file sizes only, not SHA-256 checksums (faster).")
+@click.option("--quick", is_flag=True, help="Check image headers only (default: every image checked whole and decoded).")
 @handle_errors
-def validate_cmd(path: Path, no_checksums: bool) -> None:
+def validate_cmd(path: Path, no_checksums: bool, quick: bool) -> None:
     """Check a dataset: manifest, schemas, ids, value ranges, images and checksums.
+
+    Every image is checked whole (PNG chunk CRCs, JPEG markers through EOI) and decoded, and its
+    size and sample format compared with its camera; --quick reads image headers only.
 
     Prints one line per problem (``file[:row]: field: what is wrong, what was expected``) and exits
     1, or prints ``OK`` and exits 0.
@@ -29,7 +33,7 @@ def validate_cmd(path: Path, no_checksums: bool) -> None:
     """
     from psg_data.schemas.validate import validate_dataset
 
-    problems = validate_dataset(path, checksums=not no_checksums)
+    problems = validate_dataset(path, checksums=not no_checksums, decode=not quick)
     if problems:
         for p in problems:
             click.echo(str(p))

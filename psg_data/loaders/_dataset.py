@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import FormatError
+from psg_data.loaders._checks import check_frames, checked_table
 from psg_data.schemas._manifest import DatasetInfo, read_manifest
 from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import TABLES, table_path
@@ -104,9 +105,10 @@ class Dataset:
             if not path.is_file():
                 raise FormatError(f"{path}: missing table {name!r}")
             try:
-                self._arrow[name] = pq.read_table(path)
+                table = pq.read_table(path)
             except (OSError, pa.ArrowException) as exc:
                 raise FormatError(f"{path}: unreadable Parquet ({exc})") from exc
+            self._arrow[name] = checked_table(name, table, str(path), self.info.major)
         return self._arrow[name]
 
     def df(self, name: str) -> pd.DataFrame:
@@ -122,7 +124,8 @@ class Dataset:
     @cached_property
     def cameras(self) -> dict[str, CameraIntrinsics]:
         out = {}
-        for r in self.table("cameras").to_pylist():
+        t = self.table("cameras")
+        for r in t.select([f.name for f in TABLES["cameras"].schema]).to_pylist():  # extra columns ignored
             r["distortion_coeffs"] = tuple(r["distortion_coeffs"] or ())
             out[r["camera_id"]] = CameraIntrinsics(**r)
         return out
@@ -166,6 +169,8 @@ class Dataset:
     @cached_property
     def _frames_by_scan(self) -> dict[str, dict[str, NDArray[Any]]]:
         t = self.table("frames")
+        check_frames(t, set(self.scan_ids), set(self.table("cameras").column("camera_id").to_pylist()),
+                     str(self.root / table_path("frames")))
         scan = np.asarray(t.column("scan_id").to_numpy(zero_copy_only=False))
         order = np.lexsort((t.column("frame_index").to_numpy(), scan))
         cols = {

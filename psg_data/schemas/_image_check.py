@@ -27,7 +27,7 @@ import numpy as np
 
 from psg_data.schemas._image_headers import ImageHeader, parse_image_header
 
-__all__ = ["IMAGE_CHECK_LEVELS", "DamagedImage", "check_image", "check_png", "check_jpeg", "decode_check",
+__all__ = ["IMAGE_CHECK_LEVELS", "DamagedImage", "check_image", "check_png", "check_jpeg", "decode_check", "verify_image",
            "PNG_SIGNATURE", "looks_like_image"]
 
 IMAGE_CHECK_LEVELS = ("none", "structure", "full")
@@ -233,6 +233,20 @@ def check_image(data: Any, level: str = "structure", kind: str | None = None,
         if level == "full":
             decode_check(data, hdr)
     return hdr
+
+
+def verify_image(data: Any, header: ImageHeader) -> None:
+    """What ``psg-data validate`` checks of a stored image: ``structure``, every JPEG marker through
+    EOI, and an OpenCV decode that agrees with the header.
+
+    Raises:
+        DamagedImage: what is wrong.
+    """
+    if header.kind == "png":
+        check_png(data)
+    else:
+        check_jpeg(data, scan=True)
+    decode_check(data, header)
 
 
 def decode_check(data: Any, expect: ImageHeader) -> None:

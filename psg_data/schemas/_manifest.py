@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import zoneinfo
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -11,7 +12,8 @@ from typing import Any
 
 from psg_data.errors import FormatError
 
-__all__ = ["DatasetInfo", "FORMAT_NAME", "FORMAT_VERSION", "read_manifest", "manifest_from_dict", "format_major"]
+__all__ = ["DatasetInfo", "FORMAT_NAME", "FORMAT_VERSION", "read_manifest", "manifest_from_dict", "format_major",
+           "parse_format_version"]
 
 log = logging.getLogger(__name__)
 
@@ -70,16 +72,27 @@ class DatasetInfo:
         return format_major(self.format_version)
 
 
+_VERSION_RE = re.compile(r"(0|[1-9][0-9]*)\.(0|[1-9][0-9]*)")
+
+
+def parse_format_version(version: object) -> tuple[int, int]:
+    """``(major, minor)`` of a format version: a string ``MAJOR.MINOR`` (ValueError otherwise)."""
+    m = _VERSION_RE.fullmatch(version) if isinstance(version, str) else None
+    if m is None:
+        raise ValueError(f"expected a string 'MAJOR.MINOR' (e.g. {FORMAT_VERSION!r}), got {version!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
 def format_major(version: str) -> int:
     """Major number of a ``MAJOR.MINOR`` format version (ValueError if malformed)."""
-    return int(str(version).split(".")[0])
+    return parse_format_version(version)[0]
 
 
-def _major(version: str, where: str) -> int:
+def _major(version: object, where: str) -> int:
     try:
-        return format_major(version)
+        return format_major(version)  # type: ignore[arg-type]
     except ValueError as exc:
-        raise FormatError(f"{where}: format_version: expected 'MAJOR.MINOR', got {version!r}") from exc
+        raise FormatError(f"{where}: format_version: {exc}") from None
 
 
 def manifest_from_dict(data: Any, where: str) -> DatasetInfo:
@@ -96,6 +109,11 @@ def manifest_from_dict(data: Any, where: str) -> DatasetInfo:
             f"{where}: format_version: {version} is newer than this psg-data reads "
             f"({FORMAT_VERSION}); upgrade psg-data to a release that reads format {version.split('.')[0]}.x"
         )
+    if _major(version, where) < 1:
+        raise FormatError(f"{where}: format_version: {version}, expected 1.x or 2.x")
+    if parse_format_version(version) > parse_format_version(FORMAT_VERSION):
+        log.warning("%s: format_version %s is a newer minor version than this psg-data knows (%s): what it "
+                    "added is ignored; psg-data validate cannot check it", where, version, FORMAT_VERSION)
     known = {f.name for f in fields(DatasetInfo)}
     unknown = sorted(set(data) - known)
     if unknown:

@@ -17,7 +17,7 @@ import numpy as np
 from psg_data.errors import FormatError, PsgDataError
 from psg_data.schemas._camera_checks import intrinsics_problems
 from psg_data.schemas._image_headers import parse_image_header, read_image_header
-from psg_data.schemas._manifest import manifest_from_dict
+from psg_data.schemas._manifest import FORMAT_VERSION, manifest_from_dict, parse_format_version
 from psg_data.schemas._tables import (
     DOOR_STATES,
     LABEL_CODES,
@@ -86,13 +86,16 @@ def _check_rotations(c: _Collector, file: str, field: str, mats: np.ndarray, row
                            f"det = {det[j]:.3g}), expected a proper rotation", int(idx[j]))
 
 
-def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool = True) -> list[Problem]:
+def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool = True,
+                     decode: bool = True) -> list[Problem]:
     """Validate the dataset at ``path``; returns every problem found (empty list = valid).
 
     Args:
         checksums: verify the SHA-256 of every file (reads every byte; sizes are always checked).
         images: check that every image exists and that its header matches the camera
             (colour: 8-bit 3-channel; depth: 16-bit single-channel PNG; size = camera size).
+        decode: also check every image whole (PNG chunk CRCs, JPEG markers through EOI) and decode
+            it with OpenCV (``False``: headers only, ``psg-data validate --quick``).
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -121,6 +124,10 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
             field, _, what = rest.partition(": ")
             c.add(MANIFEST_NAME, field or "manifest", what or rest)
     if info is None:
+        return c.problems
+    if parse_format_version(info.format_version) > parse_format_version(FORMAT_VERSION):
+        c.add(MANIFEST_NAME, "format_version", f"{info.format_version} is newer than this psg-data validates "
+                                               f"({FORMAT_VERSION}); upgrade psg-data to validate it")
         return c.problems
 
     # -- tables: presence, readability, schema -------------------------------------------------
@@ -301,7 +308,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                                            f"[{a}, {b}]", j)
 
         if images:
-            _check_images(c, root, cols["frames"], cams, info.color_encoding)
+            _check_images(c, root, cols["frames"], cams, info.color_encoding, decode)
 
     _check_label_tables(c, cols, scan_bounds)
     _check_process_file(c, root, info.extra, cols)
@@ -313,8 +320,10 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
     return c.problems
 
 
-def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str, dict], color_encoding: str) -> None:
-    """Every image exists (whole file or byte range of a tar member) and its header fits its camera."""
+def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str, dict], color_encoding: str,
+                  decode: bool = True) -> None:
+    """Every image exists (whole file or byte range of a tar member), its header fits its camera and
+    (``decode``) it is complete and decodes."""
     rel = table_path("frames")
     n = len(d["scan_id"])
     sizes: dict[str, int | None] = {}
@@ -384,9 +393,29 @@ def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str,
                     if hdr.kind != want or hdr.bit_depth != 8 or hdr.channels != 3:
                         c.add(where, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected "
                                               f"an 8-bit 3-channel {want} (dataset color_encoding)")
+                if decode:
+                    _verify(c, root / rp, off, size, hdr, where)
     finally:
         for fh in fds.values():
             fh.close()  # type: ignore[attr-defined]
+
+
+def _verify(c: _Collector, path: Path, off: int | None, size: int | None, hdr: Any, where: str) -> None:
+    """The whole image: structure checked and decoded (see :func:`~psg_data.schemas._image_check.verify_image`)."""
+    from psg_data.schemas._image_check import DamagedImage, verify_image
+
+    try:
+        with open(path, "rb") as fh:
+            if off is not None:
+                fh.seek(off)
+            data = fh.read() if size is None else fh.read(size)
+    except OSError as exc:
+        c.add(where, "image", f"unreadable ({exc.strerror or exc})")
+        return
+    try:
+        verify_image(data, hdr)
+    except DamagedImage as exc:
+        c.add(where, "image", f"corrupt {hdr.kind.upper()}: {exc}; expected a complete image that decodes")
 
 
 def _tar_member(block: bytes) -> tuple[str, int] | None:

@@ -210,11 +210,17 @@ def test_quick_mode_skips_content_checksums(make_dataset) -> None:
     data = bytearray(p.read_bytes())
     data[-20] ^= 0xFF  # same size, different content (inside IDAT/IEND crc)
     p.write_bytes(bytes(data))
-    assert validate_dataset(root, checksums=False) == []
+    damaged = ("images/scan_001/depth/000000.png: image: corrupt PNG: chunk 'IDAT' at byte 33: CRC mismatch "
+               "(damaged data); expected a complete image that decodes")
+    assert [str(x) for x in validate_dataset(root, checksums=False)] == [damaged]  # the image check sees it
+    assert validate_dataset(root, checksums=False, decode=False) == []
     assert [str(x) for x in validate_dataset(root)] == [
-        "images/scan_001/depth/000000.png: sha256: checksum mismatch: content differs from tables/files.parquet"]
-    code, out, _ = _run("validate", "--no-checksums", str(root))
+        "images/scan_001/depth/000000.png: sha256: checksum mismatch: content differs from tables/files.parquet",
+        damaged]
+    code, out, _ = _run("validate", "--no-checksums", "--quick", str(root))
     assert code == 0 and out.strip() == "OK"
+    code, out, _ = _run("validate", "--no-checksums", str(root))
+    assert code == 1 and out.strip() == damaged
 
 
 def test_info_summary(make_dataset) -> None:
@@ -252,7 +258,9 @@ def test_tar_archive_content_change_is_a_checksum_mismatch(make_dataset) -> None
     data[off + 100] ^= 0xFF
     p.write_bytes(bytes(data))
     assert [str(x) for x in validate_dataset(root)] == [
-        "images/scan_001.tar: sha256: checksum mismatch: content differs from tables/files.parquet"]
+        "images/scan_001.tar: sha256: checksum mismatch: content differs from tables/files.parquet",
+        f"images/scan_001.tar@{off}: image: corrupt PNG: chunk 'IDAT' at byte 33: CRC mismatch (damaged data); "
+        "expected a complete image that decodes"]
 
 
 def test_truncated_tar_archive(make_dataset) -> None:

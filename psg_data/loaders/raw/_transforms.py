@@ -80,7 +80,7 @@ def _interpolate(p: Pose7, r: Pose7, a: float) -> Pose7:
     d = px * rx + py * ry + pz * rz + pw * rw
     if d < 0:
         rx, ry, rz, rw, d = -rx, -ry, -rz, -rw, -d
-    if d > 0.9995:  # nearly parallel: normalised lerp
+    if d > 1.0 - 1e-10:  # parallel to within ~1e-5 rad: normalised lerp (error ~ angle^3, below 1e-15)
         qx, qy, qz, qw = px + a * (rx - px), py + a * (ry - py), pz + a * (rz - pz), pw + a * (rw - pw)
         n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
         qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
