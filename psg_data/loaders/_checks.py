@@ -18,7 +18,7 @@ from psg_data.schemas._tables import TABLES, schema_for
 if TYPE_CHECKING:  # pragma: no cover
     import pyarrow as pa
 
-__all__ = ["checked_table", "check_frames", "UNIQUE_KEY_TABLES"]
+__all__ = ["checked_table", "check_frames", "check_image_bytes", "UNIQUE_KEY_TABLES"]
 
 UNIQUE_KEY_TABLES = ("cameras", "scans", "frames", "rooms", "receptacles", "doors", "objects")
 """Tables whose primary key the loader checks (records are looked up by it)."""
@@ -105,3 +105,19 @@ def check_frames(frames: pa.Table, scan_ids: set[str], camera_ids: set[str], whe
             first = v[np.flatnonzero(dangling)[0]]
             raise FormatError(f"{where}: {col}: dangling id {first!r} in rows {_rows(dangling)}: not in "
                               f"tables/{table}.parquet")
+
+
+def check_image_bytes(data: bytes, where: object, what: str) -> None:
+    """A stored image is complete and undamaged (PNG chunk CRCs, JPEG segments and EOI): OpenCV
+    decodes a truncated JPEG without a word, so the loader checks before it decodes.
+
+    Raises:
+        FormatError: ``where: corrupt colour/depth image (...)``.
+    """
+    from psg_data.schemas._image_check import DamagedImage, check_image
+
+    try:
+        check_image(data, "structure")
+    except DamagedImage as exc:
+        raise FormatError(f"{where}: missing or unreadable {what} image (corrupt: {exc}); psg-data validate lists "
+                          f"every such image") from None

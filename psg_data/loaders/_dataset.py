@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import FormatError
-from psg_data.loaders._checks import check_frames, checked_table
+from psg_data.loaders._checks import check_frames, check_image_bytes, checked_table
 from psg_data.schemas._manifest import DatasetInfo, read_manifest
 from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import TABLES, table_path
@@ -279,10 +279,12 @@ class Scan:
         rgb = np.zeros((0, 0, 3), np.uint8)
         dm = np.zeros((0, 0), np.float32)
         if color:
+            check_image_bytes(cbytes, self._where("color", i), "colour")
             rgb = _decode_rgb(cv2, cbytes)
             if rgb is None:
                 raise FormatError(f"{self._where('color', i)}: missing or unreadable colour image (cannot decode)")
         if depth:
+            check_image_bytes(dbytes, self._where("depth", i), "depth")
             raw = cv2.imdecode(np.frombuffer(dbytes, np.uint8), cv2.IMREAD_UNCHANGED) if dbytes else None
             where = self._where("depth", i)
             if raw is None:
