@@ -31,7 +31,7 @@ from psg_data.convert._scan import (
 )
 from psg_data.errors import ConversionError, PsgDataError
 from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format, release_kept
-from psg_data.loaders.raw._folders import folder_format
+from psg_data.loaders.raw._folders import _list_file, folder_format
 from psg_data.loaders.raw._images import inspect_encoded
 from psg_data.loaders.raw._side import SideData, read_side_files
 from psg_data.writers._safe_output import check_output
@@ -151,8 +151,8 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
     if cfg.color_encoding != "auto":
         return cfg.color_encoding
     if kind == "tum":
-        first = [ln.split() for ln in (src / "rgb.txt").read_text().splitlines() if ln.strip() and ln[0] != "#"]
-        return "jpeg" if first and first[0][1].lower().endswith((".jpg", ".jpeg")) else "png"
+        first = _list_file(src / "rgb.txt")[:1]
+        return "jpeg" if first and first[0][-1].lower().endswith((".jpg", ".jpeg")) else "png"
     if kind == "scannet":
         return "jpeg" if any((src / "color").glob("*.jpg")) else "png"
     rec = RosRecording(src)
@@ -456,6 +456,9 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
         writer.abort(keep_partial=False)
         raise
     report.seconds = time.perf_counter() - t_start
+    for scan_id in report.scans:
+        for w in by_scan[scan_id].warnings:
+            log.warning("%s", w)
     units = {"color": "colour images", "depth": "depth images", "frames": "frames"}
     for kind, reasons in report.skipped_by_kind.items():
         for reason, n in reasons.items():

@@ -107,6 +107,8 @@ class ScanResult:
     source: str
     seconds: float
     passthrough: dict[str, int]
+    warnings: list[str] = field(default_factory=list)
+    """Warnings about the scan (corrupt images skipped), printed when the whole conversion is done."""
     record: dict[str, Any] | None = None
     """The scan as written (``scan``, ``frames``, ``files``; see DatasetWriter.scan_record); not in
     the state file, which a resumed run reads together with the writer's own scan record."""
@@ -551,6 +553,7 @@ class _ScanSink:
         self.bytes_in = 0
         self.skip_current = False
         self.frames_in_scan = 0
+        self.warnings: list[str] = []
         self.stamp_span: tuple[int, int] | None = None
         """First and last stamp of the colour + depth pairs received."""
         self.diagnosis: dict[str, Any] = {"names": names}
@@ -577,13 +580,14 @@ class _ScanSink:
             assert self.camera is not None
             res = ScanResult(self.scan_id, asdict(self.camera), self.sw.n_frames, dict(self.skipped),
                              self.kf_dropped, self.bytes_in - self.bytes_mark, self.task.source,
-                             time.perf_counter() - self.t0, dict(self.fw.passthrough))
+                             time.perf_counter() - self.t0, dict(self.fw.passthrough), list(self.warnings))
             state = Path(self.w.tmp) / STATE_DIR
             state.mkdir(exist_ok=True)
             (state / f"{self.scan_id}.json").write_text(json.dumps(res.state()))
             self.results.append(res)
         self.sw = None
         self.scan_id = None
+        self.warnings = []
         self.skipped = Counter()
         self.kf_dropped = 0
         self.bytes_mark = self.bytes_in
@@ -666,14 +670,17 @@ class _ScanSink:
 
     def _corrupt(self, stamp: int, exc: ImageDataError) -> None:
         """A damaged image: refused with ``strict``, else the frame is skipped with a warning."""
-        where = f"{exc.where}: frame at stamp {stamp / 1e9:.9f} s ({stamp} ns)"
+        where = f"{exc.where}: frame at stamp {stamp // 10**9}.{stamp % 10**9:09d} s"
         if self.cfg.strict:
             raise ConversionError(f"{where}: {exc.reason}; refused by --strict (without it the frame is skipped)")
         self.skipped["corrupt_image"] += 1
         n = self.skipped["corrupt_image"]
-        if n <= _MAX_WARNINGS:
-            log.warning("%s: %s; frame skipped%s", where, exc.reason,
-                        "" if n < _MAX_WARNINGS else " (further corrupt images of this recording are only counted)")
+        if n == 1:
+            self.diagnosis["first_corrupt"] = f"{where}: {exc.reason}"
+        if n <= _MAX_WARNINGS:  # printed once the conversion is done (an error then stays one line)
+            self.warnings.append(f"{where}: {exc.reason}; frame skipped"
+                                 + ("" if n < _MAX_WARNINGS else " (further corrupt images of this scan are only "
+                                                                 "counted)"))
 
     def abort_scan(self) -> None:
         """Drop the scan being written (an error stops the task)."""
@@ -721,7 +728,8 @@ def explain_nothing(skipped: Counter[str], cfg: ConvertConfig, diag: dict[str, A
     elif main == "nonfinite_pose":
         hint = "every pose has NaN or infinite values; check the pose source (--poses)"
     elif main == "corrupt_image":
-        hint = "every frame has a damaged image (see the warnings above; --image-check sets the check)"
+        hint = (f"every frame has a damaged image (the first: {diag.get('first_corrupt', '?')}; --image-check "
+                f"sets the check)")
     else:
         hint = (f"colour header stamps repeat or go backwards by more than buffer_s = {cfg.buffer_s:g} s; "
                 f"raise buffer_s with --config")

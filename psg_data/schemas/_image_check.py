@@ -133,7 +133,8 @@ def check_jpeg(data: Any, *, scan: bool = False) -> None:
     n = len(mv)
     if n < 4 or mv[0] != 0xFF or mv[1] != 0xD8:
         raise DamagedImage("not a JPEG (no SOI marker)")
-    o = _segments(mv, 2, False)
+    st = _Jpeg()
+    o = _segments(mv, 2, st)
     if o < 0:  # EOI before any scan
         raise DamagedImage("EOI before any frame header and scan")
     tail = bytes(mv[max(o, n - _TAIL):])
@@ -146,14 +147,27 @@ def check_jpeg(data: Any, *, scan: bool = False) -> None:
             o = _end_of_scan(arr, o)
             if o < 0:
                 raise DamagedImage(f"truncated: scan data runs to the end without an EOI marker ({n} bytes)")
-            o = _segments(mv, o, True)
+            o = _segments(mv, o, st)
 
 
 _TAIL = 1024
 """Bytes at the end of a JPEG searched for its EOI marker (padding may follow it)."""
 
 
-def _segments(mv: memoryview, o: int, frame: bool) -> int:
+class _Jpeg:
+    """What the segments of a JPEG defined so far (checked as libjpeg would before decoding)."""
+
+    __slots__ = ("components", "sof", "quant", "huff")
+
+    def __init__(self) -> None:
+        self.components: dict[int, int] = {}
+        """component id -> quantisation table id (from the frame header)."""
+        self.sof = -1
+        self.quant: set[int] = set()
+        self.huff: set[tuple[int, int]] = set()
+
+
+def _segments(mv: memoryview, o: int, st: _Jpeg) -> int:
     """Walk marker segments from ``o`` to just past the next SOS header (-1: EOI reached first)."""
     n = len(mv)
     while True:
@@ -166,26 +180,110 @@ def _segments(mv: memoryview, o: int, frame: bool) -> int:
             o += 1
             continue
         if m == 0xD9:
-            if not frame:
-                return -1
-            if o + 2 != n and bytes(mv[o + 2:]).strip(b"\x00\xff"):
+            if st.sof >= 0 and o + 2 != n and bytes(mv[o + 2:]).strip(b"\x00\xff"):
                 raise DamagedImage(f"EOI at byte {o} followed by {n - o - 2} bytes of data")
             return -1
         if m in _NO_LENGTH:
             o += 2
             continue
+        if m < 0xC0:  # 0x02-0xbf are reserved, 0x00 is stuffing: no segment starts with them
+            raise DamagedImage(f"invalid marker 0xff{m:02x} at byte {o}")
         if o + 4 > n:
             raise DamagedImage(f"truncated: segment header at byte {o} runs past the end ({n} bytes)")
         seglen = mv[o + 2] << 8 | mv[o + 3]
         if seglen < 2 or o + 2 + seglen > n:
             raise DamagedImage(f"truncated: segment 0x{m:02x} at byte {o} ({seglen} bytes) runs past the end")
-        if m in _SOF:
-            frame = True
-        elif m == 0xDA and not frame:
-            raise DamagedImage(f"scan at byte {o} before any frame header")
+        body = bytes(mv[o + 4:o + 2 + seglen])
+        check = _SEGMENT_CHECKS.get(m)
+        if check is not None:
+            why = check(body, st, m)
+            if why:
+                raise DamagedImage(f"segment 0x{m:02x} at byte {o}: {why}")
+        elif m in _SOF:
+            why = _sof(body, st, m)
+            if why:
+                raise DamagedImage(f"frame header at byte {o}: {why}")
         o += 2 + seglen
         if m == 0xDA:
             return o
+
+
+def _sof(b: bytes, st: _Jpeg, m: int) -> str | None:
+    if st.sof >= 0:
+        return "a second frame header"
+    if len(b) < 6 or len(b) != 6 + 3 * b[5]:
+        return f"{len(b)} bytes, expected 6 + 3 per component"
+    bits, height, width, nc = b[0], b[1] << 8 | b[2], b[3] << 8 | b[4], b[5]
+    if bits not in (8, 12, 16) or not width or not height or not 1 <= nc <= 4:
+        return f"{bits}-bit {width}x{height} with {nc} components"
+    for k in range(nc):
+        cid, hv, tq = b[6 + 3 * k:9 + 3 * k]
+        if not (1 <= hv >> 4 <= 4 and 1 <= hv & 15 <= 4) or tq > 3:
+            return f"component {cid}: sampling {hv >> 4}x{hv & 15}, quantisation table {tq}"
+        st.components[cid] = tq
+    st.sof = m
+    return None
+
+
+def _dht(b: bytes, st: _Jpeg, _m: int) -> str | None:
+    o = 0
+    while o < len(b):
+        if o + 17 > len(b):
+            return "Huffman table runs past the segment"
+        cls, tid = b[o] >> 4, b[o] & 15
+        counts = b[o + 1:o + 17]
+        total = sum(counts)
+        if cls > 1 or tid > 3 or total > 256 or o + 17 + total > len(b):
+            return f"Huffman table class {cls} id {tid} with {total} codes"
+        code, si = 0, 0
+        for si, c in enumerate(counts, start=1):  # canonical codes: never the all-ones code of a length
+            code += c
+            if code >= (1 << si) and c:
+                return f"Huffman table {cls}/{tid}: {c} codes of length {si} do not fit"
+            code <<= 1
+        if cls == 0 and any(v > 15 for v in b[o + 17:o + 17 + total]):
+            return f"DC Huffman table {tid}: symbol above 15"
+        st.huff.add((cls, tid))
+        o += 17 + total
+    return None
+
+
+def _dqt(b: bytes, st: _Jpeg, _m: int) -> str | None:
+    o = 0
+    while o < len(b):
+        prec, tid = b[o] >> 4, b[o] & 15
+        size = 1 + 64 * (prec + 1)
+        if prec > 1 or tid > 3 or o + size > len(b):
+            return f"quantisation table precision {prec} id {tid} does not fit the segment"
+        st.quant.add(tid)
+        o += size
+    return None
+
+
+def _sos(b: bytes, st: _Jpeg, _m: int) -> str | None:
+    if st.sof < 0:
+        return "scan before any frame header"
+    ns = b[0] if b else 0
+    if not 1 <= ns <= 4 or len(b) != 4 + 2 * ns:
+        return f"{len(b)} bytes for {ns} components"
+    missing_q = sorted({tq for tq in st.components.values()} - st.quant)
+    if missing_q:
+        return f"quantisation table {missing_q[0]} used but not defined"
+    for k in range(ns):
+        cid, tt = b[1 + 2 * k], b[2 + 2 * k]
+        if cid not in st.components or tt >> 4 > 3 or tt & 15 > 3:
+            return f"component {cid} (tables {tt >> 4}/{tt & 15}) is not one of the frame's"
+    ss, se, a = b[1 + 2 * ns], b[2 + 2 * ns], b[3 + 2 * ns]
+    if st.sof in (0xC0, 0xC1) and (ss, se, a) != (0, 63, 0):
+        return f"spectral selection {ss}-{se}, approximation {a:#04x} in a sequential JPEG"
+    return None
+
+
+def _dri(b: bytes, _st: _Jpeg, _m: int) -> str | None:
+    return None if len(b) == 2 else f"{len(b) + 2} bytes, expected 4"
+
+
+_SEGMENT_CHECKS = {0xC4: _dht, 0xDB: _dqt, 0xDA: _sos, 0xDD: _dri}
 
 
 def _end_of_scan(arr: np.ndarray, start: int) -> int:
@@ -236,16 +334,14 @@ def check_image(data: Any, level: str = "structure", kind: str | None = None,
 
 
 def verify_image(data: Any, header: ImageHeader) -> None:
-    """What ``psg-data validate`` checks of a stored image: ``structure``, every JPEG marker through
-    EOI, and an OpenCV decode that agrees with the header.
+    """What ``psg-data validate`` checks of a stored image: ``structure`` and an OpenCV decode that
+    agrees with the header (the same checks the converter applies by default, plus the decode: a
+    dataset ``convert`` wrote validates).
 
     Raises:
         DamagedImage: what is wrong.
     """
-    if header.kind == "png":
-        check_png(data)
-    else:
-        check_jpeg(data, scan=True)
+    check_image(data, "structure", header=header)
     decode_check(data, header)
 
 

@@ -355,7 +355,7 @@ class _Ros2Reader:
 
 
 _READ_ERRORS = (OSError, EOFError, struct.error, sqlite3.DatabaseError, AssertionError, KeyError, ValueError,
-                IndexError, MemoryError, zlib.error)
+                IndexError, MemoryError, OverflowError, zlib.error)
 _READER_MODULES = ("rosbags", "apsw", "mcap", "lz4", "zstandard", "backports.zstd", "zstd")
 """Exceptions of these libraries while reading a recording are the recording's fault (corrupt data)."""
 
