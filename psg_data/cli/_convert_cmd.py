@@ -43,7 +43,9 @@ from psg_data.cli._errors import ContractCommand, check_jobs
                    "through EOI; full: also inflate PNG data and decode JPEG).")
 @click.option("--strict", is_flag=True, default=None,
               help="Refuse the conversion at the first corrupt image (default: skip its frame with a warning).")
-@click.option("--overwrite", is_flag=True, help="Replace OUT if it exists (once the new dataset is complete).")
+@click.option("--overwrite", is_flag=True,
+              help="Replace OUT once the new dataset is complete; only a psg-dataset psg-data wrote (or an empty "
+                   "folder), never an input or a folder holding other files.")
 @click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT",
               help=SCHEDULER_HELP + " Remote workers must see INPUT and OUT (a shared filesystem).")
 @quiet_option
@@ -54,10 +56,11 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
 
     INPUT is a recording (ROS 1 .bag, ROS 2 bag directory with sqlite3 or MCAP storage, .mcap
     file), a TUM RGB-D or ScanNet folder, or a directory of them with side files (site.json,
-    door_states.csv, schedule.csv, scans.csv). Frames that cannot be associated are counted and
-    reported. An interrupted conversion resumes when rerun. Exit codes: 0 done (skipped frames
-    are warnings), 1 bad input or output exists (one "error:" line, nothing left behind), 2 bad
-    command line, 130 interrupted (rerun to resume).
+    door_states.csv, schedule.csv, scans.csv; a single recording converts without them unless
+    --side-dir is given). Frames are associated by header stamps; images and frames that cannot
+    be (or whose images are damaged) are counted and reported. An interrupted conversion resumes
+    when rerun. Exit codes: 0 done (skipped images are warnings), 1 bad input or output (one
+    "error:" line, nothing left behind), 2 bad command line, 130 interrupted (rerun to resume).
 
     \b
     Examples:

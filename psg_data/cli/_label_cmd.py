@@ -26,7 +26,8 @@ __all__ = ["label_cmd"]
               help="detections: footprint margin of the on-top association, metres.")
 @click.option("--doors/--no-doors", default=True, show_default=True,
               help="Also write door-state rows (door_id, 'open'/'closed') and door visibility (datasets with doors).")
-@click.option("--overwrite", is_flag=True, help="Replace labels of this source and recompute visibility.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace labels of this source and recompute visibility (only tables psg-data wrote).")
 @quiet_option
 @handle_errors
 def label_cmd(path: str, source: str, seed: int, valid_file: str | None, observed: str, min_iou: float,

@@ -38,7 +38,9 @@ def _resolution(_ctx: click.Context, _param: click.Parameter, value: str) -> tup
                    "continuous-time one.")
 @click.option("--routine-strength", type=click.FloatRange(0.0, 1.0), default=0.8, show_default=True,
               help="steps-v2: probability that the routine sets the state at a step (0 random walk, 1 clockwork).")
-@click.option("--overwrite", is_flag=True, help="Replace OUT if it exists.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace OUT if psg-data synth wrote it (a psg-dataset, or recordings of --format ros1|...) or it "
+                   "is an empty folder; anything else is refused.")
 @quiet_option
 @handle_errors
 def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, resolution: tuple[int, int],

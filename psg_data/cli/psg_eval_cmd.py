@@ -104,7 +104,9 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool) -> None:
                    "(default: keep them and report them as unreachable).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output directory (default: psg-eval-out/<timestamp>).")
-@click.option("--overwrite", is_flag=True, help="Replace an existing --out directory.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace an existing --out folder written by psg-eval (or an empty one); never the dataset or "
+                   "a folder holding other files.")
 @click.option("--jobs", "-j", type=int, default=1, show_default=True, callback=check_jobs,
               help="Worker processes (-1: all CPUs).")
 @click.option("--scheduler", default=None, metavar="local|tcp://HOST:PORT", help=SCHEDULER_HELP)

@@ -175,3 +175,25 @@ def test_side_table_given_twice(tmp_path: Path, tiny_dataset: Path) -> None:
     raw = export_raw(tiny_dataset, tmp_path / "raw", "ros1")
     shutil.copy(raw / "schedule.csv", raw / "schedule.yaml")
     assert_error(tmp_path, [str(raw)], "expected it once")
+
+
+@pytest.mark.parametrize("exc_name", ["CorruptError", "IOError"])
+def test_database_error_while_iterating_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                    exc_name: str) -> None:
+    """apsw (rosbags' sqlite3 driver) raises its own errors when a damaged page is reached mid-file."""
+    import apsw
+
+    from psg_data.loaders.raw import _bag
+
+    bag = write_bag(tmp_path / "a", "ros2-sqlite3", n=6)
+    real = _bag._Ros2Reader.messages
+
+    def messages(self, connections=()):  # type: ignore[no-untyped-def]
+        for k, m in enumerate(real(self, connections)):
+            if k == 5:
+                raise getattr(apsw, exc_name)("database disk image is malformed")
+            yield m
+
+    monkeypatch.setattr(_bag._Ros2Reader, "messages", messages)
+    assert_error(tmp_path, [str(bag)], f"unreadable or truncated recording ({exc_name}: database disk image is "
+                                       f"malformed)")
