@@ -21,10 +21,32 @@ __all__ = ["process_pool"]
 _JOIN_S = 1.0
 
 
+_MASKS = hasattr(signal, "pthread_sigmask")
+
+
 def _init(initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a worker of ours: the parent stops it
+    if _MASKS:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # started blocked (see _start_all)
     if initializer is not None:
         initializer(*initargs)
+
+
+def _noop() -> None:
+    return None
+
+
+def _start_all(pool: ProcessPoolExecutor, n: int) -> None:
+    """Start all ``n`` workers now, with SIGINT blocked: a started process inherits the mask, so a
+    Ctrl-C while one is still importing cannot print its traceback (it ignores SIGINT once its
+    initializer ran). The parent gets a Ctrl-C of that moment right after."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if _MASKS else None
+    try:
+        for _ in range(n):  # submitted before any finishes: each starts a worker
+            pool.submit(_noop)
+    finally:
+        if old is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:
@@ -49,6 +71,7 @@ def process_pool(max_workers: int, initializer: Callable[..., Any] | None = None
     pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init, initargs=(initializer, tuple(initargs)))
     try:
+        _start_all(pool, max_workers)
         yield pool
     except BaseException:
         _stop(pool)
