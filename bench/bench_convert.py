@@ -19,7 +19,8 @@ and the conversion back to back, so they share the machine's conditions):
                           same read / deserialise / encode / write (one file per recording) steps
   raw --jobs 2 vs 1:      the same conversion with two worker processes vs --jobs 1 (one core)
   checks (--cases checks): the compressed conversion with each image_check level (structure, the
-                          default; full) vs image_check none, in rotating order within each repeat
+                          default; full) vs image_check none, in rotating order within each repeat:
+                          throughput, and CPU time of the process (all threads) as a ratio none / level
   memory:                 peak RSS of a conversion in a fresh subprocess (ru_maxrss, workers included)
 
 Recordings are ROS 1 bags exported from one synthetic canonical scan and hard-linked ``--recordings``
@@ -171,38 +172,17 @@ def minimal_raw_loop(rec_dir: Path, out: Path) -> float:
 
 
 def timed_convert(src: Path, out: Path, jobs: int, image_check: str = "structure") -> float:
+    return cpu_timed_convert(src, out, jobs, image_check)[0]
+
+
+def cpu_timed_convert(src: Path, out: Path, jobs: int, image_check: str = "structure") -> tuple[float, float]:
+    """(wall seconds, CPU seconds of this process: every thread, user + system) of one conversion."""
     from psg_data.convert import ConvertConfig, convert
 
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     convert(src, out, jobs=jobs, config=ConvertConfig(image_check=image_check))
-    return time.perf_counter() - t
+    return time.perf_counter() - t, time.process_time() - c
 
-
-def checks_share(src: Path, out: Path) -> tuple[float, float, float, float]:
-    """One --jobs 1 conversion at the default level with the checks timed call by call: (wall seconds
-    inside the checks, wall seconds of the conversion, CPU seconds of the checks (their thread's),
-    CPU seconds of the conversion (every thread of the process)). CPU time is what a loaded machine
-    does not distort: wall time includes the time other processes had the cores."""
-    from psg_data.convert import _scan
-
-    real, spent, cpu = _scan.check_image, [0.0], [0.0]
-
-    def timed(*a: object, **k: object) -> object:
-        t0, c0 = time.perf_counter(), time.thread_time()
-        try:
-            return real(*a, **k)
-        finally:
-            spent[0] += time.perf_counter() - t0
-            cpu[0] += time.thread_time() - c0
-
-    _scan.check_image = timed  # type: ignore[assignment]
-    try:
-        c0 = time.process_time()
-        total = timed_convert(src, out, 1)
-        total_cpu = time.process_time() - c0
-    finally:
-        _scan.check_image = real  # type: ignore[assignment]
-    return spent[0], total, cpu[0], total_cpu
 
 
 _RSS_CODE = """
@@ -262,11 +242,8 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
         if "checks" in cases:
             levels = ["none", "structure", "full"]
             for lvl in levels[k % 3:] + levels[:k % 3]:
-                r[f"check_{lvl}"] = timed_convert(rec_cmp, o / "out_chk", 1, image_check=lvl)
+                r[f"check_{lvl}"], r[f"cpu_{lvl}"] = cpu_timed_convert(rec_cmp, o / "out_chk", 1, image_check=lvl)
                 _rm(o / "out_chk")
-            r["inside_checks"], r["with_timed_checks"], r["checks_cpu"], r["convert_cpu"] = \
-                checks_share(rec_cmp, o / "out_chk")
-            _rm(o / "out_chk")
         if rec_raw is not None:
             r["minimal_raw"] = minimal_raw_loop(rec_raw, o / "minimal")
             _rm(o / "minimal")
@@ -284,6 +261,7 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
         ("raw: convert vs minimal loop", mb_raw, "convert_raw_j1", "minimal_raw", 0.7),
         ("raw: --jobs 2 vs --jobs 1", mb_raw, "convert_raw_j2", "convert_raw_j1", 1.6),
         ("compressed: image_check structure vs none", mb_cmp, "check_structure", "check_none", 0.9),
+        ("compressed: image_check structure vs none, CPU", mb_cmp, "cpu_structure", "cpu_none", 0.9),
         ("compressed: image_check full vs none", mb_cmp, "check_full", "check_none", None),
     ):
         if conv not in reps[0]:
@@ -301,11 +279,6 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
         tgt = f">={row['target']}" if row["target"] else "-"
         print(f"{row['case']:48s} {row['mb'] / c:8.1f} {row['mb'] / b:10.1f} "
               f"{float(np.median(row['ratios'])):7.2f} ({each}) {tgt:>7s}")
-    if "inside_checks" in reps[0]:
-        for what, a, b in (("wall time", "inside_checks", "with_timed_checks"), ("CPU time", "checks_cpu", "convert_cpu")):
-            shares = [r[a] / r[b] for r in reps]
-            print(f"{'compressed: share of convert ' + what + ' in the checks':48s} {'':8s} {'':10s} "
-                  f"{100 * float(np.median(shares)):6.1f} % ({' '.join(f'{100 * x:.1f}' for x in shares)})  <=10 %")
     return {"size": {"mb_cmp": mb_cmp, "mb_raw": mb_raw, "recordings": n_rec, "frames_cmp": n_cmp,
                      "frames_raw": n_raw, "width": w, "height": h}, "repeats": reps, "rows": rows}
 
