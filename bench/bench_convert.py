@@ -185,6 +185,29 @@ def cpu_timed_convert(src: Path, out: Path, jobs: int, image_check: str = "struc
 
 
 
+def checks_cpu_share(src: Path, out: Path) -> float:
+    """Share of one --jobs 1 conversion's CPU time (every thread) spent inside the image checks at the
+    default level, each check call timed with its thread's CPU clock (which includes that clock's own
+    system calls: an upper bound)."""
+    from psg_data.convert import _scan
+
+    real, spent = _scan.check_image, [0.0]
+
+    def timed(*a: object, **k: object) -> object:
+        c0 = time.thread_time()
+        try:
+            return real(*a, **k)
+        finally:
+            spent[0] += time.thread_time() - c0
+
+    _scan.check_image = timed  # type: ignore[assignment]
+    try:
+        _, total = cpu_timed_convert(src, out, 1)
+    finally:
+        _scan.check_image = real  # type: ignore[assignment]
+    return spent[0] / total
+
+
 _RSS_CODE = """
 import json, resource, sys, time
 sys.path.insert(0, {root!r})
@@ -244,6 +267,8 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
             for lvl in levels[k % 3:] + levels[:k % 3]:
                 r[f"check_{lvl}"], r[f"cpu_{lvl}"] = cpu_timed_convert(rec_cmp, o / "out_chk", 1, image_check=lvl)
                 _rm(o / "out_chk")
+            r["checks_cpu_share"] = checks_cpu_share(rec_cmp, o / "out_chk")
+            _rm(o / "out_chk")
         if rec_raw is not None:
             r["minimal_raw"] = minimal_raw_loop(rec_raw, o / "minimal")
             _rm(o / "minimal")
@@ -279,6 +304,10 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
         tgt = f">={row['target']}" if row["target"] else "-"
         print(f"{row['case']:48s} {row['mb'] / c:8.1f} {row['mb'] / b:10.1f} "
               f"{float(np.median(row['ratios'])):7.2f} ({each}) {tgt:>7s}")
+    if "checks_cpu_share" in reps[0]:
+        shares = [100 * r["checks_cpu_share"] for r in reps]
+        print(f"{'compressed: share of convert CPU inside the checks':48s} {'':8s} {'':10s} "
+              f"{float(np.median(shares)):6.1f} % ({' '.join(f'{x:.1f}' for x in shares)})  <=10 %")
     return {"size": {"mb_cmp": mb_cmp, "mb_raw": mb_raw, "recordings": n_rec, "frames_cmp": n_cmp,
                      "frames_raw": n_raw, "width": w, "height": h}, "repeats": reps, "rows": rows}
 
