@@ -510,7 +510,10 @@ def test_jpeg_dataset_truncated_image_rejected_by_validate_and_loader(tmp_path: 
         _load_everything(root)
 
 
-def test_corpus_size() -> None:
-    n = len(RECORDINGS) + len(DATASETS) + 1
-    print(f"corruption corpus: {n} cases ({len(RECORDINGS)} recordings and folders, {len(DATASETS) + 1} datasets)")
+N_CASES = len(RECORDINGS) + len(DATASETS) + 1  # + the JPEG dataset case
+
+
+@pytest.mark.parametrize("n", [N_CASES], ids=[f"{N_CASES}-cases-{len(RECORDINGS)}-recordings-{len(DATASETS) + 1}-datasets"])
+def test_corpus_size(n: int) -> None:
+    print(f"corruption corpus: {n} cases ({len(RECORDINGS)} recordings and frame folders, {len(DATASETS) + 1} datasets)")
     assert n >= 40
