@@ -7,11 +7,12 @@ from pathlib import Path
 import click
 
 from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+from psg_data.cli._errors import ContractCommand
 
 __all__ = ["view_cmd"]
 
 
-@click.command("view")
+@click.command("view", cls=ContractCommand)
 @click.argument("dataset", metavar="DATASET")
 @click.option("--scan", "scans", multiple=True, metavar="ID", help="Only this scan (repeatable; default: all).")
 @click.option("--save", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.rrd",
@@ -51,7 +52,7 @@ def view_cmd(dataset: str, scans: tuple[str, ...], save: Path | None, frame_stri
                            f"{', '.join(ds.scan_ids[:5])}{', ...' if len(ds.scan_ids) > 5 else ''}")
     ids = list(dict.fromkeys(scans)) or ds.scan_ids
     with Progress("view", total=len(ids), unit="scans", quiet=quiet) as prog, \
-            recording(save, overwrite=overwrite) as rec:
+            recording(save, overwrite=overwrite, inputs=[ds.root]) as rec:
         counts = log_dataset(rec, ds, ids, frame_stride=frame_stride, progress=prog)
     what = (f"{counts['scans']} scans, {counts['frames']} frames, {counts['points']} points, "
             f"{counts['label_streams']} label streams")

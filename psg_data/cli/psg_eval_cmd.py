@@ -57,15 +57,15 @@ def _eval_inputs(dataset: str | None, labels: str) -> list[Path | None]:
     return paths
 
 
-def _check_rerun(path: Path | None, task: str, overwrite: bool) -> None:
+def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Path | None]) -> None:
     from psg_data.errors import EvaluationError
+    from psg_data.writers._safe_output import check_file_output
 
     if path is None:
         return
     if task != "persistence":
         raise EvaluationError(f"--rerun: beliefs are recorded for --task persistence, not {task}")
-    if path.exists() and not overwrite:
-        raise EvaluationError(f"{path}: output exists; pass --overwrite to replace it")
+    check_file_output(path, overwrite=overwrite, kind="rrd", inputs=inputs)
     from psg_data.viewer._recording import import_rerun
 
     import_rerun()  # says which extra to install before any work is done
@@ -156,7 +156,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
         specs += [parse_estimator_spec(r) for r in REFERENCE_ESTIMATORS if r not in have]
     check_estimators(specs)
     check_scheduler(scheduler)
-    _check_rerun(rerun_file, task, overwrite)
+    _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
     nav_options = None
     if task in ("navigation", "doors"):
         from psg_data.cli._eval_navigation import door_task_options, navigation_options

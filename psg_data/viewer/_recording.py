@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,14 +23,16 @@ def import_rerun() -> Any:
 
 @contextlib.contextmanager
 def recording(save: str | Path | None = None, *, application_id: str = "psg-data",
-              overwrite: bool = False) -> Iterator[Any]:
+              overwrite: bool = False, inputs: Iterable[str | Path] = ()) -> Iterator[Any]:
     """A ``rerun.RecordingStream`` for a ``with`` block.
 
     Args:
         save: write the recording to this ``.rrd`` file (via ``FILE.partial``, renamed when the
             block completes; nothing is left behind if it fails). None: spawn a viewer.
         application_id: Rerun application id.
-        overwrite: replace an existing ``save`` file.
+        overwrite: replace an existing ``save`` file (only a Rerun recording: see
+            :func:`psg_data.writers._safe_output.check_file_output`).
+        inputs: paths the recording is made from (``save`` may not be or lie inside one).
 
     Raises:
         PsgDataError: rerun-sdk missing, or ``save`` exists and ``overwrite`` is False.
@@ -45,16 +46,17 @@ def recording(save: str | Path | None = None, *, application_id: str = "psg-data
         yield rec
         rec.flush()
         return
+    from psg_data.writers._safe_output import check_file_output, replace_file
+
     out = Path(save)
-    if out.exists() and not overwrite:
-        raise PsgDataError(f"{out}: output exists; pass --overwrite to replace it")
+    check_file_output(out, overwrite=overwrite, kind="rrd", inputs=inputs)  # only a recording of ours is replaced
     tmp = out.with_name(out.name + ".partial")
     rec.save(tmp)
     try:
         yield rec
         rec.flush()
         rec.disconnect()  # closes the file sink: the footer is written
-        os.replace(tmp, out)
+        replace_file(tmp, out)
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()

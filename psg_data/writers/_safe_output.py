@@ -31,7 +31,7 @@ from pathlib import Path
 from psg_data.errors import DatasetExistsError, UnsafeOutputError
 
 __all__ = ["OUTPUT_KINDS", "OUTPUT_MARKER", "PARTIAL_MARKER", "check_output", "check_not_input", "make_staging",
-           "commit_tree", "replace_file", "fsync_tree", "owned_files"]
+           "commit_tree", "replace_file", "fsync_tree", "owned_files", "check_file_output", "FILE_SIGNATURES"]
 
 log = logging.getLogger(__name__)
 
@@ -177,6 +177,38 @@ def check_output(out: str | Path, *, overwrite: bool, kind: str = "dataset",
     if reason is not None:
         raise UnsafeOutputError(f"{out}: {reason}; --overwrite replaces only {OUTPUT_KINDS[kind]} or an empty "
                                 f"folder; choose another output path (or move it away yourself)")
+
+
+FILE_SIGNATURES = {"rrd": (b"RRF", "a Rerun recording (.rrd)")}
+"""Single-file outputs: kind -> (leading bytes of every file of that kind psg-data writes, what it is)."""
+
+
+def check_file_output(out: str | Path, *, overwrite: bool, kind: str, inputs: Iterable[str | Path | None] = ()) -> None:
+    """The rule for a single-file output (``psg-data view --save``, ``psg-eval --rerun``): never an
+    input or inside one; ``overwrite`` replaces only a file of that kind (its signature), and
+    ``OUT.partial``, the file written first, must not exist.
+
+    Raises:
+        UnsafeOutputError, DatasetExistsError: as :func:`check_output`.
+    """
+    out = Path(out)
+    magic, what = FILE_SIGNATURES[kind]
+    inputs = list(inputs)
+    check_not_input(out, inputs)
+    partial = out.with_name(out.name + ".partial")
+    if partial.exists() or partial.is_symlink():
+        raise UnsafeOutputError(f"{partial}: exists; expected no such path beside the output (move it away)")
+    if not out.exists() and not out.is_symlink():
+        return
+    if not overwrite:
+        raise DatasetExistsError(f"{out}: output exists; pass --overwrite to replace it")
+    if out.is_symlink() or not out.is_file():
+        raise UnsafeOutputError(f"{out}: is not a file; --overwrite replaces only {what}")
+    with open(out, "rb") as fh:
+        head = fh.read(len(magic))
+    if head != magic:
+        raise UnsafeOutputError(f"{out}: is not {what} (it starts with {head.hex() or 'nothing'}); --overwrite "
+                                f"replaces only {what}; choose another path (or move it away yourself)")
 
 
 def make_staging(path: str | Path, *, resume: bool = False) -> Path:

@@ -224,3 +224,17 @@ def test_label_never_writes_over_its_inputs_or_foreign_tables(tmp_path: Path) ->
     assert snapshot(tmp_path) == before
     assert pa.Table.equals(pq.read_table(foreign), pq.read_table(labels))
     assert PARTIAL_MARKER not in {p.name for p in ds.rglob("*")}
+
+
+def test_single_file_outputs_replace_only_their_own_kind(tmp_path: Path) -> None:
+    """``psg-data view --save FILE.rrd`` and ``psg-eval --rerun FILE.rrd``: a Rerun recording only."""
+    ds = write_tiny_dataset(tmp_path / "lab", scans=1, frames=1)
+    notes = tmp_path / "notes.rrd"
+    notes.write_text("my notes")
+    before = snapshot(tmp_path)
+    assert_one_error(_cli(psg_data, "view", ds, "--save", notes, "--overwrite", "-q"),
+                     "is not a Rerun recording (.rrd)")
+    assert_one_error(_cli(psg_data, "view", ds, "--save", ds / "x.rrd", "-q"), "lies inside the input")
+    assert_one_error(_cli(psg_eval, "--dataset", ds, "-e", "always_present", "--no-references", "--rerun", notes,
+                          "--overwrite", "-q"), "is not a Rerun recording (.rrd)")
+    assert snapshot(tmp_path) == before
