@@ -16,7 +16,8 @@ __all__ = ["validate_cmd", "info_cmd"]
 @click.command("validate", cls=ContractCommand)
 @click.argument("path", type=click.Path(path_type=Path))
 @click.option("--no-checksums", is_flag=True, help="Check file sizes only, not SHA-256 checksums (faster).")
-@click.option("--quick", is_flag=True, help="Check image headers only (default: every image checked whole and decoded).")
+@click.option("--quick", is_flag=True,
+              help="Check image headers only (default: every image checked whole and decoded).")
 @handle_errors
 def validate_cmd(path: Path, no_checksums: bool, quick: bool) -> None:
     """Check a dataset: manifest, schemas, ids, value ranges, images and checksums.

@@ -8,7 +8,7 @@ none, unique keys in the core tables, and in ``frames`` finite poses and ids tha
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -69,16 +69,17 @@ def _check_unique(table: pa.Table, key: tuple[str, ...], where: str) -> None:
         dup = counts > 1
         if dup.any():
             v = cols[0][first[dup][0]]
-            rows = np.flatnonzero(cols[0] == v)
-            raise FormatError(f"{where}: {key[0]}: duplicate key {v!r} in rows {_rows(np.isin(np.arange(len(cols[0])), rows))}, "
+            raise FormatError(f"{where}: {key[0]}: duplicate key {v!r} in rows {_rows(cols[0] == v)}, "
                               f"expected unique values")
         return
-    seen: dict[tuple[Any, ...], int] = {}
-    for i, k in enumerate(zip(*(c.tolist() for c in cols))):
-        j = seen.setdefault(k, i)
-        if j != i:
-            raise FormatError(f"{where}: {'+'.join(key)}: duplicate key {k!r} in rows {j} and {i}, expected unique "
-                              f"values")
+    import pandas as pd
+
+    df = pd.DataFrame(dict(zip(key, cols)))
+    dup = df.duplicated(keep=False).to_numpy()
+    if dup.any():
+        k = tuple(df.iloc[int(np.flatnonzero(dup)[0])])
+        raise FormatError(f"{where}: {'+'.join(key)}: duplicate key {k!r} in rows {_rows(dup)}, expected unique "
+                          f"values")
 
 
 def check_frames(frames: pa.Table, scan_ids: set[str], camera_ids: set[str], where: str) -> None:

@@ -27,7 +27,8 @@ import numpy as np
 
 from psg_data.schemas._image_headers import ImageHeader, parse_image_header
 
-__all__ = ["IMAGE_CHECK_LEVELS", "DamagedImage", "check_image", "check_png", "check_jpeg", "decode_check", "verify_image",
+__all__ = ["IMAGE_CHECK_LEVELS", "DamagedImage", "check_image", "check_png", "check_jpeg", "decode_check",
+           "verify_image",
            "PNG_SIGNATURE", "looks_like_image"]
 
 IMAGE_CHECK_LEVELS = ("none", "structure", "full")
@@ -99,7 +100,8 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
         o = end + 4
     if not parts:
         raise DamagedImage("no IDAT chunk (no image data)")
-    head = b"".join(mv[a:b] for a, b in parts[:2])[:2] if parts[0][1] - parts[0][0] < 2 else mv[parts[0][0]:parts[0][0] + 2]
+    a0, b0 = parts[0]
+    head = mv[a0:a0 + 2] if b0 - a0 >= 2 else b"".join(mv[a:b] for a, b in parts[:2])[:2]
     if len(head) < 2 or head[0] & 0x0F != 8 or (head[0] << 8 | head[1]) % 31 or head[1] & 0x20:
         raise DamagedImage("image data does not start with a zlib header")
     if inflate:

@@ -95,8 +95,11 @@ def _major(version: object, where: str) -> int:
         raise FormatError(f"{where}: format_version: {exc}") from None
 
 
-def manifest_from_dict(data: Any, where: str) -> DatasetInfo:
-    """Build a :class:`DatasetInfo` from parsed JSON, checking format, version and fields."""
+def manifest_from_dict(data: Any, where: str, *, warn_newer_minor: bool = True) -> DatasetInfo:
+    """Build a :class:`DatasetInfo` from parsed JSON, checking format, version and fields.
+
+    A newer minor version is read with a logged warning (``warn_newer_minor``; the validator reports
+    it as a problem instead)."""
     if not isinstance(data, dict):
         raise FormatError(f"{where}: expected a JSON object, got {type(data).__name__}")
     if data.get("format") != FORMAT_NAME:
@@ -111,7 +114,7 @@ def manifest_from_dict(data: Any, where: str) -> DatasetInfo:
         )
     if _major(version, where) < 1:
         raise FormatError(f"{where}: format_version: {version}, expected 1.x or 2.x")
-    if parse_format_version(version) > parse_format_version(FORMAT_VERSION):
+    if warn_newer_minor and parse_format_version(version) > parse_format_version(FORMAT_VERSION):
         log.warning("%s: format_version %s is a newer minor version than this psg-data knows (%s): what it "
                     "added is ignored; psg-data validate cannot check it", where, version, FORMAT_VERSION)
     known = {f.name for f in fields(DatasetInfo)}

@@ -114,7 +114,8 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
         c.add(MANIFEST_NAME, "file", "missing manifest, expected dataset.json at the dataset root")
     else:
         try:
-            info = manifest_from_dict(json.loads(mpath.read_text(encoding="utf-8")), MANIFEST_NAME)
+            info = manifest_from_dict(json.loads(mpath.read_text(encoding="utf-8")), MANIFEST_NAME,
+                                      warn_newer_minor=False)
         except json.JSONDecodeError as exc:
             c.add(MANIFEST_NAME, "json", f"not valid JSON ({exc.msg} at line {exc.lineno})")
         except FormatError as exc:

@@ -181,7 +181,7 @@ def test_side_table_given_twice(tmp_path: Path, tiny_dataset: Path) -> None:
 def test_database_error_while_iterating_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                     exc_name: str) -> None:
     """apsw (rosbags' sqlite3 driver) raises its own errors when a damaged page is reached mid-file."""
-    import apsw
+    from rosbags.rosbag2.storage_sqlite3 import apsw  # the driver rosbags reads ROS 2 sqlite3 bags with
 
     from psg_data.loaders.raw import _bag
 
