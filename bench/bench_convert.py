@@ -277,7 +277,8 @@ def run_comparison(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat:
             r["convert_raw_j2"] = timed_convert(rec_raw, o / "out_raw2", 2)
             _rm(o / "out_raw2")
         reps.append(r)
-        print(f"repeat {k + 1}/{repeat}: " + ", ".join(f"{n} {v:.2f}s" for n, v in r.items()), file=sys.stderr)
+        print(f"repeat {k + 1}/{repeat}: " + ", ".join(f"{n} {v:.3f}" if n.endswith("share") else f"{n} {v:.2f}s"
+                                                      for n, v in r.items()), file=sys.stderr)
     rows = []
     for name, mb, conv, base, tgt in (
         ("compressed: convert vs iterate (AnyReader)", mb_cmp, "convert_cmp", "iterate", 0.5),
