@@ -1,7 +1,8 @@
 """Persistence estimators: the plugin interface, the registry and the built-ins.
 
 Built-ins (``list_estimators()``): ``perpetua_star`` (FreMEn switching prior; ``prior=`` selects
-"fremen", "oracle", "schedule" or "none"), ``perpetua_star_schedule``, ``perpetua_star_oracle``,
+"fremen", "profile", "oracle", "schedule" or "none"), ``perpetua_star_schedule``, ``perpetua_star_oracle``,
+``perpetua_star_annealed`` (a variant whose prediction anneals to the prior, not the paper's),
 ``perpetua``, ``persistence_filter``, ``fremen``, ``last_seen``, ``always_present``,
 ``time_of_week_frequency``. Plugins register in the entry-point group ``psg_data.estimators``
 and may declare their settings (``_parameters = {"alpha": Real(0, 1)}``, see :class:`Param`) so
@@ -24,6 +25,7 @@ from psg_data.estimators._mixture import MixtureFilter
 from psg_data.estimators._multi import joint_log_belief, map_receptacle, receptacle_belief
 from psg_data.estimators._perpetua import PerpetuaEstimator
 from psg_data.estimators._perpetua_star import (
+    PerpetuaStarAnnealedEstimator,
     PerpetuaStarEstimator,
     PerpetuaStarOracleEstimator,
     PerpetuaStarScheduleEstimator,
@@ -32,6 +34,7 @@ from psg_data.estimators._priors import (
     ConstantPrior,
     FremenPrior,
     OraclePrior,
+    ProfilePrior,
     SchedulePrior,
     parse_llm_schedule,
     render_llm_prompt,
@@ -50,6 +53,10 @@ from psg_data.estimators._simple import (
     PersistenceFilterEstimator,
     TimeOfWeekFrequencyEstimator,
 )
+from psg_data.estimators._cadence import PAPER_SETTINGS, Cadence, training_cadence
+from psg_data.estimators._hmm import HmmFit, fit_error_hmm
+from psg_data.estimators._interval_em import IntervalFit, fit_interval_mixture
+from psg_data.estimators._segmentation import segment_reference
 from psg_data.estimators._survival import SURVIVAL_FAMILIES, SurvivalMixture
 from psg_data.estimators._training import fit_lognormal_mixture, segment_stream
 
@@ -74,6 +81,7 @@ __all__ = [
     "PerpetuaStarEstimator",
     "PerpetuaStarScheduleEstimator",
     "PerpetuaStarOracleEstimator",
+    "PerpetuaStarAnnealedEstimator",
     "PerpetuaEstimator",
     "PersistenceFilterEstimator",
     "FremenEstimator",
@@ -91,6 +99,7 @@ __all__ = [
     "FremenPrior",
     "SchedulePrior",
     "OraclePrior",
+    "ProfilePrior",
     "parse_llm_schedule",
     "render_llm_prompt",
     "receptacle_belief",
@@ -98,4 +107,12 @@ __all__ = [
     "joint_log_belief",
     "fit_lognormal_mixture",
     "segment_stream",
+    "segment_reference",
+    "fit_interval_mixture",
+    "IntervalFit",
+    "fit_error_hmm",
+    "HmmFit",
+    "training_cadence",
+    "Cadence",
+    "PAPER_SETTINGS",
 ]

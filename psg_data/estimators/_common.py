@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import logging
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar, TypeVar
 
@@ -12,10 +13,14 @@ from numpy.typing import ArrayLike, NDArray
 from psg_data.errors import EstimatorError, NotFittedError
 from psg_data.estimators._base import EdgeKey, EdgeStream
 from psg_data.estimators._params import Integral, Options, Param, Real, check_params
-from psg_data.estimators._survival import SurvivalMixture
-from psg_data.estimators._training import EdgeDurations, fit_lognormal_mixture
+from psg_data.estimators._interval_em import INTERVAL_FAMILIES
+from psg_data.estimators._mixture import ESCAPE_FIRST
+from psg_data.estimators._survival_training import SEGMENTATIONS, fit_edge_survivals, training_runs
 
-__all__ = ["BaseEstimator", "BaseFilter", "TRAINING_PARAMETERS", "edge_to_json", "edge_from_json", "fit_survivals", "streams_by_edge"]
+__all__ = ["BaseEstimator", "BaseFilter", "TRAINING_PARAMETERS", "edge_to_json", "edge_from_json", "fit_training",
+           "streams_by_edge", "escape_floors", "log_fit_summary"]
+
+log = logging.getLogger(__name__)
 
 
 def edge_to_json(edge: EdgeKey) -> list[str]:
@@ -155,6 +160,16 @@ class BaseFilter:
         self._update_many(t, yy.astype(np.int8))
         self._last_t = float(t[-1])
 
+    def start(self, t_s: float) -> None:
+        """Start the filter at ``t_s`` (e.g. the start of an evaluation window) before any observation.
+
+        The public Perpetua reference starts every feature's filter there, in the present state;
+        filters that keep a survival clock (``perpetua``) set its origin to ``t_s``. The default does
+        nothing. Raises :class:`EstimatorError` once an observation has been applied.
+        """
+        if self._last_t is not None:
+            raise EstimatorError(f"edge {self.edge}: start() must come before the first observation")
+
     def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
         """P(present) at times ``t_s`` (any shape); times before the last observation are clamped to it."""
         t = np.asarray(t_s, dtype=np.float64)
@@ -174,39 +189,52 @@ class BaseFilter:
 
 TRAINING_PARAMETERS: dict[str, Param] = {
     "max_components": Integral(1, 10, help="largest number of mixture components tried by AIC"),
+    "survival": Options(*INTERVAL_FAMILIES, help="survival family of the persistence / emergence mixtures"),
     "p_m": Real(0.0, 0.5, none_ok=True, help="P(seen absent | present); none: estimated from the training data"),
     "p_f": Real(0.0, 0.5, none_ok=True, help="P(seen present | absent); none: estimated from the training data"),
+    "segmentation": Options(*SEGMENTATIONS, help="states of the training observations: hmm, observations, "
+                            "reference (the public Perpetua's L2 PELT) or bernoulli (PELT, min_segment / "
+                            "segment_penalty)"),
     "durations": Options("segments", "ground_truth", "auto", help="where training run durations come from"),
-    "min_segment": Integral(1, None, help="shortest change-point segment, observations"),
-    "segment_penalty": Real(0.0, None, help="change-point penalty, nats"),
+    "min_segment": Integral(1, None, help="bernoulli segmentation: shortest segment, observations"),
+    "segment_penalty": Real(0.0, None, help="bernoulli segmentation: change-point penalty, nats"),
+    "pool_weight": Real(0.0, None, help="total weight of the pooled runs added to each edge's own (shrinkage)"),
+    "sigma_min": Real(0.0, None, closed="neither", help="floor of sigma of ln T of log-normal components"),
+    "escape": Real(0.0, 1e-3, help="floor of the change probability per interval (first interval: 1e-6 or this "
+                   "if larger; 0 disables both)"),
     "random_state": Integral(0, None, help="seed of the EM restarts"),
 }
-"""Settings shared by the estimators trained on run durations (Perpetua*, Perpetua)."""
+"""Settings shared by the estimators trained on interval-censored runs (Perpetua*, Perpetua)."""
 
 
-def _fallback(d: NDArray[np.float64], pooled: NDArray[np.float64], dominant: bool, span_s: float,
-              max_components: int, seed: int) -> SurvivalMixture:
-    if d.size >= 2:
-        return fit_lognormal_mixture(d, max_components=max_components, random_state=seed).mixture
-    if dominant:  # the state (almost) never ended: long censored run
-        return SurvivalMixture.lognormal_median(max(4.0 * span_s, 86400.0), 1.0)
-    if pooled.size >= 2:
-        return fit_lognormal_mixture(pooled, max_components=max_components, random_state=seed).mixture
-    return SurvivalMixture.lognormal_median(3600.0, 1.0)
+def fit_training(est: Any, streams: Sequence[EdgeStream]) -> dict[str, Any]:
+    """Shared training of Perpetua and Perpetua*: states, runs, error rates and survival mixtures.
+
+    Sets ``est.p_m_``, ``est.p_f_``, ``est.survivals_`` (edge -> (persistence, emergence)),
+    ``est.default_survivals_`` and returns the training part of the fit summary.
+    """
+    data = training_runs(streams, segmentation=est.segmentation, durations=est.durations, p_m=est.p_m, p_f=est.p_f,
+                         min_segment=int(est.min_segment), segment_penalty=float(est.segment_penalty))
+    est.p_m_, est.p_f_ = float(data.p_m), float(data.p_f)
+    est.survivals_, est.default_survivals_, per_edge = fit_edge_survivals(
+        data, family=est.survival, max_components=int(est.max_components), pool_weight=float(est.pool_weight),
+        sigma_min=float(est.sigma_min), seed=int(est.random_state))
+    return {"segmentation": data.segmentation, "durations": est.durations,
+            "error_rates": {"p_m": est.p_m_, "p_f": est.p_f_, "source": data.error_source,
+                            **({"hmm": data.hmm.summary()} if data.hmm is not None else {})},
+            "edges": {f"{e[0]}/{e[1]}": v for e, v in per_edge.items()}}
 
 
-def fit_survivals(durs: dict[EdgeKey, EdgeDurations], *, max_components: int, seed: int) -> tuple[
-        dict[EdgeKey, tuple[SurvivalMixture, SurvivalMixture]], tuple[SurvivalMixture, SurvivalMixture]]:
-    """Per-edge (persistence, emergence) log-normal mixtures, plus pooled defaults for unseen edges."""
-    pooled_p = np.concatenate([d.present for d in durs.values()] or [np.zeros(0)])
-    pooled_a = np.concatenate([d.absent for d in durs.values()] or [np.zeros(0)])
-    out = {}
-    for e, d in durs.items():
-        per = _fallback(d.present, pooled_p, d.mostly_present, d.span_s, max_components, seed)
-        emg = _fallback(d.absent, pooled_a, not d.mostly_present, d.span_s, max_components, seed)
-        out[e] = (per, emg)
-    dper = (fit_lognormal_mixture(pooled_p, max_components=max_components, random_state=seed).mixture
-            if pooled_p.size >= 2 else SurvivalMixture.lognormal_median(3600.0))
-    demg = (fit_lognormal_mixture(pooled_a, max_components=max_components, random_state=seed).mixture
-            if pooled_a.size >= 2 else SurvivalMixture.lognormal_median(3600.0))
-    return out, (dper, demg)
+def escape_floors(escape: float) -> tuple[float, float]:
+    """(escape, escape_first) of a filter from the ``escape`` setting (0 disables both)."""
+    e = float(escape)
+    return (0.0, 0.0) if e <= 0 else (e, max(ESCAPE_FIRST, e))
+
+
+def log_fit_summary(name: str, summary: Mapping[str, Any]) -> None:
+    """One INFO line per decided setting and the error rates (the full summary is ``fit_summary_``)."""
+    for k, v in summary.get("settings", {}).items():
+        log.info("%s: %s = %s (%s)", name, k, v.get("value"), v.get("source"))
+    er = summary.get("error_rates")
+    if er:
+        log.info("%s: P_M = %.4f, P_F = %.4f (%s)", name, er["p_m"], er["p_f"], er["source"])

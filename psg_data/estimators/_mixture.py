@@ -14,6 +14,16 @@ vectorised passes (``np.logaddexp.accumulate``) instead of a Python loop.
 
 An emergence filter is a persistence filter on the *absence* state with the error model swapped
 (P_M' = 1 - P_F, P_F' = 1 - P_M); its prediction of presence is 1 - P(absence persists).
+
+Escape floor. The probability that the state changed inside an interval, ``S(t_{i-1}) - S(t_i)``,
+is floored at ``escape`` (default 1e-10), and at ``escape_first`` (1e-6) for the interval ending
+at the first observation after a (re)start (the mass "changed before the first observation").
+Without it a filter whose survival prior is narrow (a log-normal with sigma of ln T of 0.005-0.07,
+as fitted on dense, regular streams) gives zero probability to a change before the prior's lower
+tail and ignores any number of contrary observations until then. The public reference gets the
+same floors from clipping survival probabilities to [1e-10, 0.999999] in float32. With the floor
+the component evidences are no longer exact probabilities of a proper model; ``escape=0``
+restores the exact recursion.
 """
 
 from __future__ import annotations
@@ -69,6 +79,10 @@ class ScanResult:
 
 
 _NEG_INF = -math.inf
+ESCAPE = 1e-10
+"""Default floor of the change probability per interval (see the module docstring)."""
+ESCAPE_FIRST = 1e-6
+"""Default floor of the change probability before the first observation after a (re)start."""
 
 
 class MixtureFilter:
@@ -94,7 +108,14 @@ class MixtureFilter:
     """
 
     def __init__(self, survival: SurvivalMixture, p_m: float, p_f: float, *, emergence: bool = False,
-                 log_prior: NDArray[np.float64] | None = None) -> None:
+                 log_prior: NDArray[np.float64] | None = None, escape: float = ESCAPE,
+                 escape_first: float = ESCAPE_FIRST) -> None:
+        if not (0.0 <= escape <= 1e-3 and 0.0 <= escape_first <= 1e-3):
+            raise EstimatorError(f"escape floors must be in [0, 1e-3], got {escape}, {escape_first}")
+        self.escape = float(escape)
+        self.escape_first = float(escape_first)
+        self._log_esc = math.log(escape) if escape > 0 else _NEG_INF
+        self._log_esc1 = math.log(escape_first) if escape_first > 0 else _NEG_INF
         self.survival = survival
         self.p_m = clip_error_rate(p_m, "p_m")
         self.p_f = clip_error_rate(p_f, "p_f")
@@ -191,6 +212,9 @@ class MixtureFilter:
             np.log(d, out=d)
             d += prev
         np.fmax(d, _NEG_INF, out=d)  # nan (both survivals 0) -> log 0
+        np.maximum(d, self._log_esc, out=d)  # escape floor
+        if ly0 is None or np.all(np.isneginf(np.asarray(ly0, dtype=np.float64))):  # fresh: nothing filtered yet
+            np.maximum(d[:, 0], self._log_esc1, out=d[:, 0])
         ca = self._la[yi]
         np.cumsum(ca, out=ca)
         l = ca
@@ -261,10 +285,17 @@ class MixtureFilter:
         ly = []
         vs = []
         best, bi, ebest = ninf, 0, ninf
+        esc = self._log_esc1 if self.n == 0 else self._log_esc
         for i, (lp, so, sn, a0) in enumerate(zip(self._log_prior_s, self.lsf, lsf, self.ly)):
             dd = sn - so
-            if dd < 0.0:  # LY = b + logaddexp(LY, l_prev + log(S_prev - S))
-                x = l_prev + so + log(-expm1(dd))
+            # log(S_prev - S), floored at the escape probability
+            x = so + log(-expm1(dd)) if dd < 0.0 else ninf
+            if x < esc:
+                x = esc
+            if x == ninf:  # no change possible in this interval
+                v = b + a0
+            else:  # LY = b + logaddexp(LY, l_prev + log(S_prev - S))
+                x += l_prev
                 if a0 == ninf:
                     v = b + x
                 elif x == ninf:
@@ -273,8 +304,6 @@ class MixtureFilter:
                     v = b + a0 + log1p(exp(x - a0))
                 else:
                     v = b + x + log1p(exp(a0 - x))
-            else:  # log 0 increment (or both survivals 0)
-                v = b + a0
             ly.append(v)
             x = l + sn  # e = logaddexp(LY, l + log S)
             if v == ninf:

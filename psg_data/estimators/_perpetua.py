@@ -8,6 +8,14 @@ mixture starts. Restarted mixtures get component weights (1 - eps) * posterior o
 instance + eps * initial prior. The belief is the active mixture's prediction. Both mixtures are
 updated with every observation (the emergence one once started).
 
+Training (shared with Perpetua*): interval-censored EM on the runs of the training states; the
+states come from the reference's own segmentation by default (``segmentation="reference"``: the
+L2 PELT the public code really runs, see :mod:`~psg_data.estimators._segmentation`), error rates
+from the disagreement of the observations with those segments. As the reference, each filter
+starts in the persistence state (its survival clock at :meth:`PerpetuaFilter.start`, or at the
+first observation) and never predicts 0.5 before its first observation; the mixtures' change
+probabilities have the escape floor of :class:`~psg_data.estimators.MixtureFilter`.
+
 Predictions simulate the state machine on the grid of query times (plus ``num_steps`` sub-steps
 between consecutive ones); within one state the active prediction is monotone, so each state's
 switching time is found with one vectorised pass.
@@ -23,21 +31,28 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.estimators._common import TRAINING_PARAMETERS, BaseEstimator, BaseFilter, fit_survivals
-from psg_data.estimators._mixture import MixtureFilter
+from psg_data.estimators._common import (
+    TRAINING_PARAMETERS,
+    BaseEstimator,
+    BaseFilter,
+    escape_floors,
+    fit_training,
+    log_fit_summary,
+)
+from psg_data.estimators._mixture import ESCAPE, ESCAPE_FIRST, MixtureFilter
 from psg_data.estimators._params import Integral, Real
 from psg_data.estimators._survival import SurvivalMixture
-from psg_data.estimators._training import collect_durations
 
 __all__ = ["PerpetuaEstimator", "PerpetuaFilter"]
 
 
 class PerpetuaFilter(BaseFilter):
     def __init__(self, edge: EdgeKey, per: SurvivalMixture, emg: SurvivalMixture, p_m: float, p_f: float, *,
-                 delta_low: float, delta_high: float, eps: float, num_steps: int, name: str = "perpetua") -> None:
+                 delta_low: float, delta_high: float, eps: float, num_steps: int, escape: float = ESCAPE,
+                 escape_first: float = ESCAPE_FIRST, name: str = "perpetua") -> None:
         super().__init__(edge)
-        self.per = MixtureFilter(per, p_m, p_f)
-        self.emg = MixtureFilter(emg, p_m, p_f, emergence=True)
+        self.per = MixtureFilter(per, p_m, p_f, escape=escape, escape_first=escape_first)
+        self.emg = MixtureFilter(emg, p_m, p_f, emergence=True, escape=escape, escape_first=escape_first)
         self.delta_low = float(delta_low)
         self.delta_high = float(delta_high)
         self.eps = float(eps)
@@ -89,13 +104,21 @@ class PerpetuaFilter(BaseFilter):
             self._simulate(np.array([ti]))
             self._last_t = ti
 
+    def start(self, t_s: float) -> None:
+        """Start in the persistence state with the survival clock at ``t_s`` (before any observation)."""
+        super().start(t_s)
+        self.per.reset(float(t_s))
+        self.active = "per"
+
     def _predict(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self._last_t is None:
-            return self.per.predict(t) if self.per.started else np.full(t.shape, 0.5)
+        t0 = self._last_t if self._last_t is not None else self.per.origin
+        if t0 is None:  # never started: the present state
+            return np.ones(t.shape)
+        t = np.maximum(t, t0)
         order = np.argsort(t, kind="stable")
         ts = t[order]
         # simulation grid: query times plus num_steps sub-steps between consecutive distinct times
-        knots = np.unique(np.concatenate([[self._last_t], ts]))
+        knots = np.unique(np.concatenate([[t0], ts]))
         if self.num_steps > 0 and knots.size > 1:
             frac = np.arange(1, self.num_steps + 1) / (self.num_steps + 1)
             sub = (knots[:-1, None] + np.diff(knots)[:, None] * frac).reshape(-1)
@@ -126,7 +149,8 @@ class PerpetuaFilter(BaseFilter):
     def _copy(self) -> PerpetuaFilter:
         c = PerpetuaFilter(self.edge, self.per.survival, self.emg.survival, self.per.p_m, self.per.p_f,
                            delta_low=self.delta_low, delta_high=self.delta_high, eps=self.eps,
-                           num_steps=self.num_steps, name=self._name)
+                           num_steps=self.num_steps, escape=self.per.escape, escape_first=self.per.escape_first,
+                           name=self._name)
         c.per.set_state(self.per.get_state())
         c.emg.set_state(self.emg.get_state())
         c.active = self.active
@@ -138,13 +162,14 @@ class PerpetuaFilter(BaseFilter):
                 "per": self.per.get_state(), "emg": self.emg.get_state(),
                 "per_survival": self.per.survival.to_dict(), "emg_survival": self.emg.survival.to_dict(),
                 "p_m": self.per.p_m, "p_f": self.per.p_f, "delta_low": self.delta_low, "delta_high": self.delta_high,
-                "eps": self.eps, "num_steps": self.num_steps}
+                "eps": self.eps, "num_steps": self.num_steps, "escape": [self.per.escape, self.per.escape_first]}
 
     @classmethod
     def from_state(cls, s: dict[str, Any]) -> PerpetuaFilter:
         f = cls((s["edge"][0], s["edge"][1]), SurvivalMixture.from_dict(s["per_survival"]),
                 SurvivalMixture.from_dict(s["emg_survival"]), s["p_m"], s["p_f"], delta_low=s["delta_low"],
-                delta_high=s["delta_high"], eps=s["eps"], num_steps=s["num_steps"], name=s["estimator"])
+                delta_high=s["delta_high"], eps=s["eps"], num_steps=s["num_steps"], escape=s["escape"][0],
+                escape_first=s["escape"][1], name=s["estimator"])
         f.per.set_state(s["per"])
         f.emg.set_state(s["emg"])
         f.active = s["active"]
@@ -159,8 +184,9 @@ class PerpetuaEstimator(BaseEstimator):
         delta_low, delta_high: switching thresholds (0.05, 0.95).
         eps: weight of the initial component prior after a restart (0.1).
         num_steps: simulated sub-steps between observations / query times (1).
-        max_components, p_m, p_f, durations, min_segment, segment_penalty, random_state: training,
-            as for Perpetua*.
+        max_components, survival, p_m, p_f, segmentation, durations, min_segment, segment_penalty,
+            pool_weight, sigma_min, escape, random_state: training and filter settings shared with
+            Perpetua* (``segmentation`` defaults to "reference", the public code's L2 PELT).
     """
 
     name = "perpetua"
@@ -173,19 +199,25 @@ class PerpetuaEstimator(BaseEstimator):
     }
 
     def __init__(self, *, delta_low: float = 0.05, delta_high: float = 0.95, eps: float = 0.1, num_steps: int = 1,
-                 max_components: int = 5, p_m: float | None = None, p_f: float | None = None,
-                 durations: str = "segments", min_segment: int = 5, segment_penalty: float = 3.0,
-                 random_state: int = 0) -> None:
+                 max_components: int = 5, survival: str = "lognormal", p_m: float | None = None,
+                 p_f: float | None = None, segmentation: str = "reference", durations: str = "segments",
+                 min_segment: int = 5, segment_penalty: float = 3.0, pool_weight: float = 2.0,
+                 sigma_min: float = 0.05, escape: float = ESCAPE, random_state: int = 0) -> None:
         self.delta_low = delta_low
         self.delta_high = delta_high
         self.eps = eps
         self.num_steps = num_steps
         self.max_components = max_components
+        self.survival = survival
         self.p_m = p_m
         self.p_f = p_f
+        self.segmentation = segmentation
         self.durations = durations
         self.min_segment = min_segment
         self.segment_penalty = segment_penalty
+        self.pool_weight = pool_weight
+        self.sigma_min = sigma_min
+        self.escape = escape
         self.random_state = random_state
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
@@ -196,12 +228,9 @@ class PerpetuaEstimator(BaseEstimator):
                                  f"{self.delta_high}")
         if int(self.num_steps) < 0 or not (0.0 <= float(self.eps) <= 1.0):
             raise EstimatorError(f"{self.name}: num_steps must be >= 0 and eps in [0, 1]")
-        durs, (pm, pf) = collect_durations(list(streams), source=self.durations, min_size=int(self.min_segment),
-                                           penalty=float(self.segment_penalty))
-        self.p_m_ = float(self.p_m) if self.p_m is not None else pm
-        self.p_f_ = float(self.p_f) if self.p_f is not None else pf
-        self.survivals_, self.default_survivals_ = fit_survivals(
-            durs, max_components=int(self.max_components), seed=int(self.random_state))
+        streams = list(streams)
+        self.fit_summary_ = {"estimator": self.name, **fit_training(self, streams)}
+        log_fit_summary(self.name, self.fit_summary_)
         self.fitted_ = True
         return self
 
@@ -209,9 +238,10 @@ class PerpetuaEstimator(BaseEstimator):
         self._check_fitted()
         edge = (str(edge[0]), str(edge[1]))
         per, emg = self.survivals_.get(edge, self.default_survivals_)
+        esc, esc1 = escape_floors(self.escape)
         return PerpetuaFilter(edge, per, emg, self.p_m_, self.p_f_, delta_low=float(self.delta_low),
                               delta_high=float(self.delta_high), eps=float(self.eps), num_steps=int(self.num_steps),
-                              name=self.name)
+                              escape=esc, escape_first=esc1, name=self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> PerpetuaFilter:
         self._check_state(state)

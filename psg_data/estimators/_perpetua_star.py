@@ -9,11 +9,22 @@ with f(t) the switching prior (FreMEn, schedule, oracle or constant) clipped to
 [prior_floor, 1 - prior_floor], and the prediction is the posterior-weighted average of the two
 models' dominant-component predictions (eq. 14).
 
-Model log likelihoods with forgetting factor gamma. L_m is the marginal log evidence of model m
-(denominator of eq. 7) accumulated with forgetting: by the chain rule
-log p(Y_1:N | m) = sum_i log p(y_i | Y_1:i-1, m), and each increment (the change of the mixture's
-log evidence) is discounted, L_m <- gamma L_m + [log p(Y_1:N | m) - log p(Y_1:N-1 | m)]. With
-gamma = 1 this is exactly the paper's model likelihood.
+Model log likelihoods with forgetting. L_m is the marginal log evidence of model m (denominator
+of eq. 7) accumulated with forgetting: by the chain rule log p(Y_1:N | m) = sum_i
+log p(y_i | Y_1:i-1, m), and each increment (the change of the mixture's log evidence) is
+discounted, L_m <- g_N L_m + [log p(Y_1:N | m) - log p(Y_1:N-1 | m)]. The factor is either the
+paper's forgetting factor per observation (g_N = gamma) or, by default, a half-life in time
+(g_N = 0.5 ** ((t_N - t_N-1) / half_life_s)), so that sparse scans and dense streams forget on the
+same clock (see :mod:`~psg_data.estimators._cadence`). With g = 1 this is exactly the paper's model
+likelihood.
+
+Eq. 14 far from the data (kept as the paper writes it). As t - t_N grows, alpha(t) -> 0 and the
+model posterior tends to the prior f(t), so the prediction tends to f(t) p_emg(t) +
+(1 - f(t)) p_per(t). For an edge last seen absent p_per is near 0 and p_emg(t) = P(emerged by t),
+so the belief is about f(t) x P(emerged by t): *below* the prior f(t) itself. The variant
+``perpetua_star_annealed`` (:class:`PerpetuaStarAnnealedEstimator`) anneals the prediction too,
+p = alpha(t) p_eq14 + (1 - alpha(t)) f(t), so that without data the belief is the prior; it is not
+the paper's estimator and is reported beside it.
 
 Survival clocks (a choice the paper leaves open, documented here): a persistence model's survival
 time counts from the appearance of the feature, an emergence model's from its disappearance. After
@@ -39,27 +50,38 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.estimators._common import TRAINING_PARAMETERS, BaseEstimator, BaseFilter, fit_survivals, streams_by_edge
+from psg_data.estimators._cadence import Cadence, training_cadence
+from psg_data.estimators._common import (
+    TRAINING_PARAMETERS,
+    BaseEstimator,
+    BaseFilter,
+    escape_floors,
+    fit_training,
+    log_fit_summary,
+    streams_by_edge,
+)
 from psg_data.estimators._fremen_estimator import fit_fremen_edge, training_clock
-from psg_data.estimators._mixture import MixtureFilter, ScanResult
+from psg_data.estimators._mixture import ESCAPE, ESCAPE_FIRST, MixtureFilter, ScanResult
 from psg_data.estimators._params import Integral, MappingParam, Options, Real
 from psg_data.estimators._priors import (
     ConstantPrior,
     FremenPrior,
+    PROFILE_DAYS,
     OraclePrior,
+    ProfilePrior,
     SchedulePrior,
     SwitchingPrior,
     parse_llm_schedule,
     prior_from_dict,
 )
 from psg_data.estimators._survival import SurvivalMixture
-from psg_data.estimators._training import collect_durations
 
-__all__ = ["PerpetuaStarEstimator", "PerpetuaStarFilter", "discounted_cumsum"]
+__all__ = ["PerpetuaStarEstimator", "PerpetuaStarAnnealedEstimator", "PerpetuaStarFilter", "discounted_cumsum",
+           "discounted_cumsum_log"]
 
 log = logging.getLogger(__name__)
 
-PRIOR_KINDS = ("fremen", "oracle", "schedule", "none")
+PRIOR_KINDS = ("fremen", "profile", "oracle", "schedule", "none")
 
 
 def discounted_cumsum(l0: float, inc: NDArray[np.float64], gamma: float) -> NDArray[np.float64]:
@@ -74,10 +96,29 @@ def discounted_cumsum(l0: float, inc: NDArray[np.float64], gamma: float) -> NDAr
     return np.exp(lg * j) * (gamma * l0 + np.cumsum(inc * np.exp(-lg * j)))
 
 
-def _chunk_limit(gamma: float) -> int:
-    if gamma >= 1.0 or gamma <= 0.0:
-        return 32768
-    return int(max(1, min(32768, math.floor(600.0 / -math.log(gamma)))))
+def discounted_cumsum_log(l0: float, inc: NDArray[np.float64], log_g: NDArray[np.float64]) -> NDArray[np.float64]:
+    """L_i = g_i * L_{i-1} + inc_i with L_{-1} = l0 and per-step factors g_i = exp(log_g_i) <= 1.
+
+    Vectorised in stretches over which the cumulative factor stays above e^-300 (so that its
+    inverse is finite); a factor of 0 (log -inf) restarts the sum.
+    """
+    n = inc.size
+    out = np.empty(n)
+    prev, a = float(l0), 0
+    while a < n:
+        c = np.cumsum(log_g[a:])
+        ok = c > -300.0
+        m = n - a if ok.all() else int(np.argmin(ok))
+        if m == 0:
+            prev = math.exp(float(log_g[a])) * prev + float(inc[a])
+            out[a] = prev
+            a += 1
+            continue
+        seg = c[:m]
+        out[a:a + m] = np.exp(seg) * (prev + np.cumsum(inc[a:a + m] * np.exp(-seg)))
+        prev = float(out[a + m - 1])
+        a += m
+    return out
 
 
 def _logit(p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -109,15 +150,23 @@ class PerpetuaStarFilter(BaseFilter):
     """One edge of Perpetua*. See the module docstring for the equations."""
 
     def __init__(self, edge: EdgeKey, per: SurvivalMixture, emg: SurvivalMixture, p_m: float, p_f: float,
-                 prior: SwitchingPrior, *, gamma: float, alpha0_per_s: float, prior_floor: float,
-                 name: str = "perpetua_star") -> None:
+                 prior: SwitchingPrior, *, gamma: float | None, alpha0_per_s: float, prior_floor: float,
+                 half_life_s: float | None = None, escape: float = ESCAPE, escape_first: float = ESCAPE_FIRST,
+                 anneal_prediction: bool = False, name: str = "perpetua_star") -> None:
         super().__init__(edge)
-        self.per = MixtureFilter(per, p_m, p_f, emergence=False)
-        self.emg = MixtureFilter(emg, p_m, p_f, emergence=True)
+        if (gamma is None) == (half_life_s is None):
+            raise EstimatorError(f"edge {edge}: give exactly one of gamma (per observation) and half_life_s")
+        self.per = MixtureFilter(per, p_m, p_f, emergence=False, escape=escape, escape_first=escape_first)
+        self.emg = MixtureFilter(emg, p_m, p_f, emergence=True, escape=escape, escape_first=escape_first)
         self.prior = prior
-        self.gamma = float(gamma)
+        self.gamma = None if gamma is None else float(gamma)
+        self.half_life_s = None if half_life_s is None else float(half_life_s)
+        # log of the forgetting factor: constant per observation, or -ln2 / half-life per second
+        self._lg_obs = None if gamma is None else (math.log(gamma) if gamma > 0 else -math.inf)
+        self._lg_per_s = None if half_life_s is None else -math.log(2.0) / float(half_life_s)
         self.alpha0_per_s = float(alpha0_per_s)
         self.prior_floor = float(prior_floor)
+        self.anneal_prediction = bool(anneal_prediction)
         self._name = name
         self._Ls = [0.0, 0.0]  # discounted log evidence [per, emg]
         self._Es = [0.0, 0.0]  # current mixture log evidence [per, emg]
@@ -127,6 +176,20 @@ class PerpetuaStarFilter(BaseFilter):
         if isinstance(prior, ConstantPrior):
             f = min(max(float(np.clip(prior.value, 0.0, 1.0)), self.prior_floor), 1.0 - self.prior_floor)
             self._const_logit = math.log(f) - math.log1p(-f)
+
+    def _log_g(self, t_prev: float | None, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(n,) log forgetting factors of the steps into the times ``t`` (after ``t_prev``)."""
+        if self._lg_obs is not None:
+            return np.full(t.size, self._lg_obs)
+        dt = np.diff(t, prepend=t[0] if t_prev is None else t_prev)
+        return self._lg_per_s * np.maximum(dt, 0.0)
+
+    def _g_one(self, t: float) -> float:
+        if self._lg_obs is not None:
+            return math.exp(self._lg_obs)
+        if self._last_t is None:
+            return 1.0
+        return math.exp(self._lg_per_s * max(t - self._last_t, 0.0))
 
     @property
     def L(self) -> NDArray[np.float64]:
@@ -171,9 +234,9 @@ class PerpetuaStarFilter(BaseFilter):
         self._last_t = t
 
     def _step(self, t: float, y: int) -> None:
+        g = self._g_one(t)
         e_p, pp = self.per.step(t, y)
         e_e, po = self.emg.step(t, y)
-        g = self.gamma
         lp = g * self._Ls[0] + (e_p - self._Es[0])
         le = g * self._Ls[1] + (e_e - self._Es[1])
         self._Ls = [lp, le]
@@ -210,8 +273,8 @@ class PerpetuaStarFilter(BaseFilter):
         yi = y.astype(np.intp)
         plogit = self._prior_logit(t)
         models = (self.per, self.emg)
-        cmax = min(_MAX_CHUNK, _chunk_limit(self.gamma))
-        gamma = self.gamma
+        cmax = _MAX_CHUNK
+        log_g = self._log_g(self._last_t, t)
         Ls, Es = self._Ls, self._Es
 
         def scan(j: int, a: int, c: int, st: tuple[Any, ...]) -> _Track:
@@ -223,7 +286,7 @@ class PerpetuaStarFilter(BaseFilter):
             inc = np.empty(b - a)
             inc[0] = ev[0] - e0
             np.subtract(ev[1:], ev[:-1], out=inc[1:])
-            L = discounted_cumsum(l_0, inc, gamma)
+            L = discounted_cumsum_log(l_0, inc, log_g[a:b])
             p = res.p_own if j == 0 else 1.0 - res.p_own
             return _Track(a, b, res, L, p, n0, min(cmax, c * _GROWTH))
 
@@ -273,7 +336,7 @@ class PerpetuaStarFilter(BaseFilter):
                     tr = tracks[j]
                     if tr is None:
                         e, po = models[j].step(tk, yk)
-                        Ls[j] = gamma * Ls[j] + (e - Es[j])
+                        Ls[j] = math.exp(float(log_g[k])) * Ls[j] + (e - Es[j])
                         Es[j] = e
                         left[j] -= 1
                         lv[j], pv[j] = Ls[j], (po if j == 0 else 1.0 - po)
@@ -324,7 +387,11 @@ class PerpetuaStarFilter(BaseFilter):
         if self._last_t is None:
             return np.clip(self.prior(t), 0.0, 1.0)
         w = self.model_posterior(t)
-        return w * self.emg.predict(t) + (1.0 - w) * self.per.predict(t)
+        p = w * self.emg.predict(t) + (1.0 - w) * self.per.predict(t)
+        if self.anneal_prediction:
+            alpha = np.exp(-self.alpha0_per_s * np.maximum(t - self._last_t, 0.0))
+            p = alpha * p + (1.0 - alpha) * np.clip(self.prior(t), 0.0, 1.0)
+        return p
 
     # ------------------------------------------------------------------ state
     def get_state(self) -> dict[str, Any]:
@@ -333,13 +400,16 @@ class PerpetuaStarFilter(BaseFilter):
                 "E": self.E.tolist(), "phase": self.phase, "n_restarts": self.n_restarts,
                 "per_survival": self.per.survival.to_dict(), "emg_survival": self.emg.survival.to_dict(),
                 "p_m": self.per.p_m, "p_f": self.per.p_f, "prior": self.prior.to_dict(), "gamma": self.gamma,
-                "alpha0_per_s": self.alpha0_per_s, "prior_floor": self.prior_floor}
+                "half_life_s": self.half_life_s, "alpha0_per_s": self.alpha0_per_s, "prior_floor": self.prior_floor,
+                "escape": [self.per.escape, self.per.escape_first], "anneal_prediction": self.anneal_prediction}
 
     @classmethod
     def from_state(cls, s: dict[str, Any]) -> PerpetuaStarFilter:
         f = cls((s["edge"][0], s["edge"][1]), SurvivalMixture.from_dict(s["per_survival"]),
                 SurvivalMixture.from_dict(s["emg_survival"]), s["p_m"], s["p_f"], prior_from_dict(s["prior"]),
-                gamma=s["gamma"], alpha0_per_s=s["alpha0_per_s"], prior_floor=s["prior_floor"], name=s["estimator"])
+                gamma=s["gamma"], half_life_s=s["half_life_s"], alpha0_per_s=s["alpha0_per_s"],
+                prior_floor=s["prior_floor"], escape=s["escape"][0], escape_first=s["escape"][1],
+                anneal_prediction=s["anneal_prediction"], name=s["estimator"])
         f.per.set_state(s["per"])
         f.emg.set_state(s["emg"])
         f.L = s["L"]
@@ -363,22 +433,29 @@ def _edge_key_of(k: Any) -> EdgeKey:
 class PerpetuaStarEstimator(BaseEstimator):
     """Perpetua* (paper Sec. "Perpetua*").
 
+    Settings left at None are derived from the training streams' cadence (the typical gap g
+    between observations, :mod:`~psg_data.estimators._cadence`) and recorded with their source in
+    ``fit_summary_`` (also logged at INFO); the persistence benchmark passes the paper's values.
+
     Args:
-        prior: switching prior: "fremen" (default), "oracle" (needs ground truth in the training
-            streams' ``meta['gt_t_s']`` / ``meta['gt_state']`` or ``ground_truth``), "schedule" (needs
-            ``schedules``) or "none" (f = 0.5).
-        gamma: forgetting factor on the model likelihoods (0.99).
-        alpha0: annealing decay rate per ``time_unit_s`` (0.01 per minute by default).
-        time_unit_s: the time unit of alpha0, seconds.
-        max_components: largest number of log-normal components tried by AIC (5).
-        p_m, p_f: detector error rates; None estimates them from the training data.
-        durations: where training durations come from: "segments" (change points of the
-            observations), "ground_truth" or "auto".
-        min_segment, segment_penalty: change-point segmentation of the training streams (PELT with
-            a Bernoulli cost; the reference's 5 observations and 3 nats). With sparse observations
-            (a few scans a day) short visits give fewer than ``min_segment`` observations and are
-            then treated as detector noise: lower both (e.g. 1 and 1) for such data.
-        n_periods, max_order, order_tol: FreMEn prior settings (1000 periods, order on validation).
+        prior: switching prior: "fremen" (default), "profile" (eq. 10's piecewise-constant form
+            learned from the training observations: day type x step of the day), "oracle" (needs
+            ground truth in the training streams' ``meta['gt_t_s']`` / ``meta['gt_state']`` or
+            ``ground_truth``), "schedule" (needs ``schedules``) or "none" (f = 0.5).
+        gamma: the paper's forgetting factor *per observation* (0.99 in the paper); None: forget
+            in time with ``half_life_s``. Give at most one of the two.
+        half_life_s: forgetting half-life in seconds (None and gamma None: g).
+        alpha0: annealing decay rate per ``time_unit_s`` (the paper: 0.01 per minute); None: ln 2 / g.
+        time_unit_s: the time unit of alpha0, seconds (60: per minute).
+        max_components, survival, p_m, p_f, segmentation, durations, min_segment, segment_penalty,
+            pool_weight, sigma_min, escape: training and filter settings shared with ``perpetua``
+            (:data:`~psg_data.estimators._common.TRAINING_PARAMETERS`): the survival mixtures are fitted
+            by interval-censored EM to the runs of the states given by the pooled error-rate HMM
+            (``segmentation="hmm"``), which also estimates P_M and P_F.
+        n_periods, max_order, order_tol: FreMEn prior: candidate periods one week / k, k = 1..n_periods
+            (None: the shortest period is 2 g, at most 1000), order chosen on validation data.
+        profile_step_s, profile_days: profile prior: step length (None: g rounded to a divisor of a
+            day) and day types ("workweek": Mon-Fri / Sat-Sun, "all", "weekday").
         schedules: for prior="schedule": mapping edge -> LLM answer text (the prompt's list format)
             or list of 'Day: HH:MM - Day: HH:MM' strings; keys (object, receptacle) or 'object/receptacle'.
         schedule_inside, schedule_outside: prior value inside / outside the scheduled intervals.
@@ -389,15 +466,22 @@ class PerpetuaStarEstimator(BaseEstimator):
     """
 
     name = "perpetua_star"
+    anneal_prediction = False
     _parameters = {
         "prior": Options(*PRIOR_KINDS, help="switching prior"),
-        "gamma": Real(0.0, 1.0, help="forgetting factor on the model likelihoods, per observation"),
-        "alpha0": Real(0.0, None, help="annealing decay rate per time_unit_s"),
+        "gamma": Real(0.0, 1.0, none_ok=True, help="forgetting factor per observation (paper); none: half_life_s"),
+        "half_life_s": Real(0.0, None, closed="neither", none_ok=True,
+                            help="forgetting half-life, seconds; none: the typical gap between observations"),
+        "alpha0": Real(0.0, None, none_ok=True, help="annealing decay rate per time_unit_s; none: ln 2 / typical gap"),
         "time_unit_s": Real(0.0, None, closed="right", help="time unit of alpha0, seconds"),
         **TRAINING_PARAMETERS,
-        "n_periods": Integral(0, None, help="FreMEn prior: candidate periods one week / k"),
+        "n_periods": Integral(1, None, none_ok=True, help="FreMEn prior: candidate periods one week / k; none: "
+                              "shortest period twice the typical gap (at most 1000)"),
         "max_order": Integral(0, None, none_ok=True, help="FreMEn prior: largest order tried"),
         "order_tol": Real(0.0, None, help="FreMEn prior: MAE tolerance favouring smaller orders"),
+        "profile_step_s": Real(0.0, 86400.0, closed="right", none_ok=True,
+                               help="profile prior: step of the day, seconds; none: the typical gap"),
+        "profile_days": Options(*PROFILE_DAYS, help="profile prior: day types"),
         "schedules": MappingParam(help="schedule prior: edge -> LLM-format schedule"),
         "schedule_inside": Real(0.0, 1.0, help="schedule prior value inside the scheduled intervals"),
         "schedule_outside": Real(0.0, 1.0, help="schedule prior value outside them"),
@@ -405,26 +489,37 @@ class PerpetuaStarEstimator(BaseEstimator):
         "prior_floor": Real(0.0, 0.5, closed="neither", help="prior clipped to [floor, 1 - floor]"),
     }
 
-    def __init__(self, *, prior: str = "fremen", gamma: float = 0.99, alpha0: float = 0.01, time_unit_s: float = 60.0,
-                 max_components: int = 5, p_m: float | None = None, p_f: float | None = None,
-                 durations: str = "segments", min_segment: int = 5, segment_penalty: float = 3.0,
-                 n_periods: int = 1000, max_order: int | None = None,
-                 order_tol: float = 1e-3, schedules: Mapping[Any, Any] | None = None, schedule_inside: float = 0.9,
+    def __init__(self, *, prior: str = "fremen", gamma: float | None = None, half_life_s: float | None = None,
+                 alpha0: float | None = None, time_unit_s: float = 60.0, max_components: int = 5,
+                 survival: str = "lognormal", p_m: float | None = None, p_f: float | None = None,
+                 segmentation: str = "hmm", durations: str = "segments", min_segment: int = 5,
+                 segment_penalty: float = 3.0, pool_weight: float = 2.0, sigma_min: float = 0.05,
+                 escape: float = ESCAPE, n_periods: int | None = None, max_order: int | None = None,
+                 order_tol: float = 1e-3, profile_step_s: float | None = None, profile_days: str = "workweek",
+                 schedules: Mapping[Any, Any] | None = None, schedule_inside: float = 0.9,
                  schedule_outside: float = 0.1, ground_truth: Mapping[Any, Any] | None = None,
                  prior_floor: float = 1e-3, random_state: int = 0) -> None:
         self.prior = prior
         self.gamma = gamma
+        self.half_life_s = half_life_s
         self.alpha0 = alpha0
         self.time_unit_s = time_unit_s
         self.max_components = max_components
+        self.survival = survival
         self.p_m = p_m
         self.p_f = p_f
+        self.segmentation = segmentation
         self.durations = durations
         self.min_segment = min_segment
         self.segment_penalty = segment_penalty
+        self.pool_weight = pool_weight
+        self.sigma_min = sigma_min
+        self.escape = escape
         self.n_periods = n_periods
         self.max_order = max_order
         self.order_tol = order_tol
+        self.profile_step_s = profile_step_s
+        self.profile_days = profile_days
         self.schedules = schedules
         self.schedule_inside = schedule_inside
         self.schedule_outside = schedule_outside
@@ -436,19 +531,49 @@ class PerpetuaStarEstimator(BaseEstimator):
         self.validate_params()
         if self.prior == "schedule" and not self.schedules:
             raise EstimatorError(f"{self.name}: prior='schedule' needs schedules={{(object, receptacle): llm_answer}}")
+        if self.gamma is not None and self.half_life_s is not None:
+            raise EstimatorError(f"{self.name}: give gamma (forgetting per observation) or half_life_s (per time), "
+                                 f"not both (got gamma={self.gamma}, half_life_s={self.half_life_s})")
+
+    def _resolve(self, cad: Cadence) -> dict[str, dict[str, Any]]:
+        """Resolved forgetting, annealing and prior settings with where each value came from."""
+        src = f"cadence: typical gap {cad.typical_gap_s:g} s" + ("" if cad.measured else " (fallback)")
+        out: dict[str, dict[str, Any]] = {}
+        if self.gamma is not None:
+            self.gamma_, self.half_life_s_ = float(self.gamma), None
+            out["forgetting"] = {"value": f"gamma {self.gamma:g} per observation", "source": "set"}
+        else:
+            self.gamma_ = None
+            self.half_life_s_ = float(self.half_life_s) if self.half_life_s is not None else cad.half_life_s
+            out["forgetting"] = {"value": f"half-life {self.half_life_s_:g} s",
+                                 "source": "set" if self.half_life_s is not None else src}
+        if self.alpha0 is not None:
+            self.alpha0_per_s_ = float(self.alpha0) / float(self.time_unit_s)
+            out["alpha0"] = {"value": f"{self.alpha0:g} per {self.time_unit_s:g} s ({self.alpha0_per_s_:.4g} per s)",
+                             "source": "set"}
+        else:
+            self.alpha0_per_s_ = cad.alpha0_per_s
+            out["alpha0"] = {"value": f"{self.alpha0_per_s_ * float(self.time_unit_s):.4g} per {self.time_unit_s:g} s "
+                             f"({self.alpha0_per_s_:.4g} per s)", "source": src}
+        self.n_periods_ = int(self.n_periods) if self.n_periods is not None else cad.n_periods
+        if self.prior == "fremen":
+            out["n_periods"] = {"value": self.n_periods_, "source": "set" if self.n_periods is not None else src}
+        self.profile_step_s_ = float(self.profile_step_s) if self.profile_step_s is not None else cad.profile_step_s
+        if self.prior == "profile":
+            out["profile_step_s"] = {"value": self.profile_step_s_,
+                                     "source": "set" if self.profile_step_s is not None else src}
+        return out
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> PerpetuaStarEstimator:
+        """Learn the mixtures, error rates and switching priors; see ``fit_summary_`` for every decision."""
         self._validate()
         streams = list(streams)
         tr = streams_by_edge(streams)
         va = streams_by_edge(val_streams)
-        durs, (pm, pf) = collect_durations(streams, source=self.durations, min_size=int(self.min_segment),
-                                           penalty=float(self.segment_penalty))
-        self.p_m_ = float(self.p_m) if self.p_m is not None else pm
-        self.p_f_ = float(self.p_f) if self.p_f is not None else pf
-        self.survivals_, self.default_survivals_ = fit_survivals(
-            durs, max_components=int(self.max_components), seed=int(self.random_state))
+        cad = training_cadence(streams)
+        settings = self._resolve(cad)
+        training = fit_training(self, streams)
         self.timezone_ = timezone
         self.clock_ = training_clock(streams, timezone)
         self.priors_: dict[EdgeKey, SwitchingPrior] = {}
@@ -456,15 +581,21 @@ class PerpetuaStarEstimator(BaseEstimator):
         for e, ss in tr.items():
             self.priors_[e] = self._fit_prior(e, ss, va.get(e))
         self._extra_schedule_priors()
+        self.fit_summary_ = {"estimator": self.name, "cadence": cad.to_dict(), "settings": settings, **training}
+        log_fit_summary(self.name, self.fit_summary_)
         self.fitted_ = True
         return self
 
     def _fit_prior(self, e: EdgeKey, ss: list[EdgeStream], val: list[EdgeStream] | None) -> SwitchingPrior:
         if self.prior == "fremen":
-            comps, info = fit_fremen_edge(ss, val, self.clock_, n_periods=int(self.n_periods),
+            comps, info = fit_fremen_edge(ss, val, self.clock_, n_periods=self.n_periods_,
                                           order_tol=self.order_tol, max_order=self.max_order)
             self.fit_info_[e] = info
             return FremenPrior(comps, self.clock_)
+        if self.prior == "profile":
+            t = np.concatenate([s.t_s for s in ss])
+            y = np.concatenate([s.y for s in ss])
+            return ProfilePrior.fit(t, y, step_s=self.profile_step_s_, days=self.profile_days, timezone=self.timezone_)
         if self.prior == "oracle":
             gt = self._ground_truth_for(e, ss)
             return OraclePrior.from_ground_truth(gt[0], gt[1], self.clock_)
@@ -512,9 +643,11 @@ class PerpetuaStarEstimator(BaseEstimator):
         self._check_fitted()
         edge = (str(edge[0]), str(edge[1]))
         per, emg = self.survivals_.get(edge, self.default_survivals_)
-        return PerpetuaStarFilter(edge, per, emg, self.p_m_, self.p_f_, self._prior_for(edge), gamma=float(self.gamma),
-                                  alpha0_per_s=float(self.alpha0) / float(self.time_unit_s),
-                                  prior_floor=float(self.prior_floor), name=self.name)
+        esc, esc1 = escape_floors(self.escape)
+        return PerpetuaStarFilter(edge, per, emg, self.p_m_, self.p_f_, self._prior_for(edge), gamma=self.gamma_,
+                                  half_life_s=self.half_life_s_, alpha0_per_s=self.alpha0_per_s_,
+                                  prior_floor=float(self.prior_floor), escape=esc, escape_first=esc1,
+                                  anneal_prediction=self.anneal_prediction, name=self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> PerpetuaStarFilter:
         self._check_state(state)
@@ -537,3 +670,15 @@ class PerpetuaStarOracleEstimator(PerpetuaStarEstimator):
 
     def __init__(self, *, prior: str = "oracle", **kwargs: Any) -> None:
         super().__init__(prior=prior, **kwargs)
+
+
+class PerpetuaStarAnnealedEstimator(PerpetuaStarEstimator):
+    """``perpetua_star_annealed``: Perpetua* whose *prediction* also anneals to the prior (not the paper's).
+
+    p(t) = alpha(t) p_eq14(t) + (1 - alpha(t)) f(t) with alpha(t) = exp(-alpha0 (t - t_N)): near the
+    last observation it is eq. 14, far from it the switching prior f(t) (which eq. 14 undershoots
+    for edges last seen absent, see the module docstring). Same settings as ``perpetua_star``.
+    """
+
+    name = "perpetua_star_annealed"
+    anneal_prediction = True

@@ -6,12 +6,15 @@ object, vectorised over Unix times (s), serialisable with ``to_dict`` / :func:`p
 - :class:`ConstantPrior` (``prior="none"``: 0.5, no information);
 - :class:`FremenPrior`: the saturated FreMEn reconstruction (eq. 9);
 - :class:`SchedulePrior`: piecewise constant over the week, e.g. parsed from an LLM answer (eq. 10);
-- :class:`OraclePrior`: a step function on a week grid from the training ground truth.
+- :class:`OraclePrior`: a step function on a week grid from the training ground truth;
+- :class:`ProfilePrior`: eq. 10's piecewise-constant form learned from the training observations
+  (``prior="profile"``): one value per (day type, step of the day).
 """
 
 from __future__ import annotations
 
 import ast
+import math
 import re
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -22,7 +25,8 @@ from numpy.typing import ArrayLike, NDArray
 from psg_data.errors import EstimatorError
 from psg_data.estimators._fremen import WEEK_S, FremenComponents, LocalClock
 
-__all__ = ["SwitchingPrior", "ConstantPrior", "FremenPrior", "SchedulePrior", "OraclePrior", "prior_from_dict",
+__all__ = ["SwitchingPrior", "ConstantPrior", "FremenPrior", "SchedulePrior", "OraclePrior", "ProfilePrior",
+           "PROFILE_DAYS", "prior_from_dict",
            "parse_llm_schedule", "render_llm_prompt", "LLM_PROMPT_TEMPLATE", "DAYS"]
 
 DAYS = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")
@@ -123,6 +127,74 @@ class OraclePrior:
         return cls(tuple(float(v) for v in vals), float(bin_s), clock)
 
 
+PROFILE_DAYS = ("workweek", "all", "weekday")
+"""Day types of :class:`ProfilePrior`: Mon-Fri / Sat-Sun, one type, or each weekday its own."""
+
+
+def _day_type(weekday: NDArray[np.int64], days: str) -> NDArray[np.int64]:
+    if days == "workweek":
+        return (weekday >= 5).astype(np.int64)
+    if days == "all":
+        return np.zeros_like(weekday)
+    return weekday
+
+
+@dataclass(frozen=True)
+class ProfilePrior:
+    """Piecewise constant in (local day type, step of the local day): the eq. 10 form, learned.
+
+    ``values[d][s]`` holds on day type d (see :data:`PROFILE_DAYS`) during the s-th step of
+    ``step_s`` seconds after local midnight. :meth:`fit` sets each value to the fraction of
+    present observations in that cell, smoothed toward the edge's overall fraction with
+    ``pseudo_count`` observations (cells without data get that fraction).
+    """
+
+    values: tuple[tuple[float, ...], ...]
+    step_s: float
+    days: str
+    timezone: str = "UTC"
+
+    def _cell(self, t_s: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        t = np.asarray(t_s, dtype=np.float64)
+        wall = LocalClock(self.timezone, 0.0)(t)
+        day = np.floor(wall / 86400.0)
+        weekday = np.mod(day + 3, 7).astype(np.int64)  # 1970-01-01 was a Thursday
+        n_steps = len(self.values[0])
+        step = np.minimum(((wall - day * 86400.0) / self.step_s).astype(np.int64), n_steps - 1)
+        return _day_type(weekday, self.days), step
+
+    def __call__(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        d, s = self._cell(t_s)
+        return np.asarray(self.values, dtype=np.float64)[d, s]
+
+    @classmethod
+    def fit(cls, t_s: ArrayLike, y: ArrayLike, *, step_s: float, days: str = "workweek", timezone: str = "UTC",
+            pseudo_count: float = 1.0) -> ProfilePrior:
+        """Learn the profile from observations ``y`` (0/1) at Unix times ``t_s``."""
+        if days not in PROFILE_DAYS:
+            raise EstimatorError(f"profile prior: days must be one of {', '.join(PROFILE_DAYS)}, got {days!r}")
+        if not (0 < step_s <= 86400.0):
+            raise EstimatorError(f"profile prior: step_s must be in (0, 86400], got {step_s}")
+        n_days = {"workweek": 2, "all": 1, "weekday": 7}[days]
+        n_steps = int(math.ceil(86400.0 / step_s))
+        blank = cls(tuple((0.5,) * n_steps for _ in range(n_days)), float(step_s), days, timezone)
+        yy = np.asarray(y, dtype=np.float64).reshape(-1)
+        if yy.size == 0:
+            return blank
+        d, s = blank._cell(t_s)
+        idx = d.reshape(-1) * n_steps + s.reshape(-1)
+        cnt = np.bincount(idx, minlength=n_days * n_steps)
+        tot = np.bincount(idx, weights=yy, minlength=n_days * n_steps)
+        base = float(yy.mean())
+        a = float(pseudo_count)
+        v = np.where(cnt > 0, (tot + a * base) / np.maximum(cnt + a, 1e-300), base).reshape(n_days, n_steps)
+        return cls(tuple(tuple(float(x) for x in row) for row in v), float(step_s), days, timezone)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": "profile", "values": [list(r) for r in self.values], "step_s": self.step_s, "days": self.days,
+                "timezone": self.timezone}
+
+
 def prior_from_dict(d: dict[str, Any]) -> SwitchingPrior:
     kind = d.get("kind")
     if kind == "constant":
@@ -134,7 +206,10 @@ def prior_from_dict(d: dict[str, Any]) -> SwitchingPrior:
                              float(d["outside"]), d["timezone"])
     if kind == "oracle":
         return OraclePrior(tuple(float(v) for v in d["values"]), float(d["bin_s"]), LocalClock.from_dict(d["clock"]))
-    raise EstimatorError(f"unknown switching prior kind {kind!r}; valid: constant, fremen, schedule, oracle")
+    if kind == "profile":
+        return ProfilePrior(tuple(tuple(float(x) for x in r) for r in d["values"]), float(d["step_s"]), d["days"],
+                            d["timezone"])
+    raise EstimatorError(f"unknown switching prior kind {kind!r}; valid: constant, fremen, schedule, oracle, profile")
 
 
 _ITEM = re.compile(r"^\s*(Mon|Tue|Wed|Thu|Fri|Sat|Sun)\s*:\s*(\d{1,2}):(\d{2})\s*-\s*"

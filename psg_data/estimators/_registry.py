@@ -32,6 +32,7 @@ _BUILTINS: dict[str, str] = {
     "perpetua_star": "psg_data.estimators._perpetua_star:PerpetuaStarEstimator",
     "perpetua_star_schedule": "psg_data.estimators._perpetua_star:PerpetuaStarScheduleEstimator",
     "perpetua_star_oracle": "psg_data.estimators._perpetua_star:PerpetuaStarOracleEstimator",
+    "perpetua_star_annealed": "psg_data.estimators._perpetua_star:PerpetuaStarAnnealedEstimator",
     "perpetua": "psg_data.estimators._perpetua:PerpetuaEstimator",
     "persistence_filter": "psg_data.estimators._simple:PersistenceFilterEstimator",
     "fremen": "psg_data.estimators._fremen_estimator:FremenEstimator",

@@ -46,7 +46,7 @@ def test_persistence_posterior_matches_brute_force(family: str) -> None:
     y[3] = 1 - y[3]
     for k in range(surv.n_components):
         one = SurvivalMixture(surv.family, np.ones(1), surv.p1[k:k + 1], surv.p2[k:k + 1])
-        f = MixtureFilter(one, 0.1, 0.15)
+        f = MixtureFilter(one, 0.1, 0.15, escape=0.0, escape_first=0.0)  # the exact recursion
         f.reset(0.0)
         f.update_many(t_obs, y)
         for tq in (t_obs[-1], t_obs[-1] + 500, t_obs[-1] + 3000):
@@ -59,7 +59,7 @@ def test_evidence_matches_brute_force_sum() -> None:
     surv = FAMILIES["lognormal"]
     t_obs = np.array([100.0, 900.0, 2000.0, 2600.0, 5000.0])
     y = np.array([1, 1, 0, 1, 0], dtype=np.int8)
-    f = MixtureFilter(surv, 0.2, 0.05)
+    f = MixtureFilter(surv, 0.2, 0.05, escape=0.0, escape_first=0.0)  # the exact recursion
     f.reset(0.0)
     f.update_many(t_obs, y)
     # exact: T falls in one of the N+1 intervals between observation times
@@ -168,3 +168,26 @@ def test_scalar_log_ndtr_matches_scipy() -> None:
     x = np.concatenate([np.linspace(-200, 40, 2001), [-37.0, -36.999, -1.0, -0.999]])
     got = np.array([log_ndtr_scalar(float(v)) for v in x])
     np.testing.assert_allclose(got, log_ndtr(x), rtol=1e-12, atol=1e-300)
+
+
+def test_escape_floor_lets_a_narrow_prior_see_an_early_change() -> None:
+    """A restarted filter with a narrow log-normal (median 1 h, sigma 0.01) believes contrary
+    observations long before the prior's lower tail only with the escape floor."""
+    narrow = SurvivalMixture.lognormal_median(3600.0, 0.01)
+    t = np.arange(0.0, 120.0, 0.5)  # two minutes at 0.5 s
+    y = np.zeros(t.size, dtype=np.int8)
+    y[0] = 1  # present at the restart, then seen absent every 0.5 s
+    exact = MixtureFilter(narrow, 0.1, 0.1, escape=0.0, escape_first=0.0)
+    exact.update_many(t, y)
+    floored = MixtureFilter(narrow, 0.1, 0.1)
+    floored.update_many(t, y)
+    assert float(exact.predict(t[-1:])[0]) > 0.999  # zero prior mass on an early change: ignores the data
+    assert float(floored.predict(t[-1:])[0]) < 1e-6
+    # about log(1e10) / log(0.9 / 0.1) ~ 11 contrary observations overcome the floor
+    g = MixtureFilter(narrow, 0.1, 0.1)
+    g.update_many(t[:13], y[:13])
+    assert float(g.predict(t[12:13])[0]) < 0.5
+    h = MixtureFilter(narrow, 0.1, 0.1)
+    for ti, yi in zip(t, y):  # the scalar path applies the same floors
+        h.update(float(ti), int(yi))
+    np.testing.assert_allclose(h.component_log_evidence(), floored.component_log_evidence(), rtol=1e-9)

@@ -42,7 +42,7 @@ def test_set_params_checks_and_returns_self() -> None:
     assert est.set_params(gamma=0.5, prior="none") is est
     assert est.gamma == 0.5 and est.prior == "none"
     assert repr(est) == "PerpetuaStarEstimator(prior='none', gamma=0.5)"
-    with pytest.raises(EstimatorError, match=r"gamma must be a number in \[0, 1\], got 1.5"):
+    with pytest.raises(EstimatorError, match=r"gamma must be a number in \[0, 1\] or none, got 1.5"):
         est.set_params(gamma=1.5)
     assert est.gamma == 0.5  # unchanged after a refused call
     with pytest.raises(EstimatorError, match="unknown setting 'gama'; valid settings: prior, gamma"):
@@ -88,8 +88,8 @@ def test_parse_kinds() -> None:
 
 
 @pytest.mark.parametrize("spec, message", [
-    ("perpetua_star:gamma=abc", "gamma must be a number in [0, 1], got 'abc'"),
-    ("perpetua_star:gamma=1.5", "gamma must be a number in [0, 1], got 1.5"),
+    ("perpetua_star:gamma=abc", "gamma must be a number in [0, 1] or none, got 'abc'"),
+    ("perpetua_star:gamma=1.5", "gamma must be a number in [0, 1] or none, got 1.5"),
     ("perpetua_star:", "no settings after ':'"),
     ("perpetua_star:bogus=1", "unknown setting 'bogus'"),
 ])

@@ -24,6 +24,7 @@ from psg_data.estimators import (
 )
 from psg_data.estimators._mixture import MixtureFilter
 from psg_data.estimators._perpetua_star import PerpetuaStarFilter, discounted_cumsum
+from psg_data.estimators._survival_training import mixture_median_s
 
 PER = SurvivalMixture("lognormal", np.array([0.5, 0.5]), np.log([3600.0, 8 * 3600.0]), np.array([0.3, 0.5]))
 EMG = SurvivalMixture.lognormal_median(4 * 3600.0, 0.6)
@@ -190,13 +191,16 @@ def test_segmentation_settings_for_sparse_scans() -> None:
     for start in rng.choice(np.arange(2, t.size - 2), 8, replace=False):  # visits of one or two scans
         y[start:start + int(rng.integers(1, 3))] = 1
     streams = [EdgeStream(("o", "r"), t, y)]
-    ref = get_estimator("perpetua_star", prior="none").fit(streams)
-    fine = get_estimator("perpetua_star", prior="none", min_segment=1, segment_penalty=1.0).fit(streams)
-    med = lambda m: float(np.exp(np.average(m.p1, weights=m.weights)))  # noqa: E731 (log-normal median)
+    ref = get_estimator("perpetua_star", prior="none", segmentation="bernoulli").fit(streams)
+    fine = get_estimator("perpetua_star", prior="none", segmentation="observations").fit(streams)
+    med = mixture_median_s
     per_ref, emg_ref = ref.survivals_[("o", "r")]
     per_fine, emg_fine = fine.survivals_[("o", "r")]
-    # the reference falls back to a censored absence run (median >= 1 day); fine segments see the gaps
+    # the Bernoulli PELT finds at most one change point: every short visit counted as a false
+    # positive and a long absence run; the observations as states see every visit
     assert med(emg_fine) < med(emg_ref) and med(emg_fine) < 7 * 86400
     assert fine.p_f_ < ref.p_f_
+    r, f = ref.fit_summary_["edges"]["o/r"], fine.fit_summary_["edges"]["o/r"]
+    assert r["present_runs"] + r["absent_runs"] <= 3 and f["present_runs"] >= 7
     with pytest.raises(EstimatorError, match="min_segment"):
         get_estimator("perpetua_star", min_segment=0).fit(streams)
