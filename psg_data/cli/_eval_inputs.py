@@ -190,6 +190,7 @@ def _synth_dense_ground_truth(ds: Any, step_s: float) -> Any:
 def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], quiet: bool) -> tuple[list[Any], dict]:
     """One :class:`~psg_data.metrics.PersistenceTask` per seed (benchmark: one draw per seed;
     datasets: the same task, seeds vary the estimators) and a description for results.json."""
+    from psg_data.estimators import PAPER_SETTINGS
     from psg_data.metrics import PersistenceTask, persistence_task_from_dataset
 
     if choice.kind == "benchmark":
@@ -207,7 +208,9 @@ def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], q
                 info={"dataset": BENCHMARK, "seed": s, "p_m": bm.p_m, "p_f": bm.p_f, "shift": bm.shift,
                       "edges": len(bm.edges), "ground_truth": "dense 60 s grid over the test week",
                       "split": "week 0 validation, weeks 1-4 train, week 5 test"},
-                estimator_hints={"schedules": bm.schedules}))
+                # the paper's Sec. V-A settings (gamma per observation, alpha0 per minute, 1000
+                # FreMEn periods) for every estimator that leaves them to the data's cadence
+                estimator_hints={"schedules": bm.schedules, **PAPER_SETTINGS}))
         return tasks, {"dataset": BENCHMARK, "per_seed_draws": True, **{k: v for k, v in tasks[0].info.items()
                                                                          if k not in ("seed",)}}
     from psg_data.loaders import open_dataset

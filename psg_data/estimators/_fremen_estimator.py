@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.estimators._common import BaseEstimator, BaseFilter, streams_by_edge
+from psg_data.estimators._cadence import training_cadence
+from psg_data.estimators._common import BaseEstimator, BaseFilter, log_fit_summary, streams_by_edge
 from psg_data.estimators._fremen import WEEK_S, FremenComponents, FremenModel, LocalClock, choose_order
 from psg_data.estimators._params import Integral, Real
 
@@ -80,19 +81,22 @@ class FremenEstimator(BaseEstimator):
     """FreMEn (Krajnik et al. 2017) with weekly harmonics, order chosen on held-out data.
 
     Args:
-        n_periods: K candidate periods one week / k, k = 1..K.
+        n_periods: K candidate periods one week / k, k = 1..K; None: the shortest period is twice
+            the training streams' typical gap between observations (Nyquist; at most 1000, see
+            :mod:`~psg_data.estimators._cadence`). Recorded in ``fit_summary_``.
         max_order: largest order tried on the validation data (None: K).
         order_tol: tolerance (MAE) favouring smaller orders.
     """
 
     name = "fremen"
     _parameters = {
-        "n_periods": Integral(0, None, help="candidate periods one week / k, k = 1..n_periods"),
+        "n_periods": Integral(0, None, none_ok=True, help="candidate periods one week / k, k = 1..n_periods; none: "
+                              "shortest period twice the typical gap between observations (at most 1000)"),
         "max_order": Integral(0, None, none_ok=True, help="largest order tried on validation data (none: n_periods)"),
         "order_tol": Real(0.0, None, help="MAE tolerance favouring smaller orders"),
     }
 
-    def __init__(self, *, n_periods: int = 1000, max_order: int | None = None, order_tol: float = 1e-3) -> None:
+    def __init__(self, *, n_periods: int | None = None, max_order: int | None = None, order_tol: float = 1e-3) -> None:
         self.n_periods = n_periods
         self.max_order = max_order
         self.order_tol = order_tol
@@ -103,11 +107,17 @@ class FremenEstimator(BaseEstimator):
         tr = streams_by_edge(streams)
         va = streams_by_edge(val_streams)
         self.clock_ = training_clock(list(streams), timezone)
+        cad = training_cadence(list(streams))
+        self.n_periods_ = int(self.n_periods) if self.n_periods is not None else cad.n_periods
+        self.fit_summary_ = {"estimator": self.name, "cadence": cad.to_dict(), "settings": {"n_periods": {
+            "value": self.n_periods_, "source": "set" if self.n_periods is not None else
+            f"cadence: typical gap {cad.typical_gap_s:g} s"}}}
+        log_fit_summary(self.name, self.fit_summary_)
         self.components_: dict[EdgeKey, FremenComponents] = {}
         self.fit_info_: dict[EdgeKey, dict[str, Any]] = {}
         for e, ss in tr.items():
             self.components_[e], self.fit_info_[e] = fit_fremen_edge(
-                ss, va.get(e), self.clock_, n_periods=int(self.n_periods), order_tol=self.order_tol,
+                ss, va.get(e), self.clock_, n_periods=self.n_periods_, order_tol=self.order_tol,
                 max_order=self.max_order)
         allt = [s for s in streams if len(s)]
         mean = float(np.mean(np.concatenate([s.y for s in allt]))) if allt else 0.5

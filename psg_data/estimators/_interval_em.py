@@ -24,7 +24,8 @@ Every step is computed in log space (``log_ndtr``, ``expm1``) so that intervals 
 not underflow, and sigma (of ln T) is floored at ``sigma_min`` so that a component cannot collapse
 on one duration. The likelihood never decreases from one iteration to the next (tested).
 K = 1..max_components is chosen by AIC (3K parameters for log-normal and Weibull, 2K for
-exponential, as the Perpetua reference), components with weight < 0.01 are dropped.
+exponential, as the Perpetua reference), trying K upward and stopping at the first K whose AIC
+does not improve on K - 1; components with weight < 0.01 are dropped.
 """
 
 from __future__ import annotations
@@ -197,15 +198,16 @@ def _weibull_mstep(lo: NDArray[np.float64], hi: NDArray[np.float64], wr: NDArray
 
 # ---------------------------------------------------------------------------------- EM
 def _mix_loglik(logp: NDArray[np.float64], logpi: NDArray[np.float64],
-                w: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
-    v = logp + logpi
-    m = np.max(v, axis=1, keepdims=True)
+                w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Weighted mixture log likelihood (...,) and responsibilities (..., n, K) from log P (..., n, K)."""
+    v = logp + logpi[..., None, :]
+    m = np.max(v, axis=-1, keepdims=True)
     m = np.where(np.isfinite(m), m, 0.0)
-    lse = m[:, 0] + np.log(np.sum(np.exp(v - m), axis=1))
+    lse = m[..., 0] + np.log(np.sum(np.exp(v - m), axis=-1))
     with np.errstate(invalid="ignore"):
-        r = np.exp(v - lse[:, None])
+        r = np.exp(v - lse[..., None])
     r = np.where(np.isfinite(r), r, 0.0)
-    return float(np.sum(w * lse)), r
+    return np.sum(w * lse, axis=-1), r
 
 
 def _row_correction(lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray[np.float64], family: str) -> float:
@@ -216,52 +218,66 @@ def _row_correction(lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray
     return -float(np.sum(w[ex] * np.log(lo[ex]))) if ex.any() else 0.0
 
 
+def _em_batch(family: str, lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray[np.float64],
+              pi: NDArray[np.float64], p1: NDArray[np.float64], p2: NDArray[np.float64], sigma_min: float,
+              max_iter: int, tol: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                                                  list[list[float]]]:
+    """R EM runs side by side (params (R, K)); each stops when its own change is < tol."""
+    pi, p1, p2 = pi.astype(np.float64).copy(), p1.astype(np.float64).copy(), p2.astype(np.float64).copy()
+    n_runs, k = pi.shape
+    traces: list[list[float]] = [[] for _ in range(n_runs)]
+    corr = _row_correction(lo, hi, w, family)
+    active = np.ones(n_runs, dtype=bool)
+    for _ in range(max_iter):
+        if family == "lognormal":
+            logp, ex, ex2 = _estep_lognormal(lo, hi, p1[:, None, :], p2[:, None, :])
+        elif family == "exponential":
+            logp, et = _estep_exponential(lo, hi, p1[:, None, :])
+        else:
+            logp = np.stack([_weibull_logp(lo, hi, p1[j], p2[j]) for j in range(n_runs)])
+        with np.errstate(divide="ignore"):
+            ll, r = _mix_loglik(logp, np.log(pi), w)
+        ll = ll + corr
+        for j in np.flatnonzero(active):
+            tr = traces[j]
+            if tr and abs(float(ll[j]) - tr[-1]) < tol:
+                active[j] = False
+            tr.append(float(ll[j]))
+        if not active.any():
+            break
+        wr = r * w[:, None]
+        nk = wr.sum(axis=1)
+        live = (nk > 1e-12) & active[:, None]
+        upd = active[:, None]
+        pi = np.where(upd, np.where(nk > 1e-12, nk, 0.0) / nk.sum(axis=1, keepdims=True), pi)
+        nk_safe = np.where(nk > 1e-12, nk, 1.0)
+        if family == "lognormal":
+            mu_new = (wr * ex).sum(axis=1) / nk_safe
+            dm = mu_new - p1
+            var = (wr * (ex2 - 2.0 * dm[:, None, :] * (ex - p1[:, None, :]))).sum(axis=1) / nk_safe + dm * dm
+            p1 = np.where(live, mu_new, p1)
+            p2 = np.where(live, np.maximum(np.sqrt(np.maximum(var, 0.0)), sigma_min), p2)
+        elif family == "exponential":
+            p1 = np.where(live, nk_safe / np.maximum((wr * et).sum(axis=1), 1e-300), p1)
+        else:
+            for j in range(n_runs):
+                for c in range(k):
+                    if live[j, c]:
+                        p1[j, c], p2[j, c] = _weibull_mstep(lo, hi, wr[j, :, c], float(p1[j, c]), float(p2[j, c]))
+    return pi, p1, p2, traces
+
+
 def em_intervals(family: str, lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray[np.float64],
                  pi: NDArray[np.float64], p1: NDArray[np.float64], p2: NDArray[np.float64], *, sigma_min: float = 0.05,
                  max_iter: int = 250, tol: float = 1e-6) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                                   NDArray[np.float64], list[float]]:
-    """EM from the given start on merged rows; returns (pi, p1, p2, log likelihood per iteration).
+    """One EM run from the given start (rows as merged by :func:`fit_interval_mixture`).
 
-    The returned parameters are those of the last E-step (whose likelihood is ``trace[-1]``).
+    Returns (pi, p1, p2, log likelihood per iteration); the parameters are those of the last
+    E-step, whose log likelihood is ``trace[-1]``.
     """
-    pi, p1, p2 = pi.astype(np.float64).copy(), p1.astype(np.float64).copy(), p2.astype(np.float64).copy()
-    trace: list[float] = []
-    corr = _row_correction(lo, hi, w, family)
-    k = pi.size
-    for _ in range(max_iter):
-        if family == "lognormal":
-            logp, ex, ex2 = _estep_lognormal(lo, hi, p1, p2)
-        elif family == "exponential":
-            logp, et = _estep_exponential(lo, hi, p1)
-        else:
-            logp = _weibull_logp(lo, hi, p1, p2)
-        with np.errstate(divide="ignore"):
-            ll, r = _mix_loglik(logp, np.log(pi), w)
-        ll += corr
-        if trace and ll < trace[-1] - 1e-9 * max(1.0, abs(trace[-1])):  # pragma: no cover - guarded by tests
-            raise EstimatorError(f"interval EM ({family}): log likelihood decreased ({trace[-1]} -> {ll})")
-        done = bool(trace) and abs(ll - trace[-1]) < tol
-        trace.append(ll)
-        if done:
-            break
-        wr = r * w[:, None]
-        nk = wr.sum(axis=0)
-        live = nk > 1e-12
-        pi = np.where(live, nk, 0.0) / nk.sum()
-        nk_safe = np.where(live, nk, 1.0)
-        if family == "lognormal":
-            mu_new = (wr * ex).sum(axis=0) / nk_safe
-            dm = mu_new - p1
-            var = (wr * (ex2 - 2.0 * dm * (ex - p1))).sum(axis=0) / nk_safe + dm * dm
-            p1 = np.where(live, mu_new, p1)
-            p2 = np.where(live, np.maximum(np.sqrt(np.maximum(var, 0.0)), sigma_min), p2)
-        elif family == "exponential":
-            p1 = np.where(live, nk_safe / np.maximum((wr * et).sum(axis=0), 1e-300), p1)
-        else:
-            for j in range(k):
-                if live[j]:
-                    p1[j], p2[j] = _weibull_mstep(lo, hi, wr[:, j], float(p1[j]), float(p2[j]))
-    return pi, p1, p2, trace
+    a, b, c, tr = _em_batch(family, lo, hi, w, pi[None], p1[None], p2[None], sigma_min, max_iter, tol)
+    return a[0], b[0], c[0], tr[0]
 
 
 def interval_log_likelihood(mixture: SurvivalMixture, lo: ArrayLike, hi: ArrayLike,
@@ -279,7 +295,7 @@ def interval_log_likelihood(mixture: SurvivalMixture, lo: ArrayLike, hi: ArrayLi
         raise EstimatorError(f"interval EM: family {f!r} not supported; valid: {', '.join(INTERVAL_FAMILIES)}")
     with np.errstate(divide="ignore"):
         ll, _ = _mix_loglik(logp, np.log(mixture.weights), w)
-    return ll + _row_correction(lo_, hi_, w, f)
+    return float(ll) + _row_correction(lo_, hi_, w, f)
 
 
 def _point_guess(lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -336,9 +352,11 @@ def fit_interval_mixture(lo: ArrayLike, hi: ArrayLike, *, family: str = "lognorm
     npar = _N_PARAMS[family]
     for k in range(1, max(1, min(int(max_components), lo_.size)) + 1):
         starts = [np.zeros(k)] + [rng.normal(0.0, 0.5 * spread, k) for _ in range(n_restarts if k > 1 else 0)]
-        runs = [em_intervals(family, lo_, hi_, w, *_init(family, g, w, k, s), sigma_min=sigma_min, max_iter=max_iter,
-                             tol=tol) for s in starts]
-        pi, p1, p2, trace = max(runs, key=lambda r: r[3][-1])
+        inits = [_init(family, g, w, k, s) for s in starts]
+        pis, p1s, p2s, traces = _em_batch(family, lo_, hi_, w, *(np.stack([x[i] for x in inits]) for i in range(3)),
+                                          sigma_min, max_iter, tol)
+        j = int(np.argmax([tr[-1] for tr in traces]))
+        pi, p1, p2, trace = pis[j], p1s[j], p2s[j], traces[j]
         ll = trace[-1]
         aic = 2.0 * npar * k - 2.0 * ll
         aics[k] = aic
@@ -346,6 +364,8 @@ def fit_interval_mixture(lo: ArrayLike, hi: ArrayLike, *, family: str = "lognorm
         mix = SurvivalMixture(family, pi[keep], p1[keep], p2[keep] if family != "exponential" else np.ones(int(keep.sum())))
         if best is None or aic < best.aic:
             best = IntervalFit(mix, ll, aic, aics, int(lo_.size), float(w.sum()), trace)
+        elif aic >= aics.get(k - 1, math.inf):  # AIC stopped improving: larger K are not tried
+            break
     assert best is not None
     best.aic_by_k = aics
     return best

@@ -57,7 +57,7 @@ class PersistenceFilterFilter(BaseFilter):
     def __init__(self, edge: EdgeKey, surv: SurvivalMixture, p_m: float, p_f: float,
                  name: str = "persistence_filter") -> None:
         super().__init__(edge)
-        self.mix = MixtureFilter(surv, p_m, p_f)
+        self.mix = MixtureFilter(surv, p_m, p_f, escape=0.0, escape_first=0.0)  # Rosen's exact recursion
         self._name = name
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
