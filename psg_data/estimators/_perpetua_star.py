@@ -184,12 +184,12 @@ class PerpetuaStarFilter(BaseFilter):
         dt = np.diff(t, prepend=t[0] if t_prev is None else t_prev)
         return self._lg_per_s * np.maximum(dt, 0.0)
 
-    def _g_one(self, t: float) -> float:
+    def _g_one(self, t: float, t_prev: float | None) -> float:
         if self._lg_obs is not None:
             return math.exp(self._lg_obs)
-        if self._last_t is None:
+        if t_prev is None:
             return 1.0
-        return math.exp(self._lg_per_s * max(t - self._last_t, 0.0))
+        return math.exp(self._lg_per_s * max(t - t_prev, 0.0))
 
     @property
     def L(self) -> NDArray[np.float64]:
@@ -230,11 +230,11 @@ class PerpetuaStarFilter(BaseFilter):
             raise EstimatorError(f"edge {self.edge}: observations must be 0 or 1")
         if self._last_t is not None and t < self._last_t:
             raise EstimatorError(f"edge {self.edge}: observation at t={t} is earlier than the last one at t={self._last_t}")
-        self._step(t, int(y))
+        self._step(t, int(y), self._last_t)
         self._last_t = t
 
-    def _step(self, t: float, y: int) -> None:
-        g = self._g_one(t)
+    def _step(self, t: float, y: int, t_prev: float | None) -> None:
+        g = self._g_one(t, t_prev)
         e_p, pp = self.per.step(t, y)
         e_e, po = self.emg.step(t, y)
         lp = g * self._Ls[0] + (e_p - self._Es[0])
@@ -267,8 +267,10 @@ class PerpetuaStarFilter(BaseFilter):
         """
         n = t.size
         if n <= _SCALAR_MAX:
+            prev = self._last_t
             for ti, yv in zip(t.tolist(), y.tolist()):
-                self._step(ti, yv)
+                self._step(ti, yv, prev)
+                prev = ti
             return
         yi = y.astype(np.intp)
         plogit = self._prior_logit(t)
