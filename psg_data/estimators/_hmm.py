@@ -42,6 +42,7 @@ from psg_data.estimators._base import EdgeKey, EdgeStream
 __all__ = ["HmmFit", "fit_error_hmm", "typical_gap_s"]
 
 _RATE_MIN, _RATE_MAX = 1e-4, 0.45
+_SCAN_FROM = 200  # longer sequences use the time-vectorised forward-backward
 
 
 @dataclass
@@ -175,6 +176,77 @@ def _forward_backward(le: NDArray[np.float64], a_same: NDArray[np.float64], a_lo
     return gamma, xi_same, xi_long, loglik
 
 
+def _prefix_products(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Inclusive prefix products P_t = M_0 @ ... @ M_t of (O, T, S, S) matrices by recursive doubling.
+
+    Each stored product is scaled by its largest entry; the log of the scale is returned (O, T), so
+    that products over tens of thousands of steps neither overflow nor underflow.
+    """
+    n_obj, n_t, n_s, _ = m.shape
+
+    def scale(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        flat = x.reshape(x.shape[0], x.shape[1], n_s * n_s)
+        mx = flat[:, :, 0].copy()
+        for j in range(1, n_s * n_s):  # elementwise: much faster than a reduction over a tiny axis
+            np.maximum(mx, flat[:, :, j], out=mx)
+        np.maximum(mx, 1e-300, out=mx)
+        x /= mx[:, :, None, None]
+        return np.log(mx)
+
+    def matmul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        if n_s > 3:
+            return np.matmul(a, b)
+        out = np.zeros(a.shape)
+        for i in range(n_s):
+            for k in range(n_s):
+                for j in range(n_s):
+                    out[..., i, k] += a[..., i, j] * b[..., j, k]
+        return out
+
+    p = m.copy()
+    c = scale(p)
+    d = 1
+    while d < n_t:
+        q = matmul(p[:, :-d], p[:, d:])
+        cq = scale(q)
+        p[:, d:] = q
+        c[:, d:] += c[:, :-d].copy() + cq
+        d *= 2
+    return p, c
+
+
+def _forward_backward_scan(le: NDArray[np.float64], a_same: NDArray[np.float64], a_long: NDArray[np.float64],
+                           init: NDArray[np.float64], long: NDArray[np.bool_]) -> tuple[NDArray[np.float64], ...]:
+    """:func:`_forward_backward` vectorised over time (prefix / suffix matrix products, O(T log T))."""
+    n_obj, t_max, n_s = le.shape
+    mle = le.max(axis=2, keepdims=True)
+    mle = np.where(np.isfinite(mle), mle, 0.0)
+    e = np.exp(le - mle)  # (O, T, S)
+    tr = np.where(long[:, :, None, None], a_long[:, None], a_same[:, None])  # (O, T, S, S): step t-1 -> t
+    m = tr * e[:, :, None, :]  # M_t = A_t diag(e_t)
+    m[:, 0] = np.eye(n_s)[None] * e[:, 0, None, :]  # the first step has no transition
+    pf, cf = _prefix_products(m)
+    alpha = np.einsum("os,otsr->otr", init, pf)
+    sa = alpha.sum(axis=2)
+    alpha /= np.maximum(sa, 1e-300)[:, :, None]
+    loglik = np.log(sa[:, -1]) + cf[:, -1] + mle[:, :, 0].sum(axis=1)
+    # backward: beta_t = M_{t+1} ... M_{T-1} 1, from prefix products of the reversed, transposed chain
+    rev = np.swapaxes(m[:, :0:-1], 2, 3)  # M_{T-1}^T, ..., M_1^T
+    pb, _ = _prefix_products(rev) if t_max > 1 else (np.zeros((n_obj, 0, n_s, n_s)), None)
+    beta = np.ones((n_obj, t_max, n_s))
+    if t_max > 1:
+        beta[:, :-1] = pb.sum(axis=2)[:, ::-1]  # column sums of (M_{t+1} ... M_{T-1})^T = that product @ 1
+        beta[:, :-1] /= np.maximum(beta[:, :-1].max(axis=2, keepdims=True), 1e-300)
+    gamma = alpha * beta
+    gamma /= np.maximum(gamma.sum(axis=2, keepdims=True), 1e-300)
+    x = alpha[:, :-1, :, None] * m[:, 1:] * beta[:, 1:, None, :]  # (O, T-1, S, S)
+    x /= np.maximum(x.sum(axis=(2, 3), keepdims=True), 1e-300)
+    lg = long[:, 1:, None, None]
+    xi_long = np.where(lg, x, 0.0).sum(axis=1)
+    xi_same = np.where(lg, 0.0, x).sum(axis=1)
+    return gamma, xi_same, xi_long, loglik
+
+
 def _transitions(stay: float, d: NDArray[np.float64]) -> NDArray[np.float64]:
     """(O, S, S) A = stay I + (1 - stay) 1 d^T (padded states have d = 0)."""
     n_s = d.shape[1]
@@ -215,8 +287,8 @@ def fit_error_hmm(streams: Sequence[EdgeStream], *, p_m: float | None = None, p_
     for _ in range(max_iter):
         le = _log_emissions(b, pm, pf)
         le = np.where(b.valid_t[:, :, None], le, np.where(mask[:, None, :], 0.0, -np.inf))
-        gamma, xs, xl, ll = _forward_backward(le, _transitions(stay["same_day"], d), _transitions(stay["long_gap"], d),
-                                              d, long)
+        fb = _forward_backward_scan if t_max > _SCAN_FROM else _forward_backward
+        gamma, xs, xl, ll = fb(le, _transitions(stay["same_day"], d), _transitions(stay["long_gap"], d), d, long)
         with np.errstate(divide="ignore", invalid="ignore"):
             pen = float(np.sum(np.where(mask, alpha_d * np.log(d), 0.0)))
         total = float(ll.sum()) + pen

@@ -99,3 +99,18 @@ def test_reference_segmentation_equals_ruptures() -> None:
         y = np.where(rng.random(x.size) < rng.choice([0.0, 0.05, 0.2]), 1 - x, x).astype(float)
         want = rpt.Pelt(model="l2", min_size=2, jump=5).fit(y).predict(pen=3)
         assert segment_reference(y)[1:].tolist() == want
+
+
+def test_time_vectorised_forward_backward_equals_the_loop() -> None:
+    from psg_data.estimators._hmm import _forward_backward_scan
+
+    streams, _ = simulate(5, 80, 0.1, 0.1, seed=6)  # 320 steps per object, 3-6 states
+    b = _batch(streams, long_gap_s=6 * 3600)
+    n_s = b.y.shape[2] + 1
+    mask = np.arange(n_s)[None, :] < b.n_states[:, None]
+    d = mask / mask.sum(axis=1, keepdims=True)
+    le = _log_emissions(b, 0.1, 0.05)
+    le = np.where(b.valid_t[:, :, None], le, np.where(mask[:, None, :], 0.0, -np.inf))
+    args = (le, _transitions(0.6, d), _transitions(0.3, d), d, b.long & b.valid_t)
+    for a, c in zip(_forward_backward(*args), _forward_backward_scan(*args)):
+        np.testing.assert_allclose(c, a, rtol=1e-9, atol=1e-9)
