@@ -196,7 +196,8 @@ def main() -> None:
     from psg_data.synth.persistence_benchmark import make_persistence_benchmark
 
     b = make_persistence_benchmark(seed=0)
-    est = get_estimator("perpetua_star").fit(b.train_streams, val_streams=b.val_streams, timezone=b.timezone)
+    est = get_estimator("perpetua_star", n_periods=1000).fit(b.train_streams, val_streams=b.val_streams,
+                                                         timezone=b.timezone)
     sizes_json, sizes_pickle = [], []
     for s in b.train_streams:
         g = est.make_filter(s.edge)
