@@ -199,3 +199,25 @@ def test_room_like_stream_three_hours() -> None:
     assert max(mae[:4]) <= 0.001
     assert all(fs["edges"][f"feature{k}/room"]["present_runs"] == 1 for k in range(4))  # no over-segmentation
     assert max(mae[4:]) < 0.02
+
+
+@pytest.mark.slow
+def test_million_observations_stay_finite() -> None:
+    from psg_data.estimators import SurvivalMixture, fit_error_hmm
+    from psg_data.estimators._perpetua_star import PerpetuaStarFilter
+    from psg_data.estimators._priors import ConstantPrior
+
+    n = 1_000_000
+    rng = np.random.default_rng(7)
+    t = T0 + np.cumsum(rng.uniform(0.3, 0.7, n))
+    x = (np.mod(t, 3600.0) < 1800.0).astype(np.int8)
+    y = np.where(rng.random(n) < 0.1, 1 - x, x).astype(np.int8)
+    f = PerpetuaStarFilter(("o", "r"), SurvivalMixture.lognormal_median(1800.0, 0.05),
+                           SurvivalMixture.lognormal_median(1800.0, 0.05), 0.1, 0.1, ConstantPrior(0.5), gamma=None,
+                           half_life_s=30.0, alpha0_per_s=0.01, prior_floor=1e-3)
+    f.update_many(t, y)
+    assert np.all(np.isfinite(f.L)) and np.all(np.isfinite(f.E))
+    p = f.predict(t[-1] + np.array([0.0, 10.0, 1e5]))
+    assert np.all(np.isfinite(p)) and np.all((p >= 0) & (p <= 1))
+    fit = fit_error_hmm([EdgeStream(("o", "r"), t, y)], max_iter=3)
+    assert np.all(np.isfinite(fit.log_likelihood)) and 0 < fit.p_f < 0.5 and 0 < fit.p_m < 0.5
