@@ -13,7 +13,7 @@ executor of a Dask distributed cluster (``Client.get_executor()``, extra ``psg-d
 
 The tasks submitted are plain picklable functions and their results are plain data, so the
 numbers do not depend on the executor (tested byte for byte: tests/test_executors.py). Convert
-(``psg_data.convert``) and the persistence harness (``psg_data.metrics.evaluate_persistence``) use it;
+(``psg_data.convert``) and the persistence harness (``psg_data.evaluation.evaluate_persistence``) use it;
 a sweep over lab seeds or settings submits its runs the same way.
 """
 

@@ -15,7 +15,7 @@ from psg_data._executors import check_scheduler, open_executor
 from psg_data.convert import convert
 from psg_data.errors import PsgDataError
 from psg_data.estimators import EdgeStream
-from psg_data.metrics import evaluate_persistence
+from psg_data.evaluation import evaluate_persistence
 from psg_data.synth._raw_export import export_raw
 from tests.convert.conftest import dataset_bytes, make_dataset
 

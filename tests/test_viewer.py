@@ -71,7 +71,7 @@ def test_view_selects_scans_and_refuses_to_overwrite(make_dataset: Callable[...,
 
 def test_beliefs_recording_holds_every_estimator_and_edge(tmp_path: Path) -> None:
     from psg_data.estimators import EdgeStream
-    from psg_data.metrics import evaluate_persistence
+    from psg_data.evaluation import evaluate_persistence
     from psg_data.viewer import log_beliefs, recording
 
     t0, day = 1_700_000_000.0, 86_400.0

@@ -188,10 +188,10 @@ def _synth_dense_ground_truth(ds: Any, step_s: float) -> Any:
 
 
 def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], quiet: bool) -> tuple[list[Any], dict]:
-    """One :class:`~psg_data.metrics.PersistenceTask` per seed (benchmark: one draw per seed;
+    """One :class:`~psg_data.evaluation.PersistenceTask` per seed (benchmark: one draw per seed;
     datasets: the same task, seeds vary the estimators) and a description for results.json."""
     from psg_data.estimators import PAPER_SETTINGS
-    from psg_data.metrics import PersistenceTask, persistence_task_from_dataset
+    from psg_data.evaluation import PersistenceTask, persistence_task_from_dataset
 
     if choice.kind == "benchmark":
         from psg_data.synth import make_persistence_benchmark

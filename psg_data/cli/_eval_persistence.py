@@ -17,7 +17,7 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
                      out: Path, no_plots: bool, quiet: bool, *, scheduler: str | None = None,
                      rerun_file: Path | None = None, overwrite: bool = False) -> bool:
     from psg_data.cli._eval_inputs import persistence_tasks, require_hints, resolve_dataset
-    from psg_data.metrics import (
+    from psg_data.evaluation import (
         choose_plot_edges,
         format_persistence_table,
         merge_results,
@@ -58,7 +58,7 @@ def run_persistence(specs: list[Any], dataset: str | None, setting: str, labels:
 
 def _plotted(traces: list[Any], truth: Any) -> list[Any]:
     """The traces of the edges the belief plot shows (all traces are kept when --rerun asks for them)."""
-    from psg_data.metrics import choose_plot_edges
+    from psg_data.evaluation import choose_plot_edges
 
     keep = set(choose_plot_edges(truth, k=4))
     return [t for t in traces if t.edge in keep]
@@ -91,7 +91,7 @@ def _executor(jobs: int, scheduler: str | None) -> Any:
 def _evaluate(specs: list[Any], tasks: list[Any], seeds: list[int], setting: str, jobs: int, executor: Any,
               prog: Any, plot_edges: list[Any]) -> list[Any]:
     from psg_data.cli._eval_inputs import with_hints
-    from psg_data.metrics import RegistryFactory, evaluate_persistence
+    from psg_data.evaluation import RegistryFactory, evaluate_persistence
 
     offset = 0
     results = []

@@ -1,4 +1,4 @@
-"""Metrics and evaluation harnesses.
+"""Metrics: pure functions of arrays (scikit-learn's ``metric(y_true, y_pred, ...)`` shape).
 
 - Persistence metrics (:mod:`._classification`): :func:`mae`, :func:`balanced_accuracy`,
   :func:`f1` per sample (scikit-learn's shape and, by default, its convention) and
@@ -8,14 +8,13 @@
   present iff ``b >= 0.5``; ground-truth codes -1/-2 are excluded (:func:`mask_codes`).
 - Navigation metrics: :func:`success_rate`, :func:`spl`, :func:`abort_rate`,
   :func:`distance_travelled`.
-- Aggregation: :func:`summarize` -> :class:`Summary` (mean, std with ddof=1, seeded percentile
-  bootstrap CI, n).
-- The persistence task: :func:`evaluate_persistence` -> :class:`PersistenceResult`.
+
+Fitting estimators, running tasks, aggregating and reporting live in :mod:`psg_data.evaluation`
+(which calls these functions; this package imports nothing from it).
 """
 
 from __future__ import annotations
 
-from psg_data.metrics._aggregate import Summary, bootstrap_ci, summarize
 from psg_data.metrics._classification import (
     PRIVILEGED_CODES,
     Convention,
@@ -32,27 +31,6 @@ from psg_data.metrics._classification import (
     trapezoid_weights,
 )
 from psg_data.metrics._navigation import abort_rate, distance_travelled, spl, success_rate
-from psg_data.metrics._dataset_task import DenseGroundTruth, PersistenceTask, persistence_task_from_dataset
-from psg_data.metrics._report import (
-    choose_plot_edges,
-    format_persistence_table,
-    plot_beliefs,
-    plot_metric_bars,
-    write_persistence_results,
-)
-from psg_data.metrics._persistence_task import (
-    SAMPLE_METRICS,
-    TIME_METRICS,
-    WEEKDAY_NAMES,
-    EdgeResult,
-    EvaluationIssue,
-    PersistenceResult,
-    PredictionTrace,
-    RegistryFactory,
-    merge_results,
-    WeekdayResult,
-    evaluate_persistence,
-)
 
 __all__ = [
     "PRIVILEGED_CODES",
@@ -72,26 +50,4 @@ __all__ = [
     "spl",
     "abort_rate",
     "distance_travelled",
-    "Summary",
-    "summarize",
-    "bootstrap_ci",
-    "TIME_METRICS",
-    "SAMPLE_METRICS",
-    "WEEKDAY_NAMES",
-    "EvaluationIssue",
-    "EdgeResult",
-    "WeekdayResult",
-    "PersistenceResult",
-    "PredictionTrace",
-    "RegistryFactory",
-    "merge_results",
-    "evaluate_persistence",
-    "PersistenceTask",
-    "format_persistence_table",
-    "write_persistence_results",
-    "plot_beliefs",
-    "plot_metric_bars",
-    "choose_plot_edges",
-    "persistence_task_from_dataset",
-    "DenseGroundTruth",
 ]

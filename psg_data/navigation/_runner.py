@@ -409,7 +409,7 @@ def _episodes(env: NavigationEnv, cache: PlanningCache, name: str, qs: list[Quer
 def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tuple[Any, Any]:
     import pandas as pd
 
-    from psg_data.metrics import summarize
+    from psg_data.evaluation import summarize
 
     per_seed_rows = []
     for (name, sd), df in records.groupby(["method", "seed"], sort=False):

@@ -14,7 +14,7 @@ __all__ = ["log_beliefs"]
 
 
 def log_beliefs(rec: Any, traces: Sequence[Any], *, seed: int | None = None) -> int:
-    """Log each :class:`~psg_data.metrics.PredictionTrace` of one seed as time series.
+    """Log each :class:`~psg_data.evaluation.PredictionTrace` of one seed as time series.
 
     Per edge ``beliefs/OBJECT/RECEPTACLE``: one child per estimator (its belief at every evaluation
     time), ``ground_truth`` (1/0 where scored) and ``observations`` (the test observations), all

@@ -8,7 +8,7 @@ import sys
 
 import psg_data.metrics as metrics
 
-SUBMODULES = ["_classification", "_navigation", "_aggregate", "_persistence_task"]
+SUBMODULES = ["_classification", "_navigation"]
 
 
 def test_all_is_complete_and_resolvable():

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from psg_data.estimators import EdgeStream
-from psg_data.metrics import evaluate_persistence, plot_beliefs, plot_metric_bars
+from psg_data.evaluation import evaluate_persistence, plot_beliefs, plot_metric_bars
 
 ROOT = Path(__file__).resolve().parents[2]
 

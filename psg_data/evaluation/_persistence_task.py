@@ -29,7 +29,7 @@ Protocol (what :func:`evaluate_persistence` does for every estimator, seed and e
 7. Aggregation: per (estimator, seed) the time-integrated metrics are averaged over edges with
    weights proportional to each edge's scored span (the reference's feature weighting), the
    per-sample ones with weights proportional to the number of scored points; then mean, std
-   (ddof=1), bootstrap CI and count over seeds (:class:`~psg_data.metrics.Summary`).
+   (ddof=1), bootstrap CI and count over seeds (:class:`~psg_data.evaluation.Summary`).
    Breakdowns per object, receptacle and local weekday use the same weighting.
 
 Runs ``(estimator, seed)`` fits and edge chunks in a ``ProcessPoolExecutor`` (``spawn``) when
@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream, PersistenceEstimator
-from psg_data.metrics._aggregate import Summary, summarize
+from psg_data.evaluation._aggregate import Summary, summarize
 from psg_data.metrics._classification import (
     PRIVILEGED_CODES,
     _bacc,

@@ -12,10 +12,8 @@ import pytest
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeFilter, EdgeStream, PersistenceEstimator
+from psg_data.evaluation import TIME_METRICS, PersistenceResult, evaluate_persistence
 from psg_data.metrics import (
-    TIME_METRICS,
-    PersistenceResult,
-    evaluate_persistence,
     time_integrated_balanced_accuracy,
     time_integrated_f1,
     time_integrated_mae,

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from psg_data.metrics._persistence_task import PersistenceResult, PredictionTrace
+from psg_data.evaluation._persistence_task import PersistenceResult, PredictionTrace
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from psg_data.errors import EvaluationError
-from psg_data.metrics import Summary, bootstrap_ci, summarize
+from psg_data.evaluation import Summary, bootstrap_ci, summarize
 
 
 def test_summary_mean_std_with_ddof():
