@@ -4,7 +4,8 @@
   :func:`f1` per sample (scikit-learn's shape and, by default, its convention) and
   :func:`time_integrated_mae`, :func:`time_integrated_balanced_accuracy`,
   :func:`time_integrated_f1` (trapezoid integrals over the ground-truth grid, by default the
-  Perpetua reference's convention that the paper's Table I uses). Beliefs are binarised as
+  Perpetua reference's convention that the paper's Table I uses; ``windows=`` bounds the integral
+  by scoring windows, :func:`window_weights`). Beliefs are binarised as
   present iff ``b >= 0.5``; ground-truth codes -1/-2 are excluded (:func:`mask_codes`).
 - Navigation metrics: :func:`success_rate`, :func:`spl`, :func:`abort_rate`,
   :func:`distance_travelled`.
@@ -31,6 +32,7 @@ from psg_data.metrics._classification import (
     trapezoid_weights,
 )
 from psg_data.metrics._navigation import abort_rate, distance_travelled, spl, success_rate
+from psg_data.metrics._time_weights import check_windows, window_weights
 
 __all__ = [
     "PRIVILEGED_CODES",
@@ -38,6 +40,8 @@ __all__ = [
     "mask_codes",
     "binarize",
     "trapezoid_weights",
+    "window_weights",
+    "check_windows",
     "confusion_counts",
     "mae",
     "balanced_accuracy",

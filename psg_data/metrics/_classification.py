@@ -31,7 +31,9 @@ Time integration (:func:`time_integrated_mae` and friends): on a ground-truth ti
 ``MAE = (1 / span) * integral |x(t) - b(t)| dt``. This is exactly the weighted per-sample
 metric with trapezoid weights ``w_i = (t_{i+1} - t_{i-1}) / 2`` (halves at the ends), see
 :func:`trapezoid_weights`. With masked samples, only intervals whose two end points are both
-valid are integrated (the span is the total length of those intervals).
+valid are integrated (the span is the total length of those intervals). With ``windows`` the
+integral is bounded by scoring windows (:func:`window_weights`, :mod:`._time_weights`): the gaps
+between them (nights nobody scored) get no weight.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EvaluationError
+from psg_data.metrics._time_weights import trapezoid_weights, window_weights
 
 __all__ = [
     "PRIVILEGED_CODES",
@@ -50,6 +53,7 @@ __all__ = [
     "mask_codes",
     "binarize",
     "trapezoid_weights",
+    "window_weights",
     "confusion_counts",
     "mae",
     "balanced_accuracy",
@@ -105,41 +109,6 @@ def binarize(y_pred: ArrayLike, *, threshold: float = 0.5) -> NDArray[np.int8]:
         [0, 1, 1]
     """
     return (np.asarray(y_pred, dtype=np.float64) >= threshold).astype(np.int8)
-
-
-def trapezoid_weights(t_s: ArrayLike, valid: ArrayLike | None = None) -> NDArray[np.float64]:
-    """Per-sample weights that turn a weighted mean into a trapezoid time integral over the span.
-
-    For sorted times ``t`` the weight of sample ``i`` is half the length of each adjacent interval
-    whose two end points are valid; ``sum(w)`` is the integrated span (seconds).
-
-    Args:
-        t_s: (N,) non-decreasing times, seconds.
-        valid: (N,) bool mask of usable samples (default: all).
-
-    Returns:
-        (N,) float64 weights, seconds.
-
-    Example:
-        >>> trapezoid_weights([0.0, 1.0, 3.0]).tolist()
-        [0.5, 1.5, 1.0]
-    """
-    t = np.asarray(t_s, dtype=np.float64).reshape(-1)
-    v = np.ones(t.shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool).reshape(-1)
-    if v.shape != t.shape:
-        raise EvaluationError(f"valid mask has {v.size} entries, t_s has {t.size}")
-    if not np.all(np.isfinite(t)):
-        raise EvaluationError("t_s contains NaN or inf")
-    if t.size > 1 and np.any(np.diff(t) < 0):
-        i = int(np.argmax(np.diff(t) < 0)) + 1
-        raise EvaluationError(f"t_s must be non-decreasing, got {t[i]} after {t[i - 1]} at index {i}")
-    w = np.zeros(t.shape, dtype=np.float64)
-    if t.size < 2:
-        return w
-    dt = np.diff(t) * (v[:-1] & v[1:])
-    w[:-1] += dt / 2.0
-    w[1:] += dt / 2.0
-    return w
 
 
 def _prepare(
@@ -343,7 +312,7 @@ def f1(
 
 
 def _time_prepare(
-    t_s: ArrayLike, y_true: ArrayLike, y_pred: ArrayLike, codes: Sequence[int]
+    t_s: ArrayLike, y_true: ArrayLike, y_pred: ArrayLike, codes: Sequence[int], windows: ArrayLike | None = None
 ) -> tuple[NDArray[np.int8], NDArray[np.float64], NDArray[np.float64]]:
     t = np.asarray(t_s, dtype=np.float64).reshape(-1)
     y = np.asarray(y_true).reshape(-1)
@@ -353,10 +322,12 @@ def _time_prepare(
     if t.size > 1 and np.any(np.diff(t) < 0):
         order = np.argsort(t, kind="stable")
         t, y, b = t[order], y[order], b[order]
-    w = trapezoid_weights(t, mask_codes(y, codes))
+    valid = mask_codes(y, codes)
+    w = trapezoid_weights(t, valid) if windows is None else window_weights(t, windows, valid)
     if not np.sum(w) > 0:
         raise EvaluationError(
             "time-integrated metric needs at least two distinct valid times (zero integrated span)"
+            + ("" if windows is None else " inside the scoring windows")
         )
     return _prepare(y, b, w, codes)
 
@@ -368,6 +339,7 @@ def time_integrated_mae(
     *,
     threshold: float | None = None,
     codes: Sequence[int] = PRIVILEGED_CODES,
+    windows: ArrayLike | None = None,
 ) -> float:
     """MAE integrated over time: ``(1 / span) * integral |x(t) - b(t)| dt`` (trapezoid rule).
 
@@ -378,9 +350,12 @@ def time_integrated_mae(
         threshold: None (default, the reference) integrates the raw belief; a number integrates
             the binarised belief.
         codes: ground-truth values to exclude.
+        windows: (K, 2) scoring windows ``[start, end]``, seconds: integrate only inside them
+            (:func:`~psg_data.metrics.window_weights`); None (default) integrates the whole span
+            (the reference's plain trapezoid).
 
     Returns:
-        Time-averaged absolute error in [0, 1].
+        Time-averaged absolute error in [0, 1] (averaged over the scored time).
 
     Raises:
         EvaluationError: when the valid span is zero (fewer than two distinct valid times).
@@ -389,7 +364,7 @@ def time_integrated_mae(
         >>> time_integrated_mae([0.0, 1.0, 3.0], [1, 1, 0], [1.0, 0.0, 0.0])
         0.5
     """
-    y, b, w = _time_prepare(t_s, y_true, y_pred, codes)
+    y, b, w = _time_prepare(t_s, y_true, y_pred, codes, windows)
     return _mae(y, b, w, threshold)
 
 
@@ -401,18 +376,19 @@ def time_integrated_balanced_accuracy(
     threshold: float = 0.5,
     convention: Convention = "reference",
     codes: Sequence[int] = PRIVILEGED_CODES,
+    windows: ArrayLike | None = None,
 ) -> float:
     """Balanced accuracy with time-integrated (trapezoid) confusion counts (seconds).
 
     Same definitions as :func:`balanced_accuracy`; the default convention here is
-    ``"reference"`` (what the paper's tables use).
+    ``"reference"`` (what the paper's tables use). ``windows`` as in :func:`time_integrated_mae`.
 
     Example:
         >>> round(time_integrated_balanced_accuracy([0.0, 1.0, 2.0], [1, 1, 1], [1.0, 1.0, 1.0]), 6)
         0.5
     """
     _check_convention(convention)
-    y, b, w = _time_prepare(t_s, y_true, y_pred, codes)
+    y, b, w = _time_prepare(t_s, y_true, y_pred, codes, windows)
     return _bacc(y, b, w, threshold, convention)
 
 
@@ -425,17 +401,18 @@ def time_integrated_f1(
     convention: Convention = "reference",
     zero_division: float = 0.0,
     codes: Sequence[int] = PRIVILEGED_CODES,
+    windows: ArrayLike | None = None,
 ) -> float:
     """F1 with time-integrated (trapezoid) confusion counts; see :func:`f1`.
 
-    The default convention here is ``"reference"``.
+    The default convention here is ``"reference"``; ``windows`` as in :func:`time_integrated_mae`.
 
     Example:
         >>> round(time_integrated_f1([0.0, 1.0, 2.0], [1, 1, 0], [0.9, 0.9, 0.9]), 6)
         0.857143
     """
     _check_convention(convention)
-    y, b, w = _time_prepare(t_s, y_true, y_pred, codes)
+    y, b, w = _time_prepare(t_s, y_true, y_pred, codes, windows)
     return _f1(y, b, w, threshold, convention, zero_division)
 
 

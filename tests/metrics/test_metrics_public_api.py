@@ -8,7 +8,7 @@ import sys
 
 import psg_data.metrics as metrics
 
-SUBMODULES = ["_classification", "_navigation"]
+SUBMODULES = ["_classification", "_navigation", "_time_weights"]
 
 
 def test_all_is_complete_and_resolvable():
