@@ -3,7 +3,7 @@
 Built-ins (``list_estimators()``): ``perpetua_star`` (FreMEn switching prior; ``prior=`` selects
 "fremen", "profile", "oracle", "schedule" or "none"), ``perpetua_star_schedule``, ``perpetua_star_oracle``,
 ``perpetua_star_annealed`` (a variant whose prediction anneals to the prior, not the paper's),
-``perpetua``, ``persistence_filter``, ``fremen``, ``last_seen``, ``always_present``,
+``perpetua``, ``persistence_filter``, ``fremen``, ``last_seen``, ``always_present``, ``always_absent``,
 ``time_of_week_frequency``. Plugins register in the entry-point group ``psg_data.estimators``
 and may declare their settings (``_parameters = {"alpha": Real(0, 1)}``, see :class:`Param`) so
 that ``set_params`` and ``psg-eval -e NAME:alpha=...`` check them before any work.
@@ -48,6 +48,7 @@ from psg_data.estimators._registry import (
     register_estimator,
 )
 from psg_data.estimators._simple import (
+    AlwaysAbsentEstimator,
     AlwaysPresentEstimator,
     LastSeenEstimator,
     PersistenceFilterEstimator,
@@ -87,6 +88,7 @@ __all__ = [
     "FremenEstimator",
     "LastSeenEstimator",
     "AlwaysPresentEstimator",
+    "AlwaysAbsentEstimator",
     "TimeOfWeekFrequencyEstimator",
     "MixtureFilter",
     "SurvivalMixture",

@@ -61,6 +61,16 @@ class BaseEstimator:
     name: str = "base"
     _parameters: ClassVar[Mapping[str, Param]] = {}
 
+    @property
+    def fit_depends_on_seed(self) -> bool:
+        """Whether :meth:`fit` can give another model for another ``random_state``.
+
+        True when the estimator has a ``random_state`` setting (e.g. EM restarts); a subclass
+        overrides it to declare otherwise. ``psg-eval`` fits an estimator once when this is False,
+        whatever ``--seeds`` says (its seeds would repeat the same run).
+        """
+        return "random_state" in self._param_names()
+
     @classmethod
     def _param_names(cls) -> list[str]:
         for klass in cls.__mro__:

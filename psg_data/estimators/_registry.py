@@ -38,6 +38,7 @@ _BUILTINS: dict[str, str] = {
     "fremen": "psg_data.estimators._fremen_estimator:FremenEstimator",
     "last_seen": "psg_data.estimators._simple:LastSeenEstimator",
     "always_present": "psg_data.estimators._simple:AlwaysPresentEstimator",
+    "always_absent": "psg_data.estimators._simple:AlwaysAbsentEstimator",
     "time_of_week_frequency": "psg_data.estimators._simple:TimeOfWeekFrequencyEstimator",
     "process_oracle": "psg_data.estimators._process_oracle:ProcessOracleEstimator",
 }

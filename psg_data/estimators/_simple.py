@@ -5,6 +5,7 @@
   the training present-run durations;
 - ``last_seen``: the last observation (0.5 before any);
 - ``always_present``: 1;
+- ``always_absent``: 0 (a constant belief: chance level for balanced accuracy, F1 0);
 - ``time_of_week_frequency``: fraction of present observations in the same local hour of the week
   (Laplace smoothed), from the training data.
 """
@@ -28,7 +29,7 @@ from psg_data.estimators._survival import SURVIVAL_FAMILIES, SurvivalMixture
 from psg_data.estimators._training import collect_durations
 
 __all__ = ["PersistenceFilterEstimator", "PersistenceFilterFilter", "LastSeenEstimator", "AlwaysPresentEstimator",
-           "TimeOfWeekFrequencyEstimator", "fit_single_survival"]
+           "AlwaysAbsentEstimator", "TimeOfWeekFrequencyEstimator", "fit_single_survival"]
 
 
 def fit_single_survival(family: str, d: NDArray[np.float64]) -> SurvivalMixture:
@@ -193,6 +194,17 @@ class AlwaysPresentEstimator(_NoFitEstimator):
 
     name = "always_present"
     value = 1.0
+
+    def __init__(self) -> None:
+        pass
+
+
+class AlwaysAbsentEstimator(_NoFitEstimator):
+    """Predicts 0 everywhere: the chance row of the thresholded metrics (B-Acc 0.5, F1 0; MAE = the
+    share of time the object is present)."""
+
+    name = "always_absent"
+    value = 0.0
 
     def __init__(self) -> None:
         pass

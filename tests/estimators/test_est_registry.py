@@ -15,7 +15,7 @@ import psg_data.estimators as E
 from psg_data.errors import EstimatorError, NotFittedError
 from psg_data.estimators import check_estimator, get_estimator, list_estimators, register_estimator
 
-BUILTINS = ["always_present", "fremen", "last_seen", "perpetua", "perpetua_star", "perpetua_star_oracle",
+BUILTINS = ["always_absent", "always_present", "fremen", "last_seen", "perpetua", "perpetua_star", "perpetua_star_oracle",
             "perpetua_star_schedule", "persistence_filter", "time_of_week_frequency"]
 
 
@@ -161,3 +161,22 @@ def test_public_all_is_complete() -> None:
               "register_estimator", "check_estimator", "receptacle_belief", "map_receptacle", "render_llm_prompt",
               "parse_llm_schedule"):
         assert n in E.__all__
+
+
+def test_fit_depends_on_seed_is_declared() -> None:
+    # estimators whose fit draws random restarts say so; the others repeat the same fit for any seed
+    assert get_estimator("perpetua_star").fit_depends_on_seed and get_estimator("perpetua").fit_depends_on_seed
+    for name in ("last_seen", "always_absent", "always_present", "fremen", "time_of_week_frequency",
+                 "persistence_filter", "process_oracle"):
+        assert not get_estimator(name).fit_depends_on_seed, name
+
+
+def test_always_absent_predicts_zero() -> None:
+    import numpy as np
+
+    from psg_data.estimators import EdgeStream
+
+    est = get_estimator("always_absent").fit([EdgeStream(("o", "r"), np.array([0.0, 1.0]), np.array([1, 1], np.int8))])
+    f = est.make_filter(("o", "r"))
+    f.update(2.0, 1)
+    assert f.predict(np.array([3.0, 4.0])).tolist() == [0.0, 0.0]
