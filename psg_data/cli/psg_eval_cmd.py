@@ -25,7 +25,6 @@ __all__ = ["main"]
 log = logging.getLogger(__name__)
 
 DEFAULT_ESTIMATOR = "perpetua_star"
-REFERENCE_ESTIMATORS = ("perpetua", "fremen")
 
 
 def _out_dir(out: Path | None, overwrite: bool, inputs: list[Path | None]) -> Path:
@@ -77,28 +76,45 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 @click.option("--estimator", "-e", "estimators", multiple=True, metavar="NAME[:key=value,...]",
               help=f"Estimator to score (repeatable; default {DEFAULT_ESTIMATOR}). Settings after ':'.")
 @click.option("--references/--no-references", default=True, show_default=True,
-              help=f"Also score the reference methods ({', '.join(REFERENCE_ESTIMATORS)}) for the paper's table.")
+              help="Also score the paper's comparison methods (perpetua, fremen) and the reference rows: the ceiling "
+                   "(process_oracle where the dataset stores its generator model, else the ground truth), baselines "
+                   "and chance. --no-references scores only the -e estimators.")
 @click.option("--task", type=click.Choice(["persistence", "navigation", "doors"]), default="persistence",
               show_default=True, help="doors: planning around predicted closed doors on the dataset's own map.")
 @click.option("--setting", type=click.Choice(["predictive", "adaptive"]), default="adaptive", show_default=True,
-              help="adaptive: test observations update the estimators online; predictive: they do not.")
+              help="adaptive: test observations update the estimators online (see --horizon); predictive: they do not.")
+@click.option("--horizon", default="auto", show_default=True, metavar="auto|DURATION",
+              help="Adaptive persistence: a prediction at t uses the observations up to t - HORIZON (0, 30min, 2h, 1d). "
+                   "auto: one scan interval of the dataset (the lab: 2 h); the persistence benchmark: 0 (the paper).")
+@click.option("--windows", default="auto", show_default=True, metavar="auto|HH[:MM]-HH[:MM][,...]",
+              help="Scoring windows, local hours (e.g. 9-17): time integrals and navigation / door queries stay inside "
+                   "them. auto: the dataset's operating hours (the lab: 09:00-17:00; a converted dataset: the hours "
+                   "its scans cover).")
+@click.option("--weighting", type=click.Choice(["auto", "windows", "reference"]), default="auto", show_default=True,
+              help="windows: integrals bounded by the scoring windows; reference: the plain trapezoid over the whole "
+                   "span (the Perpetua reference). auto: reference for the persistence benchmark, windows otherwise.")
 @click.option("--labels", default="gt", show_default=True, metavar="gt|privileged|noisy:P|detections:FILE|observed",
-              help="Observation source: gt (the schedule); privileged, detections:FILE, observed (door states read "
-                   "from the depth; doors only) from the dataset's labels table (psg-data label); noisy:P: "
-                   "persistence reads the stored noisy labels, navigation and doors flip the ground truth "
-                   "(the paper's noised training data). Scoring always uses the schedule.")
+              help="Observation source: gt (the schedule); noisy:P[,P_F]: the schedule at every scan with each "
+                   "observation flipped (seeded; the paper's noised ground truth, the same in every task); "
+                   "privileged, detections:FILE, observed (door states read from the depth; doors only) from the "
+                   "dataset's labels table (psg-data label). Scoring always uses the schedule.")
 @click.option("--protocol", type=click.Choice(["sim", "paper-real"]), default="sim", show_default=True,
               help="Navigation queries: sim (--queries per seed, random starts, natural mix) or paper-real (25: 10 "
                    "static, 10 dynamic, 5 absent, one fixed start, adaptive, predicted doors; the paper's real-world "
                    "table).")
 @click.option("--door-belief", type=click.Choice(["truth", "predicted", "last-map", "all-open"]), default=None,
               help="Navigation: door states the agent plans with (default: truth for sim, predicted for paper-real).")
-@click.option("--seeds", type=click.IntRange(1, 100), default=3, show_default=True,
-              help="Seeds 0..N-1 (benchmark: one draw per seed; datasets: estimator seeds / query sets).")
+@click.option("--seeds", type=click.IntRange(1, 100), default=None,
+              help="Persistence: estimator seeds 0..N-1 for estimators whose fit depends on the seed (default: 3 for "
+                   "those, 1 for the others). Navigation and doors: query sets (default 3).")
+@click.option("--lab-seeds", type=click.IntRange(1, 100), default=None,
+              help="Persistence: regenerate the synthetic dataset N times (the built-in lab: new layout and schedules, "
+                   "labels gt or noisy:P; the benchmark: new draws) and report the t-interval over the draws.")
 @click.option("--queries", type=click.IntRange(1), default=None,
               help="Navigation / door queries per seed (default 250; the paper-real protocol has 25).")
-@click.option("--delta", type=click.FloatRange(0.0, 1.0), default=0.2, show_default=True,
-              help="Navigation: abort (declare the object absent) when the best receptacle belief is below this.")
+@click.option("--delta", default="0.2", show_default=True, metavar="D|D1,D2,...",
+              help="Navigation: abort (declare the object absent) when the best receptacle belief is below D. A list "
+                   "(0.05,0.1,0.2,0.3) sweeps it: a table per delta and SR / AR against delta (delta_sweep.png).")
 @click.option("--reachable-only", is_flag=True,
               help="Navigation: redraw queries whose present target is unreachable under the true door states "
                    "(default: keep them and report them as unreachable).")
@@ -120,21 +136,25 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 @click.pass_context
 @handle_errors
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
-         setting: str, labels: str, protocol: str, door_belief: str | None, seeds: int, queries: int | None,
-         delta: float, reachable_only: bool, out: Path | None, overwrite: bool, jobs: int, scheduler: str | None,
-         rerun_file: Path | None,
-         list_estimators: bool, no_plots: bool, quiet: bool) -> None:
-    """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1, mean +- std over seeds).
+         setting: str, horizon: str, windows: str, weighting: str, labels: str, protocol: str,
+         door_belief: str | None, seeds: int | None, lab_seeds: int | None, queries: int | None, delta: str,
+         reachable_only: bool, out: Path | None, overwrite: bool, jobs: int, scheduler: str | None,
+         rerun_file: Path | None, list_estimators: bool, no_plots: bool, quiet: bool) -> None:
+    """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1) next to a ceiling, baselines
+    and chance, with a stated interval; or navigation (SR, SPL, AR, DIST) and doors with them.
 
-    Writes results.json, results.csv, summary.csv, breakdowns per object / receptacle / weekday and
-    PNG plots (belief vs ground truth over the test window, per-estimator bars).
+    Writes results.json (the versioned results schema: psg_data.evaluation.load_results reads it),
+    table.txt, summary.csv, results.csv, breakdowns per object / receptacle / weekday / horizon and PNG
+    plots (beliefs over the scored test time, bars with intervals, scores by horizon).
 
     \b
     Examples:
       psg-eval --estimator perpetua_star                       # the built-in lab
-      psg-eval --dataset persistence-benchmark -e perpetua_star -e perpetua_star_oracle
+      psg-eval --lab-seeds 5 -e perpetua_star                  # five regenerated labs, t-interval
+      psg-eval --dataset persistence-benchmark --lab-seeds 5 -e perpetua_star -e perpetua_star_oracle
       psg-eval --dataset /data/lab --labels privileged -e my_plugin:alpha=0.3 --out res/
       psg-eval --task navigation -e perpetua_star -e fremen    # SR / SPL / AR / DIST
+      psg-eval --task navigation --delta 0.05,0.1,0.2,0.3 -e perpetua_star
       psg-eval --task navigation --dataset /data/lab --labels noisy:0.1 --protocol paper-real -e perpetua_star
       psg-eval --task doors --dataset /data/lab -e perpetua_star   # blocked first plans, extra metres
       psg-eval compare res/a res/b                             # tabulate earlier runs
@@ -142,7 +162,8 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     if ctx.invoked_subcommand is not None:
         return
     setup_logging(quiet)
-    from psg_data.cli._eval_inputs import check_estimators, parse_estimator_spec
+    from psg_data.cli._eval_checks import check_lab_seeds, check_task_estimators, parse_deltas, persistence_options
+    from psg_data.cli._eval_inputs import available_hints, check_estimators, parse_estimator_spec, require_hints
 
     if list_estimators:
         from psg_data.estimators import list_estimators as _list
@@ -151,20 +172,23 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
             click.echo(name)
         return
     specs = [parse_estimator_spec(e) for e in (estimators or (DEFAULT_ESTIMATOR,))]
-    if references:
-        have = {s.name for s in specs}
-        specs += [parse_estimator_spec(r) for r in REFERENCE_ESTIMATORS if r not in have]
     check_estimators(specs)
+    check_task_estimators(specs, task)
     check_scheduler(scheduler)
     _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
+    deltas = parse_deltas(delta, task)
+    p_opts = persistence_options(setting=setting, horizon=horizon, weighting=weighting, windows=windows, seeds=seeds)
+    check_lab_seeds(lab_seeds, dataset, task, labels)
+    require_hints(specs, available_hints(dataset), "the " + (dataset or "demo") + " dataset")
     nav_options = None
     if task in ("navigation", "doors"):
         from psg_data.cli._eval_navigation import door_task_options, navigation_options
 
-        nav_options = (navigation_options(protocol, labels=labels, seeds=list(range(seeds)), queries=queries,
-                                          setting=setting, delta=delta, reachable_only=reachable_only,
-                                          door_belief=door_belief) if task == "navigation" else
-                       door_task_options(labels=labels, seeds=list(range(seeds)), queries=queries))
+        q_seeds = list(range(seeds or 3))
+        nav_options = (navigation_options(protocol, labels=labels, seeds=q_seeds, queries=queries, setting=setting,
+                                          delta=deltas[0], reachable_only=reachable_only, door_belief=door_belief,
+                                          windows=windows) if task == "navigation" else
+                       door_task_options(labels=labels, seeds=q_seeds, queries=queries, windows=windows))
     from psg_data.writers._safe_output import commit_tree, make_staging
 
     out_dir = _out_dir(out, overwrite, _eval_inputs(dataset, labels))
@@ -175,12 +199,13 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
 
     try:
         if task == "persistence":
-            ok = run_persistence(specs, dataset, setting, labels, list(range(seeds)), jobs, tmp, no_plots, quiet,
-                                 scheduler=scheduler, rerun_file=rerun_file, overwrite=overwrite)
+            ok = run_persistence(specs, dataset, p_opts, labels, jobs, tmp, no_plots, quiet, references=references,
+                                 lab_seeds=lab_seeds, scheduler=scheduler, rerun_file=rerun_file, overwrite=overwrite)
         elif task == "doors":
-            ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet)
+            ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references)
         else:
-            ok = run_navigation_task(specs, dataset, nav_options, tmp, no_plots, quiet)
+            ok = run_navigation_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references,
+                                     deltas=deltas)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         if new_parent and not any(out_dir.parent.iterdir()):

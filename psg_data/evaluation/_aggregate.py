@@ -1,6 +1,8 @@
-"""Aggregation across scenes or seeds: mean, standard deviation, bootstrap CI and the count.
+"""Aggregation across scenes or seeds: mean, standard deviation, a confidence interval and the count.
 
-Conventions (chosen once, used everywhere):
+:class:`Summary` is the record every table cell comes from; its interval's meaning is in
+``method`` / ``unit`` (see :mod:`psg_data.evaluation._intervals` for the intervals the harnesses use).
+:func:`summarize` is the plain helper for a list of values:
 
 - ``std`` uses ``ddof=1`` (sample standard deviation) by default; with a single value (n=1) the
   standard deviation is reported as 0.0 (not NaN) and the CI collapses to that value. ``n`` is
@@ -31,11 +33,14 @@ class Summary:
     """Mean, spread and count of one metric over scenes or seeds.
 
     Attributes:
-        mean: mean of the values.
-        std: standard deviation with ``ddof`` (0.0 when n == 1).
-        ci_low: lower end of the bootstrap confidence interval of the mean.
+        mean: the point estimate (mean of the values).
+        std: standard deviation across seeds or draws with ddof=1 (0.0 when there is one).
+        ci_low: lower end of the confidence interval.
         ci_high: upper end of it.
-        n: number of values aggregated.
+        n: number of resampled units (values, objects, draws, queries).
+        method: how the interval was made (``bootstrap``, ``t``, ``jackknife-t``, ``percentile``
+            for :func:`summarize`, ``none``).
+        unit: the resampled unit (``objects``, ``lab draws``, ``queries``, ``values``).
     """
 
     mean: float
@@ -43,13 +48,29 @@ class Summary:
     ci_low: float
     ci_high: float
     n: int
+    method: str = "percentile"
+    unit: str = "values"
+
+    @property
+    def half_width(self) -> float:
+        """Half the interval's width (what the tables print after ``±``); NaN without an interval."""
+        return (self.ci_high - self.ci_low) / 2.0 if math.isfinite(self.ci_low) and math.isfinite(self.ci_high) \
+            else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict; NaN becomes None."""
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in asdict(self).items()}
 
     def __str__(self) -> str:
-        return f"{self.mean:.3f} ± {self.std:.3f} (n={self.n})"
+        hw = self.half_width
+        return f"{self.mean:.3f} ± {hw:.3f} (n={self.n})" if math.isfinite(hw) else f"{self.mean:.3f} (n={self.n})"
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> Summary:
+        nan = float("nan")
+        f = lambda k: nan if d.get(k) is None else float(d[k])  # noqa: E731
+        return Summary(f("mean"), f("std"), f("ci_low"), f("ci_high"), int(d.get("n") or 0),
+                       str(d.get("method", "percentile")), str(d.get("unit", "values")))
 
 
 def bootstrap_ci(

@@ -1,59 +1,187 @@
-"""Presenting persistence results: the paper-style table, result files and PNG plots."""
+"""Presenting persistence results: the results schema's table with its reference rows and notes, and the files.
+
+:func:`persistence_results` turns a :class:`~psg_data.evaluation.PersistenceResult` into the
+versioned :class:`~psg_data.evaluation.EvalResults` (one table shaped like the paper's Table I,
+reference rows first, a ``% of ceiling`` column, one line under the table per metric and for the
+setting, the ceiling and the interval); :func:`write_persistence_results` writes it with the
+per-edge CSV files and the breakdowns. Plots are in :mod:`psg_data.evaluation._persistence_plots`.
+"""
 
 from __future__ import annotations
 
-import json
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-import numpy as np
+from psg_data.evaluation._intervals import describe_interval
+from psg_data.evaluation._persistence_result import PersistenceResult
+from psg_data.evaluation._persistence_types import TIME_METRICS
+from psg_data.evaluation._references import describe_method
+from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, ResultTable, save_results
 
-from psg_data.evaluation._persistence_task import PersistenceResult, PredictionTrace
+__all__ = ["persistence_results", "format_persistence_table", "write_persistence_results", "choose_plot_edges",
+           "PERSISTENCE_METRICS", "pct_of_ceiling"]
 
-if TYPE_CHECKING:  # pragma: no cover
-    from matplotlib.figure import Figure
+PERSISTENCE_METRICS: dict[str, MetricInfo] = {
+    "mae": MetricInfo("mae", "MAE", "lower", "mean |truth - belief| over the scored time, 0 best"),
+    "balanced_accuracy": MetricInfo("balanced_accuracy", "B-Acc", "higher",
+                                    "(recall of present + recall of absent) / 2 of belief >= 0.5 per edge (reference "
+                                    "convention: an edge that is always present scores at most 0.5)"),
+    "f1": MetricInfo("f1", "F1", "higher", "F1 of 'present' for belief >= 0.5 per edge (0 without a true positive)"),
+}
 
-__all__ = ["format_persistence_table", "write_persistence_results", "plot_beliefs", "plot_metric_bars",
-           "choose_plot_edges"]
 
-_TABLE_METRICS = (("mae", "MAE", "lower"), ("balanced_accuracy", "B-Acc", "higher"), ("f1", "F1", "higher"))
+def _chance(result: PersistenceResult) -> dict[str, float]:
+    """Chance level per metric: the always_absent row when it ran, else its known values."""
+    if "always_absent" in result.summary:
+        return {m: result.summary["always_absent"][m].mean for m in TIME_METRICS}
+    return {"mae": float(result.config.get("present_share") or math.nan), "balanced_accuracy": 0.5, "f1": 0.0}
 
 
-def format_persistence_table(result: PersistenceResult, *, digits: int = 3) -> str:
-    """A text table shaped like the paper's Table I: method, MAE, B-Acc, F1 as mean +- std over seeds.
-
-    The best mean of each column is marked with ``*``; ``n`` is the number of seeds with a score.
-    """
-    names = result.estimators
-    best: dict[str, float] = {}
-    for key, _, better in _TABLE_METRICS:
-        vals = [result.summary[n][key].mean for n in names if np.isfinite(result.summary[n][key].mean)]
+def _ceiling(rows: list[ResultRow]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for m, info in PERSISTENCE_METRICS.items():
+        vals = [r.values[m].mean for r in rows if r.role == "ceiling" and math.isfinite(r.values[m].mean)]
         if vals:
-            best[key] = min(vals) if better == "lower" else max(vals)
-    header = ["Method", *(f"{label} {'(lower better)' if b == 'lower' else '(higher better)'}"
-                          for _, label, b in _TABLE_METRICS), "seeds", "edges"]
+            out[m] = min(vals) if info.better == "lower" else max(vals)
+    return out
+
+
+def pct_of_ceiling(value: float, ceiling: float | None, chance: float | None) -> float | None:
+    """``100 (value - chance) / (ceiling - chance)``: 0 at chance, 100 at the ceiling (None if undefined)."""
+    if ceiling is None or chance is None or not all(math.isfinite(x) for x in (value, ceiling, chance)):
+        return None
+    if abs(ceiling - chance) < 1e-12:
+        return None
+    return 100.0 * (value - chance) / (ceiling - chance)
+
+
+def _rows(result: PersistenceResult, roles: Mapping[str, tuple[str, str]]) -> list[ResultRow]:
+    seeds = result.config.get("estimator_seeds", {})
     rows = []
-    for n in names:
-        cells = [n]
-        for key, _, _ in _TABLE_METRICS:
-            s = result.summary[n][key]
-            if not np.isfinite(s.mean):
-                cells.append("-")
-                continue
-            mark = "*" if key in best and abs(s.mean - best[key]) < 0.5 * 10**-digits else " "
-            cells.append(f"{s.mean:.{digits}f} +- {s.std:.{digits}f}{mark}")
-        cells.append(str(result.summary[n]["mae"].n))
-        n_ok = len({(r.object_id, r.receptacle_id) for r in result.edges if r.estimator == n and r.status == "ok"})
-        cells.append(str(n_ok))
-        rows.append(cells)
-    w = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    fmt = lambda cells: "  ".join(c.ljust(w[i]) if i == 0 else c.rjust(w[i]) for i, c in enumerate(cells))  # noqa: E731
-    lines = [fmt(header), "  ".join("-" * x for x in w), *(fmt(r) for r in rows)]
+    for name in result.estimators:
+        role, desc = roles.get(name, ("method", describe_method(name)))
+        ok = {(r.draw, r.object_id, r.receptacle_id) for r in result.edges if r.estimator == name and r.status == "ok"}
+        n_draws = max(1, len({r.draw for r in result.edges if r.estimator == name}))
+        n_ok = len(ok) // n_draws if len(ok) % n_draws == 0 else round(len(ok) / n_draws, 1)
+        rows.append(ResultRow(name, role, {m: result.summary[name][m] for m in TIME_METRICS}, desc,
+                              counts={"edges": n_ok, "fits": len(seeds.get(name, [0]))}))
+    return rows
+
+
+def _metric_notes(metrics: list[MetricInfo], chance: dict[str, float], result: PersistenceResult) -> list[str]:
+    share = result.config.get("present_share")
+    out = []
+    for m in metrics:
+        c = chance.get(m.key)
+        if m.key == "mae":
+            extra = (f"; chance: always_absent {c:.3f} (objects are on their edges {100 * share:.0f} % of the scored "
+                     "time), a constant 0.5 scores 0.500") if c is not None and share is not None else ""
+        elif m.key == "balanced_accuracy":
+            extra = (f"; chance: always_absent {c:.3f} (a constant belief scores 0.5 on an edge with both states in "
+                     "the scored time, 0 or 0.5 on an edge with one)") if c is not None and math.isfinite(c) else ""
+        else:
+            extra = f"; chance: always_absent {c:.3f}" if c is not None and math.isfinite(c) else ""
+        out.append(f"{m.label} ({m.better} is better): {m.description}{extra}")
+    return out
+
+
+def _setting_note(cfg: dict[str, Any]) -> str:
+    text = str(cfg.get("setting_text", cfg.get("setting")))
+    if cfg.get("setting") == "adaptive" and cfg.get("horizon"):
+        from psg_data.evaluation._windows import format_duration
+
+        h = format_duration(float(cfg["horizon"]))
+        text += f" (a prediction at t uses the observations up to t - {h}; horizon: {cfg.get('horizon_reason')})"
+    elif cfg.get("setting") == "adaptive":
+        text += f" (a prediction at t uses the observations up to t; {cfg.get('horizon_reason')})"
+    else:
+        text += " (the test week forecast from the training data; no test observation is applied)"
+    w = cfg.get("windows")
+    if cfg.get("weighting") == "windows" and isinstance(w, dict):
+        weight = f"time integrals inside the scoring windows {w.get('text')} ({w.get('source')}); gaps get no weight"
+    else:
+        weight = "plain trapezoid over the whole span (the reference's weighting)"
+    return f"setting: {text}; {weight}"
+
+
+def _interval_note(rows: list[ResultRow], result: PersistenceResult) -> str:
+    s = next(iter(rows[0].values.values())) if rows else None
+    if s is None:
+        return "±: -"
+    seeds = result.config.get("estimator_seeds", {})
+    multi = sorted(n for n, ss in seeds.items() if len(ss) > 1)
+    extra = ""
+    if multi:
+        spread = max(result.seed_spread(n) for n in multi)
+        extra = (f"; {', '.join(multi)}: fit depends on the seed, averaged over {len(seeds[multi[0]])} fits "
+                 f"(seed-to-seed std of B-Acc <= {spread:.4f}); the other rows are fitted once")
+    return describe_interval(s.method, s.unit, s.n, float(result.config.get("confidence", 0.95)), extra=extra)
+
+
+def _ceiling_note(rows: list[ResultRow], ceiling: dict[str, float], chance: dict[str, float]) -> str | None:
+    if not ceiling:
+        return None
+    refs = [r for r in rows if r.role == "ceiling"]
+    best = [r for r in rows if r.role != "ceiling" and r.pct_of_ceiling is not None]
+    text = "ceiling: " + "; ".join(f"{r.method} = {r.description}" for r in refs)
+    text += (f"; B-Acc {ceiling.get('balanced_accuracy', math.nan):.3f}, F1 {ceiling.get('f1', math.nan):.3f}, "
+             f"MAE {ceiling.get('mae', math.nan):.3f} (best of the ceiling rows)")
+    if best:
+        top = max(best, key=lambda r: r.pct_of_ceiling or -math.inf)
+        text += f"; the best other row ({top.method}) closes {top.pct_of_ceiling:.0f} % of the B-Acc gap from chance"
+    c = chance.get("balanced_accuracy", math.nan)
+    return text + f"; % of ceiling = 100 (B-Acc - chance) / (ceiling B-Acc - chance), chance = {c:.3f}"
+
+
+def persistence_results(result: PersistenceResult, *, roles: Mapping[str, tuple[str, str]] | None = None,
+                        info: dict[str, Any] | None = None, title: str | None = None) -> EvalResults:
+    """The results-schema form of a persistence run (module docstring).
+
+    Args:
+        result: the run.
+        roles: row label -> (role, description) for reference rows (``ceiling``, ``baseline``,
+            ``chance``); other rows are methods.
+        info: provenance stored as ``info``.
+        title: the table's title.
+    """
     cfg = result.config
-    lines.append(f"setting: {cfg.get('setting')}; metrics: time-integrated, {cfg.get('convention')} convention, "
-                 f"present iff belief >= {cfg.get('threshold')}; std over seeds (ddof=1); * best")
-    return "\n".join(lines)
+    rows = _rows(result, roles or {})
+    chance = _chance(result)
+    ceiling = _ceiling(rows)
+    primary = "balanced_accuracy" if ceiling else None
+    for r in rows:
+        r.pct_of_ceiling = pct_of_ceiling(r.values["balanced_accuracy"].mean, ceiling.get("balanced_accuracy"),
+                                          chance.get("balanced_accuracy")) if primary else None
+    metrics = [PERSISTENCE_METRICS[m] for m in TIME_METRICS]
+    metrics = [MetricInfo(m.key, m.label, m.better, m.description, m.scale, m.digits, chance.get(m.key)) for m in metrics]
+    notes = [*_metric_notes(metrics, chance, result), _setting_note(cfg)]
+    cn = _ceiling_note(rows, ceiling, chance)
+    if cn:
+        notes.append(cn)
+    notes.append(_interval_note(rows, result))
+    draws = cfg.get("draws") or [0]
+    where = (f"{len(draws)} draws of {cfg.get('dataset_kind', 'the dataset')} (seeds {min(draws)}-{max(draws)})"
+             if len(draws) > 1 else str(cfg.get("dataset")))
+    name = title or (f"Persistence estimation on {where} ({cfg.get('n_edges')} edges of {cfg.get('n_objects')} objects"
+                     f"{' per draw' if len(draws) > 1 else ''}; {cfg.get('setting_text')})")
+    first = rows[0].values["mae"] if rows else None
+    interval = ({"method": first.method, "unit": first.unit, "n": first.n, "confidence": cfg.get("confidence", 0.95),
+                 "text": notes[-1]} if first is not None else {})
+    horizon = result.breakdown("horizon")
+    horizon = horizon[horizon["metric"].isin(TIME_METRICS)]
+    table = ResultTable("persistence", name, metrics, rows, notes, count_columns=["edges", "fits"], primary=primary)
+    return EvalResults("persistence", [table], config=cfg, info=dict(info or {}), interval=interval,
+                       breakdowns={"horizon": horizon.to_dict("records")},
+                       errors=[e.to_dict() for e in result.errors])
+
+
+def format_persistence_table(result: PersistenceResult, *, roles: Mapping[str, tuple[str, str]] | None = None) -> str:
+    """The table and its notes as plain text (:func:`persistence_results` rendered)."""
+    from psg_data.evaluation._tables import format_results
+
+    return format_results(persistence_results(result, roles=roles))
 
 
 def choose_plot_edges(result_or_truth: Any, k: int = 4) -> list[tuple[str, str]]:
@@ -61,6 +189,8 @@ def choose_plot_edges(result_or_truth: Any, k: int = 4) -> list[tuple[str, str]]
     truth = result_or_truth
     scored = []
     for edge, (t, y) in truth.items():
+        import numpy as np
+
         y = np.asarray(y)
         y = y[(y == 0) | (y == 1)]
         scored.append((-int(np.count_nonzero(np.diff(y))), edge))
@@ -68,95 +198,20 @@ def choose_plot_edges(result_or_truth: Any, k: int = 4) -> list[tuple[str, str]]
     return [e for _, e in scored[:k]]
 
 
-def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *, info: dict[str, Any]) -> dict[str, Path]:
-    """Write ``results.json`` (config, provenance, every metric), ``results.csv`` (one row per
-    estimator, seed and edge), ``summary.csv`` and the per-object / receptacle / weekday breakdowns.
-    """
+def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *, info: dict[str, Any],
+                              roles: Mapping[str, tuple[str, str]] | None = None, title: str | None = None
+                              ) -> dict[str, Path]:
+    """Write ``results.json`` (the results schema), ``summary.csv``, ``table.txt``, ``results.csv`` (one row
+    per estimator, seed, draw and edge), ``seeds.json`` and the breakdowns per object / receptacle /
+    weekday / horizon (``by_*.csv``)."""
+    import json
+
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    data = result.to_dict()
-    data["info"] = info
-    paths = {"json": out / "results.json", "csv": out / "results.csv", "summary": out / "summary.csv",
-             "by_object": out / "by_object.csv", "by_receptacle": out / "by_receptacle.csv",
-             "by_weekday": out / "by_weekday.csv", "table": out / "table.txt"}
-    paths["json"].write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
-    result.to_frame().to_csv(paths["csv"], index=False)
-    result.summary_frame().to_csv(paths["summary"], index=False)
-    result.breakdown("object").to_csv(paths["by_object"], index=False)
-    result.breakdown("receptacle").to_csv(paths["by_receptacle"], index=False)
-    result.breakdown("weekday").to_csv(paths["by_weekday"], index=False)
-    paths["table"].write_text(format_persistence_table(result) + "\n", encoding="utf-8")
-    return paths
-
-
-def _save(fig: Figure, out_path: str | Path | None, dpi: int = 110) -> Figure:
-    """Write ``fig`` as a PNG at ``out_path`` when one is given; the figure either way."""
-    if out_path is not None:
-        out = Path(out_path)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi)
-    return fig
-
-
-def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path | None = None, *, timezone: str = "UTC",
-                 seed: int | None = None, title: str | None = None) -> Figure:
-    """The paper's "Persistence Belief" figure: per edge, each estimator's belief over the test
-    window against the ground truth (shaded) and the test observations (ticks), local time axis.
-
-    Returns a ``matplotlib.figure.Figure`` (no pyplot, no backend change), written as a PNG at
-    ``out_path`` if given.
-    """
-    import matplotlib
-    import pandas as pd
-    from matplotlib.figure import Figure
-
-    if seed is None and traces:
-        seed = min(t.seed for t in traces)
-    traces = [t for t in traces if t.seed == seed]
-    edges = list(dict.fromkeys(t.edge for t in traces))
-    names = list(dict.fromkeys(t.estimator for t in traces))
-    fig = Figure(figsize=(11, 2.1 * max(1, len(edges)) + 0.6))
-    axes = fig.subplots(max(1, len(edges)), 1, sharex=True, squeeze=False)
-    colours = matplotlib.colormaps["tab10"]
-
-    def local(t: np.ndarray) -> Any:
-        return pd.to_datetime(t, unit="s", utc=True).tz_convert(timezone).tz_localize(None)
-
-    for ax, edge in zip(axes[:, 0], edges):
-        mine = [t for t in traces if t.edge == edge]
-        ref = mine[0]
-        ok = (ref.truth == 0) | (ref.truth == 1)
-        ax.fill_between(local(ref.t_s[ok]), 0, ref.truth[ok], step="post", color="0.85", label="ground truth")
-        for tr in mine:
-            ax.plot(local(tr.t_s), tr.belief, lw=1.2, color=colours(names.index(tr.estimator) % 10), label=tr.estimator)
-        if ref.obs_t_s.size:
-            ax.plot(local(ref.obs_t_s), np.where(ref.obs_y == 1, 1.04, -0.04), "|", color="k", ms=6,
-                    label="observations")
-        ax.set_ylim(-0.1, 1.1)
-        ax.set_ylabel("P(present)")
-        ax.set_title(f"{edge[0]} on {edge[1]}", fontsize=9, loc="left")
-    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=min(6, len(names) + 2))
-    fig.suptitle(title or f"Persistence belief over the test window (seed {seed}, local time {timezone})", fontsize=10)
-    fig.tight_layout()
-    return _save(fig, out_path)
-
-
-def plot_metric_bars(result: PersistenceResult, out_path: str | Path | None = None) -> Figure:
-    """Per-estimator bars of MAE, B-Acc and F1 (mean over seeds, error bars = std); a
-    ``matplotlib.figure.Figure``, written as a PNG at ``out_path`` if given."""
-    import matplotlib
-    from matplotlib.figure import Figure
-
-    names = result.estimators
-    fig = Figure(figsize=(4 * len(_TABLE_METRICS), 3.4))
-    axes = fig.subplots(1, len(_TABLE_METRICS))
-    for ax, (key, label, better) in zip(axes, _TABLE_METRICS):
-        means = [result.summary[n][key].mean for n in names]
-        stds = [result.summary[n][key].std for n in names]
-        ax.bar(range(len(names)), np.nan_to_num(means), yerr=np.nan_to_num(stds), color=matplotlib.colormaps["tab10"](
-            np.arange(len(names)) % 10), capsize=3)
-        ax.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
-        ax.set_title(f"{label} ({better} is better)", fontsize=9)
-        ax.set_ylim(0, 1)
-    fig.tight_layout()
-    return _save(fig, out_path)
+    paths = save_results(persistence_results(result, roles=roles, info=info, title=title), out)
+    extra = {"csv": out / "results.csv", "by_object": out / "by_object.csv", "by_receptacle": out / "by_receptacle.csv",
+             "by_weekday": out / "by_weekday.csv", "by_horizon": out / "by_horizon.csv", "seeds": out / "seeds.json"}
+    result.to_frame().to_csv(extra["csv"], index=False)
+    for by in ("object", "receptacle", "weekday", "horizon"):
+        result.breakdown(by).to_csv(extra[f"by_{by}"], index=False)
+    extra["seeds"].write_text(json.dumps(result.to_dict()["seeds"], indent=1) + "\n", encoding="utf-8")
+    return {**paths, **extra}

@@ -46,50 +46,63 @@ def test_persistence_on_dataset_writes_table_files_and_plots(lab: Path, tmp_path
     assert res.exit_code == 0, res.output + str(res.exception)
     assert "Method" in res.stdout and "last_seen" in res.stdout and "always_present" in res.stdout
     assert "MAE" in res.stdout and "B-Acc" in res.stdout and "F1" in res.stdout
+    assert "±: " in res.stdout  # the line that says what the interval is
+    from psg_data.evaluation import load_results
+
     data = json.loads((out / "results.json").read_text())
-    assert data["config"]["seeds"] == [0, 1]
+    assert data["schema"] == "psg-eval-results" and data["schema_version"] == 1 and data["task"] == "persistence"
+    # neither estimator's fit depends on the seed: each is fitted once, whatever --seeds says
+    assert data["config"]["estimator_seeds"] == {"last_seen": [0], "always_present": [0]}
     assert data["info"]["psg_data_version"] and data["info"]["format_version"] == "2.0"
     assert data["info"]["labels"] == "gt" and "dense schedule" in data["info"]["ground_truth"]
-    assert set(data["summary"]) == {"last_seen", "always_present"}
+    table = load_results(out).table()
+    assert {r.method for r in table.rows} == {"last_seen", "always_present"}
+    assert all(r.role == "method" for r in table.rows) and table.primary is None  # no ceiling: no % column
     csv = pd.read_csv(out / "results.csv")
     n_edges = data["config"]["n_edges"]
-    assert len(csv) == 2 * 2 * n_edges
+    assert len(csv) == 2 * n_edges
     # always_present predicts 1: its time-integrated MAE equals the absent share of the ground truth
     ap = csv[(csv.estimator == "always_present") & (csv.status == "ok")]
     assert ap["mae"].between(0, 1).all()
-    for name in ("belief.png", "bars.png"):
+    for name in ("belief.png", "bars.png", "horizon.png"):
         _assert_png(out / name)
-    for name in ("by_object.csv", "by_receptacle.csv", "by_weekday.csv", "summary.csv", "table.txt"):
+    for name in ("by_object.csv", "by_receptacle.csv", "by_weekday.csv", "by_horizon.csv", "summary.csv", "table.txt"):
         assert (out / name).stat().st_size > 0
     assert not out.with_name("res.partial").exists()
 
 
 def test_always_present_mae_matches_independent_computation(lab: Path, tmp_path: Path) -> None:
-    from psg_data.cli._eval_inputs import persistence_tasks, resolve_dataset
+    from psg_data.cli._eval_inputs import persistence_task_for, resolve_dataset
 
     out = tmp_path / "res"
     assert run("--dataset", str(lab), "-e", "always_present", "--no-references", "--seeds", "1", "--out", str(out),
                "--quiet", "--no-plots").exit_code == 0
-    task = persistence_tasks(resolve_dataset(str(lab), quiet=True), labels="gt", seeds=[0], quiet=True)[0][0]
+    task = persistence_task_for(resolve_dataset(str(lab), quiet=True), labels="gt", quiet=True)
+    assert task.windows is not None and task.windows.hours == ((9.0, 17.0),)
     num = den = 0.0
-    for t, y in task.ground_truth.values():  # span-weighted trapezoid of |1 - y|
-        if t.size < 2:
-            continue
+    for t, y in task.ground_truth.values():  # |1 - y| integrated piecewise linearly inside 9:00-17:00, day by day
         err = 1.0 - y.astype(float)
-        num += float(np.sum((err[1:] + err[:-1]) / 2 * np.diff(t)))
-        den += float(t[-1] - t[0])
+        for a, b in task.windows.intervals(float(t[0]), float(t[-1])):
+            m = (t >= a) & (t <= b)
+            tt, ee = t[m], err[m]
+            num += float(np.sum((ee[1:] + ee[:-1]) / 2 * np.diff(tt)))
+            den += float(tt[-1] - tt[0]) if tt.size > 1 else 0.0
     data = json.loads((out / "results.json").read_text())
-    assert data["summary"]["always_present"]["mae"]["mean"] == pytest.approx(num / den, rel=1e-9)
+    row = next(r for r in data["tables"][0]["rows"] if r["method"] == "always_present")
+    assert row["values"]["mae"]["mean"] == pytest.approx(num / den, rel=1e-9)
 
 
 def test_benchmark_and_compare(tmp_path: Path) -> None:
     a, b = tmp_path / "a", tmp_path / "b"
-    assert run("--dataset", "persistence-benchmark", "-e", "always_present", "--no-references", "--seeds", "2",
+    assert run("--dataset", "persistence-benchmark", "-e", "always_present", "--no-references", "--lab-seeds", "2",
                "--out", str(a), "--quiet", "--no-plots").exit_code == 0
     assert run("--dataset", "persistence-benchmark", "-e", "time_of_week_frequency", "--no-references",
-               "--seeds", "1", "--out", str(b), "--quiet", "--no-plots", "--setting", "predictive").exit_code == 0
+               "--out", str(b), "--quiet", "--no-plots", "--setting", "predictive").exit_code == 0
     data = json.loads((a / "results.json").read_text())
-    assert data["config"]["seeds"] == [0, 1] and data["info"]["per_seed_draws"] is True
+    assert data["config"]["draws"] == [0, 1] and data["info"]["lab_seeds"] == 2
+    # the benchmark keeps the paper's protocol: plain trapezoid, no horizon; two draws: a t-interval
+    assert data["config"]["weighting"] == "reference" and data["config"]["horizon"] == 0.0
+    assert data["interval"]["method"] == "t" and data["interval"]["unit"] == "lab draws"
     res = run("compare", str(a), str(b))
     assert res.exit_code == 0
     lines = res.stdout.splitlines()

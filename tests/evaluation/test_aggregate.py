@@ -30,7 +30,8 @@ def test_single_value_and_empty_and_nan():
     assert (s.mean, s.std, s.ci_low, s.ci_high, s.n) == (0.42, 0.0, 0.42, 0.42, 1)
     e = summarize([])
     assert e.n == 0 and np.isnan(e.mean) and np.isnan(e.std)
-    assert e.to_dict() == {"mean": None, "std": None, "ci_low": None, "ci_high": None, "n": 0}
+    assert e.to_dict() == {"mean": None, "std": None, "ci_low": None, "ci_high": None, "n": 0, "method": "percentile",
+                           "unit": "values"}
     json.dumps(e.to_dict(), allow_nan=False)
     s2 = summarize([0.2, np.nan, 0.4])
     assert s2.n == 2 and s2.mean == pytest.approx(0.3)

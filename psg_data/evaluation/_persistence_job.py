@@ -1,0 +1,153 @@
+"""A whole persistence evaluation as ``psg-eval`` runs it: rows (the user's, the paper's, the references),
+one dataset or several draws of a synthetic one, and the files and figures of the run.
+
+- :func:`persistence_rows`: the estimator specs of a run and the role of each reference row;
+- :func:`run_persistence_rows` on one :class:`PersistenceTask`;
+- :func:`run_lab_draws`: ``--lab-seeds N``: N regenerated labs (or benchmark draws), one job per
+  draw on an executor (:func:`psg_data._executors.open_executor`), merged into one result whose
+  interval is the t-interval over draws;
+- :func:`write_persistence_outputs`: the results schema, CSV files and the PNG figures.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
+from pathlib import Path
+from typing import Any
+
+from psg_data.errors import EvaluationError
+from psg_data.evaluation._dataset_task import PersistenceTask
+from psg_data.evaluation._hints import EstimatorSpec, with_hints
+from psg_data.evaluation._options import PersistenceOptions
+from psg_data.evaluation._oracles import TruthFactory
+from psg_data.evaluation._persistence_result import PersistenceResult, merge_results
+from psg_data.evaluation._persistence_task import RegistryFactory, run_persistence_task, seeds_for
+from psg_data.evaluation._references import PAPER_METHODS, persistence_references
+
+__all__ = ["persistence_rows", "factories_for", "run_persistence_rows", "run_lab_draws", "write_persistence_outputs",
+           "draw_task"]
+
+Roles = dict[str, tuple[str, str]]
+
+
+def persistence_rows(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, references: bool = True
+                     ) -> tuple[list[EstimatorSpec], Roles]:
+    """The rows of a run: the user's specs, then (with ``references``) the paper's comparison methods and
+    the reference rows (ceiling, baselines, chance) not already given; and label -> (role, description)."""
+    out = list(specs)
+    roles: Roles = {}
+    if not references:
+        return out, roles
+    have = {s.label for s in out} | {s.name for s in out if not s.settings}
+    out += [EstimatorSpec.of(m) for m in PAPER_METHODS if m not in have]
+    for ref in persistence_references(hints):
+        roles[ref.label] = (ref.role, ref.description)
+        if ref.label not in have:
+            out.append(ref.spec)
+    return out, roles
+
+
+def factories_for(specs: Sequence[EstimatorSpec], task: PersistenceTask) -> dict[str, Callable[..., Any]]:
+    """label -> picklable factory (registry estimators with the task's hints; ``ground_truth`` -> the truth)."""
+    out: dict[str, Callable[..., Any]] = {}
+    for s in specs:
+        if s.name == "ground_truth":
+            out[s.label] = TruthFactory(task.ground_truth)
+        else:
+            out[s.label] = RegistryFactory(s.name, with_hints(s, task.estimator_hints).settings)
+    return out
+
+
+def run_persistence_rows(specs: Sequence[EstimatorSpec], task: PersistenceTask, options: PersistenceOptions, *,
+                         jobs: int = 1, executor: Executor | None = None,
+                         progress: Callable[[int, int], None] | None = None,
+                         keep_predictions: Sequence[Any] = ()) -> PersistenceResult:
+    """:func:`run_persistence_task` of these rows on one task."""
+    return run_persistence_task(factories_for(specs, task), task, options, jobs=jobs, executor=executor,
+                                progress=progress, keep_predictions=keep_predictions)
+
+
+def draw_task(kind: str, seed: int, labels: str) -> PersistenceTask:
+    """Draw ``seed`` of a synthetic dataset: ``lab`` (the built-in lab, no images) or ``benchmark``."""
+    from psg_data.evaluation._dataset_task import persistence_task_from_benchmark, persistence_task_from_lab
+
+    if kind == "benchmark":
+        if labels != "gt":
+            raise EvaluationError(f"--labels {labels}: the persistence benchmark has its own noisy observations "
+                                  "(P_M = P_F = 0.1); use --labels gt (the default)")
+        return persistence_task_from_benchmark(seed)
+    from psg_data.synth import LabConfig
+
+    return persistence_task_from_lab(LabConfig(seed=int(seed)), labels=labels)
+
+
+def _draw_job(kind: str, seed: int, labels: str, specs: Sequence[EstimatorSpec], options: PersistenceOptions,
+              keep: bool) -> tuple[PersistenceResult, PersistenceTask | None]:
+    """One draw, evaluated inline (runs in a worker process)."""
+    from psg_data.evaluation._report import choose_plot_edges
+
+    task = draw_task(kind, seed, labels)
+    res = run_persistence_rows(specs, task, options, keep_predictions=choose_plot_edges(task.ground_truth) if keep else ())
+    return res, (task if keep else None)
+
+
+def run_lab_draws(kind: str, seeds: Sequence[int], labels: str, specs: Sequence[EstimatorSpec],
+                  options: PersistenceOptions, *, executor: Executor | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> tuple[PersistenceResult, PersistenceTask]:
+    """Evaluate the rows on every draw (``executor``: one job per draw; None: inline) and merge.
+
+    Returns:
+        The merged result (summary: t-interval over the draws) and the first draw's task (its
+        predictions are kept for the belief figure).
+    """
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise EvaluationError("--lab-seeds: no draw")
+    results: dict[int, PersistenceResult] = {}
+    first: PersistenceTask | None = None
+    if executor is None:
+        for k, s in enumerate(seeds):
+            res, task = _draw_job(kind, s, labels, specs, options, k == 0)
+            results[s], first = res, first or task
+            if progress is not None:
+                progress(k + 1, len(seeds))
+    else:
+        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0): s for k, s in enumerate(seeds)}
+        from concurrent.futures import as_completed
+
+        for done, fut in enumerate(as_completed(futs), 1):
+            res, task = fut.result()
+            results[futs[fut]], first = res, first or task
+            if progress is not None:
+                progress(done, len(seeds))
+    assert first is not None
+    merged = merge_results([results[s] for s in seeds]) if len(seeds) > 1 else results[seeds[0]]
+    return merged, first
+
+
+def fit_counts(specs: Sequence[EstimatorSpec], task: PersistenceTask, options: PersistenceOptions) -> int:
+    """How many (estimator, seed) fits a run makes (for progress totals)."""
+    return sum(len(seeds_for(f, options.seeds)) for f in factories_for(specs, task).values())
+
+
+def write_persistence_outputs(result: PersistenceResult, out: Path, *, info: dict[str, Any], roles: Roles,
+                              timezone: str, plots: bool = True) -> Any:
+    """Write the results schema, the CSV files and (``plots``) belief.png, bars.png, horizon.png.
+
+    Returns:
+        The :class:`~psg_data.evaluation.EvalResults` written.
+    """
+    from psg_data.evaluation._persistence_plots import plot_beliefs, plot_horizon, plot_metric_bars
+    from psg_data.evaluation._report import persistence_results, write_persistence_results
+
+    write_persistence_results(result, out, info=info, roles=roles)
+    results = persistence_results(result, roles=roles, info=info)
+    if plots:
+        flat = [n for n, (role, _) in roles.items() if role == "chance"] + \
+            [n for n in result.estimators if n.endswith("output=median")]
+        if result.traces:
+            plot_beliefs(result.traces, out / "belief.png", timezone=timezone, skip=flat)
+        plot_metric_bars(results, out / "bars.png")
+        plot_horizon(result, out / "horizon.png", skip=flat)
+    return results

@@ -1,0 +1,227 @@
+"""One versioned results schema for every task (persistence, navigation, doors), written and read here.
+
+Every ``psg-eval`` run writes ``results.json`` (evo's ``save_res_file`` / ``load_res_file`` habit:
+one file a notebook can load without psg-data internals, one loader that knows its versions)::
+
+    {"schema": "psg-eval-results", "schema_version": 1, "task": "persistence",
+     "tables": [{"name": "persistence", "title": "...",
+                 "metrics": [{"key": "mae", "label": "MAE", "better": "lower", "scale": 1.0,
+                              "digits": 3, "description": "...", "chance": 0.32}, ...],
+                 "groups": [], "count_columns": ["edges"], "primary": "balanced_accuracy",
+                 "rows": [{"method": "process_oracle", "role": "ceiling", "description": "...",
+                           "values": {"mae": {"mean": ..., "std": ..., "ci_low": ..., "ci_high": ...,
+                                              "n": 21, "method": "bootstrap", "unit": "objects"}, ...},
+                           "pct_of_ceiling": 100.0, "counts": {"edges": 56}}, ...],
+                 "notes": ["MAE: ...", "±: ..."]}, ...],
+     "interval": {"method": "bootstrap", "unit": "objects", "n": 21, "confidence": 0.95, "text": "..."},
+     "config": {...}, "info": {...}, "breakdowns": {"horizon": [...]}, "errors": [...], "ok": true}
+
+Values are fractions in [0, 1] (SR 0.84, not 84; ``scale`` 100 is for display) or metres; NaN is
+``null``. :func:`load_results` reads a file or a run folder and refuses unknown schemas with one
+line; :func:`results_frame` gives the long table (one row per method and metric) for pandas.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from psg_data.errors import EvaluationError
+from psg_data.evaluation._aggregate import Summary
+from psg_data.evaluation._persistence_types import clean_json
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "MetricInfo", "ResultRow", "ResultTable", "EvalResults", "save_results",
+           "load_results", "results_frame", "ROLES"]
+
+SCHEMA = "psg-eval-results"
+SCHEMA_VERSION = 1
+ROLES = ("ceiling", "baseline", "chance", "method")
+"""Row roles in table order: reference rows (the best achievable, simple baselines, chance) first."""
+
+
+@dataclass(frozen=True)
+class MetricInfo:
+    """One column: what it is, which way is better, how it is shown, this dataset's chance level."""
+
+    key: str
+    label: str
+    better: str
+    description: str
+    scale: float = 1.0
+    digits: int = 3
+    chance: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return clean_json(self.__dict__)
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> MetricInfo:
+        return MetricInfo(str(d["key"]), str(d["label"]), str(d["better"]), str(d.get("description", "")),
+                          float(d.get("scale", 1.0)), int(d.get("digits", 3)),
+                          None if d.get("chance") is None else float(d["chance"]))
+
+
+@dataclass
+class ResultRow:
+    """One method's row: its role, what it is, a :class:`Summary` per metric, counts."""
+
+    method: str
+    role: str
+    values: dict[str, Summary]
+    description: str = ""
+    pct_of_ceiling: float | None = None
+    counts: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return clean_json({"method": self.method, "role": self.role, "description": self.description,
+                           "values": {k: v.to_dict() for k, v in self.values.items()},
+                           "pct_of_ceiling": self.pct_of_ceiling, "counts": self.counts})
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> ResultRow:
+        return ResultRow(str(d["method"]), str(d.get("role", "method")),
+                         {k: Summary.from_dict(v or {}) for k, v in (d.get("values") or {}).items()},
+                         str(d.get("description", "")), d.get("pct_of_ceiling"), dict(d.get("counts") or {}))
+
+
+@dataclass
+class ResultTable:
+    """A table of one task: columns (metrics, optionally grouped), rows, and the lines under it."""
+
+    name: str
+    title: str
+    metrics: list[MetricInfo]
+    rows: list[ResultRow]
+    notes: list[str] = field(default_factory=list)
+    groups: list[tuple[str, list[str]]] = field(default_factory=list)
+    count_columns: list[str] = field(default_factory=list)
+    primary: str | None = None
+    """the metric the ``% of ceiling`` column is computed on (None: no such column)"""
+
+    def row(self, method: str) -> ResultRow:
+        for r in self.rows:
+            if r.method == method:
+                return r
+        raise EvaluationError(f"table {self.name!r}: no row {method!r} (rows: {', '.join(r.method for r in self.rows)})")
+
+    def metric(self, key: str) -> MetricInfo:
+        return next(m for m in self.metrics if m.key == key)
+
+    def to_dict(self) -> dict[str, Any]:
+        return clean_json({"name": self.name, "title": self.title, "metrics": [m.to_dict() for m in self.metrics],
+                           "groups": [[g, list(ks)] for g, ks in self.groups], "count_columns": self.count_columns,
+                           "primary": self.primary, "rows": [r.to_dict() for r in self.rows], "notes": self.notes})
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> ResultTable:
+        return ResultTable(str(d["name"]), str(d.get("title", "")), [MetricInfo.from_dict(m) for m in d["metrics"]],
+                           [ResultRow.from_dict(r) for r in d["rows"]], list(d.get("notes") or []),
+                           [(str(g), list(ks)) for g, ks in d.get("groups") or []], list(d.get("count_columns") or []),
+                           d.get("primary"))
+
+
+@dataclass
+class EvalResults:
+    """Everything a ``psg-eval`` run reports, in the shape of ``results.json`` (module docstring)."""
+
+    task: str
+    tables: list[ResultTable]
+    config: dict[str, Any] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+    interval: dict[str, Any] = field(default_factory=dict)
+    breakdowns: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    errors: list[dict[str, Any]] = field(default_factory=list)
+    schema_version: int = SCHEMA_VERSION
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+    def table(self, name: str | None = None) -> ResultTable:
+        """The table called ``name`` (default: the first)."""
+        if name is None:
+            return self.tables[0]
+        for t in self.tables:
+            if t.name == name:
+                return t
+        raise EvaluationError(f"results of task {self.task!r}: no table {name!r} (tables: "
+                              f"{', '.join(t.name for t in self.tables)})")
+
+    def to_dict(self) -> dict[str, Any]:
+        return clean_json({"schema": SCHEMA, "schema_version": self.schema_version, "task": self.task,
+                           "tables": [t.to_dict() for t in self.tables], "interval": self.interval,
+                           "config": self.config, "info": self.info, "breakdowns": self.breakdowns,
+                           "errors": self.errors, "ok": self.ok})
+
+    @staticmethod
+    def from_dict(d: dict[str, Any], where: str = "results") -> EvalResults:
+        if d.get("schema") != SCHEMA:
+            raise EvaluationError(f"{where}: not a psg-eval results file (no 'schema': {SCHEMA!r}; files of psg-eval "
+                                  "before results schema 1 are not read: rerun the command in info.command)")
+        v = d.get("schema_version")
+        if not isinstance(v, int) or v > SCHEMA_VERSION or v < 1:
+            raise EvaluationError(f"{where}: results schema version {v!r}; this psg-data reads versions 1 to "
+                                  f"{SCHEMA_VERSION} (upgrade psg-data to read newer files)")
+        try:
+            return EvalResults(str(d["task"]), [ResultTable.from_dict(t) for t in d["tables"]], dict(d.get("config") or {}),
+                               dict(d.get("info") or {}), dict(d.get("interval") or {}),
+                               dict(d.get("breakdowns") or {}), list(d.get("errors") or []), int(v))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise EvaluationError(f"{where}: malformed results file ({type(exc).__name__}: {exc})") from None
+
+
+def save_results(results: EvalResults, out_dir: str | Path) -> dict[str, Path]:
+    """Write ``results.json``, ``summary.csv`` (the long table) and ``table.txt`` (the rendered tables)."""
+    from psg_data.evaluation._tables import format_results
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out / "results.json", "summary": out / "summary.csv", "table": out / "table.txt"}
+    paths["json"].write_text(json.dumps(results.to_dict(), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    results_frame(results).to_csv(paths["summary"], index=False)
+    paths["table"].write_text(format_results(results, width=200) + "\n", encoding="utf-8")
+    return paths
+
+
+def load_results(path: str | Path) -> EvalResults:
+    """Read ``results.json`` (a file, or a run folder holding one).
+
+    Raises:
+        EvaluationError: missing, not JSON, or not a known results schema (one line).
+    """
+    p = Path(path)
+    if p.is_dir():
+        p = p / "results.json"
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise EvaluationError(f"{p}: missing; expected a psg-eval output folder or its results.json") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise EvaluationError(f"{p}: cannot read ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise EvaluationError(f"{p}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(data, dict):
+        raise EvaluationError(f"{p}: not a psg-eval results file (expected a JSON object)")
+    return EvalResults.from_dict(data, str(p))
+
+
+def results_frame(results: EvalResults) -> Any:
+    """Long table: one row per (table, method, metric) with role, mean, std, ci_low, ci_high, n, method, unit."""
+    import pandas as pd
+
+    recs = []
+    for t in results.tables:
+        for r in t.rows:
+            for m in t.metrics:
+                s = r.values.get(m.key)
+                if s is None:
+                    continue
+                recs.append({"table": t.name, "method": r.method, "role": r.role, "metric": m.key, "mean": s.mean,
+                             "std": s.std, "ci_low": s.ci_low, "ci_high": s.ci_high, "n": s.n,
+                             "interval": s.method, "unit": s.unit,
+                             "pct_of_ceiling": r.pct_of_ceiling if m.key == t.primary else math.nan})
+    return pd.DataFrame.from_records(recs, columns=["table", "method", "role", "metric", "mean", "std", "ci_low",
+                                                    "ci_high", "n", "interval", "unit", "pct_of_ceiling"])
