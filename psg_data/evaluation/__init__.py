@@ -14,6 +14,8 @@
 - One versioned results schema for every task: :class:`EvalResults` (tables of :class:`ResultRow`),
   :func:`save_results` / :func:`load_results` (what ``psg-eval compare`` and notebooks read),
   one table renderer (rich): :func:`render_table`, :func:`format_results`, :func:`print_results`.
+- Navigation and doors: :func:`score_records` / :func:`summarise_navigation` (per-query terms, bootstrap
+  over queries), :func:`navigation_results`, :func:`door_results`, :func:`plot_delta_sweep`.
 - Persistence reports: :func:`persistence_results`, :func:`write_persistence_results`, the plots
   :func:`plot_beliefs`, :func:`plot_metric_bars`, :func:`plot_horizon`.
 
@@ -79,6 +81,14 @@ from psg_data.evaluation._results import (
     save_results,
 )
 from psg_data.evaluation._tables import format_compare, format_results, format_table, print_results, render_table
+from psg_data.evaluation._navigation_scores import query_terms, score_records, summarise_navigation
+from psg_data.evaluation._navigation_report import (
+    choose_map_query,
+    navigation_results,
+    plot_delta_sweep,
+    write_navigation_results,
+)
+from psg_data.evaluation._door_report import door_results, summarise_doors
 from psg_data.evaluation._windows import (
     DailyWindows,
     dataset_cadence_s,
@@ -103,4 +113,6 @@ __all__ = [
     "Reference", "PAPER_METHODS", "persistence_references", "navigation_references", "door_references",
     "SCHEMA_VERSION", "EvalResults", "MetricInfo", "ResultRow", "ResultTable", "load_results", "save_results",
     "results_frame", "render_table", "format_table", "format_results", "print_results", "format_compare",
+    "query_terms", "score_records", "summarise_navigation", "navigation_results", "write_navigation_results",
+    "choose_map_query", "plot_delta_sweep", "door_results", "summarise_doors",
 ]

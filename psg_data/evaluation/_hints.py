@@ -60,7 +60,7 @@ def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
 
 
 NEEDS: dict[str, tuple[tuple[str, ...], str]] = {
-    "process_oracle": (("dataset", "model"), "the stored generator model of a synthetic dataset (psg-data synth, "
+    "process_oracle": (("dataset", "model"), "a synthetic dataset with its stored generator model (psg-data synth, "
                                              "generator steps-v2)"),
     "perpetua_star_schedule": (("schedules",), "schedules in the LLM output format (the persistence benchmark "
                                                "and psg-data synth datasets provide them)"),

@@ -182,7 +182,7 @@ def save_results(results: EvalResults, out_dir: str | Path) -> dict[str, Path]:
     paths = {"json": out / "results.json", "summary": out / "summary.csv", "table": out / "table.txt"}
     paths["json"].write_text(json.dumps(results.to_dict(), indent=1, allow_nan=False) + "\n", encoding="utf-8")
     results_frame(results).to_csv(paths["summary"], index=False)
-    paths["table"].write_text(format_results(results, width=200) + "\n", encoding="utf-8")
+    paths["table"].write_text(format_results(results) + "\n", encoding="utf-8")
     return paths
 
 

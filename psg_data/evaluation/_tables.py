@@ -61,15 +61,16 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
     """A ``rich.table.Table`` of ``table`` (``run``: an extra first column, for ``compare``)."""
     from rich import box
     from rich.table import Table
+    from rich.text import Text
 
-    t = Table(title=table.title if show_title else None, box=box.SIMPLE_HEAD, title_justify="left",
+    t = Table(title=Text(table.title) if show_title else None, box=box.SIMPLE_HEAD, title_justify="left",
               show_edge=False, pad_edge=False)
     if run is not None:
         t.add_column("run")
     t.add_column("Method", no_wrap=True)
     t.add_column("ref", style="dim")
     for h in _headers(table):
-        t.add_column(h, justify="right", no_wrap=True)
+        t.add_column(Text(h), justify="right", no_wrap=True)
     if table.primary is not None:
         t.add_column(f"% of ceiling\n({table.metric(table.primary).label})", justify="right")
     for c in table.count_columns:
@@ -90,7 +91,7 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
                          else f"{r.pct_of_ceiling:.0f} %")
         cells += [str(r.counts.get(c, "-")) for c in table.count_columns]
         last_ref = r.role != "method" and (i + 1 == len(rows) or rows[i + 1].role == "method")
-        t.add_row(*cells, end_section=last_ref)
+        t.add_row(*(Text(c) for c in cells), end_section=last_ref)
     return t
 
 
@@ -101,7 +102,11 @@ def _console(file: Any, width: int | None, plain: bool) -> Any:
                    force_terminal=False if plain else None, soft_wrap=False, highlight=False, emoji=False)
 
 
-def format_table(table: ResultTable, *, width: int | None = 200, notes: bool = True) -> str:
+WIDE = 1000
+"""Console width of plain-text renders: tables take their natural width and never wrap."""
+
+
+def format_table(table: ResultTable, *, width: int | None = WIDE, notes: bool = True) -> str:
     """Plain text of one table (and its notes): what ``table.txt`` holds."""
     buf = io.StringIO()
     con = _console(buf, width, True)
@@ -113,7 +118,7 @@ def format_table(table: ResultTable, *, width: int | None = 200, notes: bool = T
     return "\n".join(lines)
 
 
-def format_results(results: EvalResults, *, width: int | None = 200) -> str:
+def format_results(results: EvalResults, *, width: int | None = WIDE) -> str:
     """Plain text of every table of a run, with their notes."""
     return "\n\n".join(format_table(t, width=width) for t in results.tables)
 
@@ -123,7 +128,7 @@ def print_results(results: EvalResults, *, file: Any = None) -> None:
     terminal, plain text (wide enough not to wrap) when redirected."""
     out = file if file is not None else sys.stdout
     is_tty = hasattr(out, "isatty") and out.isatty()
-    con = _console(out, None if is_tty else 200, not is_tty)
+    con = _console(out, None if is_tty else WIDE, not is_tty)
     for k, t in enumerate(results.tables):
         if k:
             con.print()
@@ -132,7 +137,7 @@ def print_results(results: EvalResults, *, file: Any = None) -> None:
             con.print(line, markup=False, style="dim" if is_tty else None, overflow="ignore", crop=False)
 
 
-def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | None = 200) -> str:
+def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | None = WIDE) -> str:
     """``psg-eval compare``: per task and table name, every run's rows in one table (same renderer)."""
     by_key: dict[tuple[str, str], list[tuple[str, ResultTable, EvalResults]]] = {}
     for run, res in items:
@@ -147,16 +152,19 @@ def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | Non
         con = _console(buf, width, True)
         from rich import box
         from rich.table import Table
+        from rich.text import Text
 
-        t = Table(title=merged.title, box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+        t = Table(title=Text(merged.title), box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
         for c in ("run", "Method", "ref", "setting", *(_headers(merged)), "±"):
-            t.add_column(c, justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right", no_wrap=True)
+            t.add_column(Text(c), justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right",
+                         no_wrap=True)
         for run, table, res in runs:
             for r in _ordered(table.rows):
                 iv = next((s for s in r.values.values()), None)
                 what = f"{iv.method} over {iv.n} {iv.unit}" if iv is not None and iv.method != "none" else "-"
-                t.add_row(run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
-                          *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], what)
+                cells = [run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
+                         *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], what]
+                t.add_row(*(Text(c) for c in cells))
         con.print(t)
         blocks.append("\n".join(ln.rstrip() for ln in buf.getvalue().rstrip().splitlines()))
     return "\n\n".join(blocks)

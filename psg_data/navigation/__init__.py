@@ -19,7 +19,9 @@
   adaptive belief updates, door discovery).
 - Harness (:mod:`._runner`): :func:`run_navigation` (a :class:`NavigationOptions`) ->
   :class:`NavigationResult` (per-query records and the paper-shaped tables, simulation or
-  real-world layout), baselines 'oracle' and 'last_seen_map', per-method door beliefs.
+  real-world layout), baselines 'oracle', 'last_seen_map' and 'random_receptacle', per-method door
+  beliefs, a delta sweep; scoring in :mod:`psg_data.evaluation._navigation_scores`, tables and
+  files in :mod:`psg_data.evaluation`.
 - Plots (:mod:`._plots`): :func:`plot_query`.
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
@@ -33,7 +35,14 @@
 from __future__ import annotations
 
 from psg_data.navigation._agent import OUTCOMES, SETTINGS, AgentConfig, Episode, episode_record, run_episode
-from psg_data.navigation._baselines import LastSeenFilter, OracleFilter, last_seen_filters, oracle_filters
+from psg_data.navigation._baselines import (
+    LastSeenFilter,
+    OracleFilter,
+    RandomFilter,
+    last_seen_filters,
+    oracle_filters,
+    random_filters,
+)
 from psg_data.navigation._door_dataset import (
     DOOR_MODE_LABELS,
     DoorTaskOptions,
@@ -147,6 +156,8 @@ __all__ = [
     "OracleFilter",
     "last_seen_filters",
     "oracle_filters",
+    "RandomFilter",
+    "random_filters",
     "AgentConfig",
     "Episode",
     "run_episode",

@@ -6,6 +6,10 @@
   belief with the new observation (a map that is refreshed by what the robot sees).
 - ``oracle`` (perfect knowledge): belief = ground truth at the query time, with an edge to every
   receptacle of the environment; updates are ignored.
+- ``random_receptacle`` (chance): on the object's known edges (the receptacles it was seen on), a
+  belief drawn uniformly in [0, 1] per edge and query time (seeded, the same draw for the same edge
+  and time in any process): the agent visits the known receptacles in a random order and aborts
+  when every draw falls below delta; updates are ignored.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
 
-__all__ = ["LastSeenFilter", "OracleFilter", "last_seen_filters", "oracle_filters"]
+__all__ = ["LastSeenFilter", "OracleFilter", "RandomFilter", "last_seen_filters", "oracle_filters", "random_filters"]
 
 
 class _Clock:
@@ -84,6 +88,32 @@ class OracleFilter(_Clock):
 
     def get_state(self) -> dict[str, Any]:
         return {"estimator": "oracle", "edge": list(self.edge), "last_t_s": self._last}
+
+
+class RandomFilter(_Clock):
+    """Belief = a uniform draw per (edge, time), deterministic for ``seed`` (chance)."""
+
+    def __init__(self, edge: EdgeKey, seed: int = 0) -> None:
+        import zlib
+
+        super().__init__(edge)
+        self._key = (int(seed), zlib.crc32(f"{edge[0]}\x00{edge[1]}".encode()))
+
+    def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None:
+        self._advance(np.asarray(t_s, dtype=np.float64).reshape(-1))
+
+    def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        t = np.asarray(t_s, dtype=np.float64)
+        flat = [float(np.random.default_rng([*self._key, int(round(x * 1000))]).random()) for x in t.reshape(-1)]
+        return np.asarray(flat, dtype=np.float64).reshape(t.shape)
+
+    def get_state(self) -> dict[str, Any]:
+        return {"estimator": "random_receptacle", "edge": list(self.edge), "last_t_s": self._last}
+
+
+def random_filters(streams: list[EdgeStream], seed: int = 0) -> dict[EdgeKey, RandomFilter]:
+    """A :class:`RandomFilter` on every stream's edge."""
+    return {s.edge: RandomFilter(s.edge, seed) for s in streams}
 
 
 def last_seen_filters(streams: list[EdgeStream]) -> dict[EdgeKey, LastSeenFilter]:

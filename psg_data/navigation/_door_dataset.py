@@ -5,19 +5,20 @@ into a :class:`~psg_data.navigation.DoorWorld`:
 
 - grid: :func:`~psg_data.navigation.grid_from_dataset` (room polygons, or the fused depth with
   ``grid_source="scans"``), door cells from the ``doors`` table;
-- truth: the ``door_states`` table, a step function between scans (state 'unknown' counts open);
+- truth: a synthetic lab's physical door states at the query time (its generator), else the
+  ``door_states`` table, a step function between scans (state 'unknown' counts open);
 - training streams: the ``(door_id, 'open')`` observations of a label source on the map scans
   (:func:`~psg_data.navigation.source_observations`: ``gt`` / ``noisy:P`` from the door states,
   ``privileged`` and ``observed`` from the labels table, ``detections:FILE`` from ``observed``);
 - start cells: per room, the free cells inside its floor polygon (free with every door closed, in
   the main free component); goals: per room, its receptacles with a non-empty approach set;
-- query hours: the local hours the recordings cover (robot operating hours).
+- query hours: the dataset's scoring windows (:func:`psg_data.evaluation.dataset_windows`: the
+  lab's 9:00-17:00, else the local hours the recordings cover).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,18 +38,6 @@ __all__ = ["door_world_from_dataset", "DoorTaskOptions", "DoorTaskResult", "run_
            "walk_summary"]
 
 log = logging.getLogger(__name__)
-
-
-def _operating_hours(ds: Any, timezone: str) -> tuple[float, float]:
-    """Local hours [first scan start, last scan end) over all scans, whole hours."""
-    import pandas as pd
-
-    scans = ds.df("scans")
-    start = pd.to_datetime(scans["start_stamp_ns"], utc=True).dt.tz_convert(timezone)
-    end = pd.to_datetime(scans["end_stamp_ns"], utc=True).dt.tz_convert(timezone)
-    lo = float((start.dt.hour + start.dt.minute / 60.0).min())
-    hi = float((end.dt.hour + end.dt.minute / 60.0 + end.dt.second / 3600.0).max())
-    return float(math.floor(lo)), float(min(24.0, math.ceil(hi) if hi > lo else lo + 1.0))
 
 
 def door_world_from_dataset(dataset: Any, *, labels: str = "gt", label_seed: int = 0, grid_source: str = "geometry",
@@ -100,9 +89,19 @@ def door_world_from_dataset(dataset: Any, *, labels: str = "gt", label_seed: int
         raise EvaluationError(f"{ds.root}: the door task needs start cells and goal receptacles in at least two rooms "
                               "(rooms with floor polygons and receptacles)")
     tz = ds.info.timezone or "UTC"
-    return DoorWorld(grid, tl.doors_at, list(src.door_streams), tl.t_map_s, tl.t_end_s, tz, starts, goals,
-                     name=f"{ds.info.name or ds.root.name} (doors from {labels})", hours=_operating_hours(ds, tz),
-                     info={"dataset": str(ds.root), "labels": labels, **src.info, "map_scans": len(tl.map_ids)},
+    from psg_data.evaluation._windows import dataset_windows
+
+    windows = dataset_windows(ds)
+    doors_at, truth = tl.doors_at, "latest scan row"
+    if ds.info.extra.get("generator") == "psg_data.synth":
+        from psg_data.navigation._env import schedule_truth
+        from psg_data.synth import LabModel
+
+        doors_at, truth = schedule_truth(LabModel.from_dataset(ds).schedule)[1], "physical state (generator)"
+    return DoorWorld(grid, doors_at, list(src.door_streams), tl.t_map_s, tl.t_end_s, tz, starts, goals,
+                     name=f"{ds.info.name or ds.root.name} (doors from {labels})", hours=windows.hours[0],
+                     info={"dataset": str(ds.root), "labels": labels, **src.info, "map_scans": len(tl.map_ids),
+                           "truth": truth, "windows": windows.to_dict()},
                      _cache=cache)
 
 
@@ -122,6 +121,7 @@ class DoorTaskOptions:
             doors open and the true doors (objects behind predicted-closed doors).
         setting: agent setting of the object runs.
         grid_source, resolution_m, robot_radius_m: the occupancy grid.
+        windows: ``auto`` (the dataset's scoring windows) or local hours (``9-16``): door query times.
     """
 
     labels: str = "gt"
@@ -135,6 +135,7 @@ class DoorTaskOptions:
     grid_source: str = "geometry"
     resolution_m: float = 0.05
     robot_radius_m: float = 0.25
+    windows: str = "auto"
 
     def __post_init__(self) -> None:
         if not self.seeds:
@@ -169,24 +170,16 @@ class DoorTaskResult:
     options: DoorTaskOptions
 
     def format_table(self) -> str:
-        """The door table (percent for rates, metres for distances)."""
-        shown = self.summary.copy()
-        for c in ("blocked_rate", "SR", "SPL"):
-            shown[c] = (100 * shown[c]).round(1)
-        for c in ("mean_extra_distance_m", "wasted_m"):
-            shown[c] = shown[c].round(2)
-        cols = {"blocked_rate": "blocked %", "mean_extra_distance_m": "extra m", "SR": "SR %", "SPL": "SPL %",
-                "n_reachable": "reachable", "declined": "declined", "wasted_m": "wasted m"}
-        text = shown[["estimator", "queries", "blocked_first_plans", *cols]].rename(columns=cols).to_string(index=False)
-        o = self.options
-        return text + (f"\nblocked %: first plans through a door closed at the query time; SR / SPL over the reachable "
-                       f"goals; declined: did not set off (the predicted doors leave no route; no_path={o.no_path}); "
-                       f"wasted m: mean walked towards goals no route reached; {len(o.seeds)} seed(s), door streams "
-                       f"from {o.labels} ({self.world.info.get('doors', {}).get('from', '?')})")
+        """The door table and the objects table as plain text (:func:`psg_data.evaluation.door_results`)."""
+        from psg_data.evaluation._door_report import door_results
+        from psg_data.evaluation._tables import format_results
+
+        return format_results(door_results(self))
 
 
 def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: DoorTaskOptions | None = None, *,
-                  settings: Mapping[str, Mapping[str, Any]] | None = None) -> DoorTaskResult:
+                  settings: Mapping[str, Mapping[str, Any]] | None = None,
+                  objects_for: list[str] | None = None) -> DoorTaskResult:
     """The door task on a dataset: door queries per seed, and objects behind predicted-closed doors.
 
     Args:
@@ -194,6 +187,7 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
         estimators: ``(label, registry name or estimator)`` pairs.
         options: settings (default :class:`DoorTaskOptions`).
         settings: label -> estimator settings.
+        objects_for: labels whose object runs are made (default: every estimator).
     """
     import pandas as pd
 
@@ -206,6 +200,10 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
         dataset = open_dataset(dataset)
     world = door_world_from_dataset(dataset, labels=o.labels, label_seed=o.label_seed, grid_source=o.grid_source,
                                     resolution_m=o.resolution_m, robot_radius_m=o.robot_radius_m)
+    if o.windows != "auto":
+        from psg_data.evaluation._windows import parse_windows
+
+        world.hours = parse_windows(o.windows, world.timezone).hours[0]
     tables, records, first = [], [], None
     for seed in o.seeds:
         res = run_door_navigation(world, estimators, n_queries=o.n_queries, seed=seed, threshold=o.threshold,
@@ -215,15 +213,35 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
         if first is None:
             first = res
     per_seed = pd.concat(tables, ignore_index=True)
+    recs = pd.concat(records, ignore_index=True)
+    summary = _door_summary(per_seed, recs, len(o.seeds))
+    obj_est = [e for e in estimators if objects_for is None or e[0] in objects_for]
+    objects = _objects_behind_doors(dataset, obj_est, o, settings) if o.objects and obj_est else None
+    return DoorTaskResult(summary, per_seed, recs, world, first, objects, o)
+
+
+def _door_summary(per_seed: Any, records: Any, n_seeds: int) -> Any:
+    """One row per method: the metrics pooled over the seeds' queries (:mod:`psg_data.evaluation._door_report`),
+    ``*_std`` across seeds, the summed counts."""
+    import pandas as pd
+
+    from psg_data.evaluation._door_report import summarise_doors
+
     cols = ["blocked_rate", "mean_extra_distance_m", "SR", "SPL", "wasted_m"]
     g = per_seed.groupby("estimator", sort=False)
-    summary = g[cols].mean().join(g[cols].std(ddof=1).fillna(0.0).add_suffix("_std")).reset_index()
-    for k, c in enumerate(("queries", "blocked_first_plans", "n_reachable", "declined", "declined_reachable")):
-        summary.insert(1 + k, c, g[c].sum().to_numpy())
-    summary["seeds"] = len(o.seeds)
-    summary["unseen_doors"] = g["unseen_doors"].first().to_numpy()
-    objects = _objects_behind_doors(dataset, estimators, o, settings) if o.objects else None
-    return DoorTaskResult(summary, per_seed, pd.concat(records, ignore_index=True), world, first, objects, o)
+    names = list(g.groups)
+    scores = summarise_doors(records, names)
+    rows = []
+    for n in names:
+        row: dict[str, Any] = {"estimator": n}
+        for c in ("queries", "blocked_first_plans", "n_reachable", "declined", "declined_reachable"):
+            row[c] = int(g.get_group(n)[c].sum())
+        for c in cols:
+            row[c], row[f"{c}_std"] = scores[n][c].mean, scores[n][c].std
+            row[f"{c}_ci_low"], row[f"{c}_ci_high"] = scores[n][c].ci_low, scores[n][c].ci_high
+        row["seeds"], row["unseen_doors"] = n_seeds, g.get_group(n)["unseen_doors"].iloc[0]
+        rows.append(row)
+    return pd.DataFrame(rows)
 
 
 DOOR_MODE_LABELS = {"all_open": "doors all open", "predicted": "doors predicted", "truth": "doors known"}

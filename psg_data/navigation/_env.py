@@ -15,7 +15,10 @@ Edges: for every object, the receptacles it was seen on during the mapping scans
 each of those edges, ``y = 1`` if the object was on that receptacle and ``y = 0`` otherwise, stamped
 at the scan start; other sources observe what they saw. The door observations of the same source
 (``door_streams``) drive predicted door states, and its sighting model (``observation``) what the
-agent sees on the way. The ground truth (``gt_at`` / ``doors_at``) is always the schedule.
+agent sees on the way. The ground truth (``gt_at`` / ``doors_at``) is always the schedule: the
+physical state at the query time for a synthetic lab (its generator knows the state at any instant),
+else the ``schedule`` / ``door_states`` rows of the latest scan (all a recording knows). Queries are
+drawn inside the dataset's scoring windows (``windows``, its operating hours).
 """
 
 from __future__ import annotations
@@ -178,6 +181,9 @@ class NavigationEnv:
         labels: the label source of ``map_streams`` / ``door_streams``.
         start_xy: world (x, y) of the recordings' first camera pose, metres (the robot's dock;
             the fixed start of the real-world protocol), or None.
+        windows: the scoring windows (a :class:`~psg_data.evaluation.DailyWindows`; queries are
+            drawn inside them), or None.
+        truth: where ``gt_at`` comes from (``physical state (generator)`` or ``latest scan row``).
     """
 
     name: str
@@ -198,6 +204,8 @@ class NavigationEnv:
     observation: ObservationModel = field(default_factory=ObservationModel)
     labels: str = "gt"
     start_xy: tuple[float, float] | None = None
+    windows: Any = None
+    truth: str = "latest scan row"
 
     @property
     def edges(self) -> list[EdgeKey]:
@@ -250,6 +258,14 @@ class NavigationEnv:
             dataset.df("schedule")["object_id"].unique())
         map_ids, last = tl.map_ids, tl.map_ids[-1]
         src = source_observations(dataset, labels, map_ids, seed=label_seed)
+        from psg_data.evaluation._windows import dataset_windows
+
+        truth = "given" if gt_at is not None else "latest scan row"
+        if gt_at is None and doors_at is None and dataset.info.extra.get("generator") == "psg_data.synth":
+            from psg_data.synth import LabModel
+
+            gt_at, doors_at = schedule_truth(LabModel.from_dataset(dataset).schedule)
+            truth = "physical state (generator)"
         return cls(
             name=name or dataset.info.name or str(dataset.root.name),
             grid=grid,
@@ -269,6 +285,8 @@ class NavigationEnv:
             observation=src.observation,
             labels=labels,
             start_xy=_first_pose_xy(dataset, tl.ids[0]),
+            windows=dataset_windows(dataset),
+            truth=truth,
         )
 
     @classmethod
@@ -285,18 +303,7 @@ class NavigationEnv:
             raise EvaluationError("synthetic lab: no training scans")
         sched = lab.schedule
         objects = list(L.object_ids)
-        cache: dict[int, dict[str, str | None]] = {}
-
-        def _gt(o: str, t_s: float) -> str | None:
-            ns = int(round(t_s * 1e9))
-            if ns not in cache:
-                if len(cache) > 4096:
-                    cache.clear()
-                cache[ns] = sched.objects_at(ns)
-            return cache[ns].get(o)
-
-        def _doors(t_s: float) -> dict[str, bool]:
-            return dict(sched.doors_at(int(round(t_s * 1e9))))
+        _gt, _doors = schedule_truth(sched)
 
         times = [p.start_ns / 1e9 for p in plans]
         streams = streams_from_states(times, [p.state.objects for p in plans], objects)
@@ -322,6 +329,8 @@ class NavigationEnv:
             extra={"source": "synth", "seed": lab.config.seed, "roles": dict(sched.roles)},
             door_streams=door_streams,
             start_xy=(float(first[0, 3]), float(first[1, 3])),
+            windows=_lab_windows(lab),
+            truth="physical state (generator)",
         )
 
     def start_cell(self) -> tuple[int, int]:
@@ -349,6 +358,31 @@ class NavigationEnv:
             return cls.from_lab(obj, **{k: v for k, v in kwargs.items()
                                         if k in ("grid", "resolution_m", "robot_radius_m", "name")})
         return cls.from_dataset(obj, **kwargs)
+
+
+def schedule_truth(sched: Any) -> tuple[Callable[[str, float], str | None], Callable[[float], dict[str, bool]]]:
+    """``gt_at`` / ``doors_at`` from a synthetic lab's schedule: the physical state at any instant."""
+    cache: dict[int, dict[str, str | None]] = {}
+
+    def gt_at(o: str, t_s: float) -> str | None:
+        ns = int(round(t_s * 1e9))
+        if ns not in cache:
+            if len(cache) > 4096:
+                cache.clear()
+            cache[ns] = sched.objects_at(ns)
+        return cache[ns].get(o)
+
+    def doors_at(t_s: float) -> dict[str, bool]:
+        return dict(sched.doors_at(int(round(t_s * 1e9))))
+
+    return gt_at, doors_at
+
+
+def _lab_windows(lab: Any) -> Any:
+    from psg_data.evaluation._windows import DailyWindows, _synth_hours
+
+    hours = _synth_hours(lab.config.to_extra())
+    return DailyWindows((hours,), lab.config.timezone, source="the lab's scan steps") if hours else None
 
 
 def _first_pose_xy(dataset: Any, scan_id: str) -> tuple[float, float] | None:

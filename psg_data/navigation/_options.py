@@ -16,6 +16,10 @@ run can be repeated. :meth:`NavigationOptions.preset` starts from a protocol:
     visible within 1 m of the final position; doors as the method predicts them (each method's
     estimator trained on the door streams of the label source).
 
+Query times (``windows``): ``auto`` (default) draws them inside the dataset's scoring windows (its
+operating hours: the lab's 9:00-17:00; a converted dataset's scan hours), ``none`` anywhere after the
+map, or local hours such as ``9-17``.
+
 Door beliefs (``door_belief``), per method: ``truth`` (the true states at the query time),
 ``predicted`` (registry estimators: the same estimator fitted on the door streams, open iff
 P(open) >= 0.5; ``last_seen_map``: the last door observation; ``oracle``: the truth),
@@ -64,6 +68,9 @@ class NavigationOptions:
         reach_m: success radius, metres.
         resolution_m, robot_radius_m, grid_source: occupancy grid (``geometry`` or ``scans``).
         keep_trails: keep the walked paths in memory (plots).
+        windows: ``auto``, ``none`` or local hours (``9-17``): where query times are drawn.
+        delta_sweep: more deltas to run every method with (the sweep table and plot); the main
+            table uses ``delta``.
     """
 
     protocol: str = "sim"
@@ -87,6 +94,8 @@ class NavigationOptions:
     robot_radius_m: float = 0.25
     grid_source: str = "geometry"
     keep_trails: bool = True
+    windows: str = "auto"
+    delta_sweep: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if self.start not in START_MODES:
@@ -108,6 +117,15 @@ class NavigationOptions:
         if self.n_queries < 1:
             raise EvaluationError(f"n_queries must be >= 1, got {self.n_queries}")
         object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        sweep = tuple(float(d) for d in self.delta_sweep)
+        if any(not 0.0 <= d <= 1.0 for d in (*sweep, float(self.delta))):
+            raise EvaluationError(f"delta {self.delta} / delta_sweep {sweep}: expected beliefs in [0, 1]")
+        object.__setattr__(self, "delta_sweep", tuple(d for d in dict.fromkeys(sweep) if d != float(self.delta)))
+
+    @property
+    def deltas(self) -> tuple[float, ...]:
+        """``delta`` first, then the sweep's other values."""
+        return (float(self.delta), *self.delta_sweep)
 
     @classmethod
     def preset(cls, protocol: str = "sim", **overrides: Any) -> NavigationOptions:
@@ -131,12 +149,15 @@ class NavigationOptions:
         tag = f"_n{self.n_queries}{quota}"
         tag += "_fixedstart" if self.start == "fixed" else ""
         tag += "_reachable" if self.reachable_only else ""
+        tag += "" if self.windows == "auto" else ("_anytime" if self.windows == "none" else
+                                                   "_w" + self.windows.replace(":", "").replace(",", "_"))
         return tag
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["seeds"] = list(self.seeds)
         d["quotas"] = dict(self.quotas) if self.quotas else None
+        d["delta_sweep"] = list(self.delta_sweep)
         return d
 
 

@@ -3,7 +3,8 @@ estimator is scored on the same set.
 
 Sampling (per query, from ``numpy.random.default_rng([seed, 8801])``): a query time uniform in
 ``(t_map, min(t_map + horizon, t_end)]`` (horizon one week by default, the paper's "up to one week
-ahead of the last map update"), a target object uniform over the environment's objects, and a
+ahead of the last map update") restricted to the scoring windows when given (the dataset's operating
+hours: a robot is not asked at night), a target object uniform over the environment's objects, and a
 start cell uniform over the cells that are free with *every* door closed (so the start is free
 under any door configuration and never inside a doorway) and lie in the largest 8-connected
 component of the free space with every door open (no starts in isolated pockets). With a fixed
@@ -92,7 +93,7 @@ def start_cells(grid: OccupancyGrid, name: str = "grid") -> np.ndarray:
 def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, horizon_s: float = WEEK_S,
                  objects: list[str] | None = None, reachable_only: bool = False, reach_m: float = 1.0,
                  max_tries: int = 100, quotas: Mapping[str, int] | None = None,
-                 start_cell: tuple[int, int] | None = None) -> list[Query]:
+                 start_cell: tuple[int, int] | None = None, windows: Any = None) -> list[Query]:
     """Sample ``n_queries`` queries (deterministic for ``env`` and ``seed``).
 
     Args:
@@ -110,6 +111,8 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
             5 absent): draws are kept while their category is not full (and, with
             ``reachable_only``, their present target is reachable), in draw order.
         start_cell: one start cell for every query (default: a random start cell per query).
+        windows: (K, 2) ``[start, end]`` UTC seconds: query times are drawn uniformly inside them
+            (None: anywhere in the window after the map).
 
     Raises:
         EvaluationError: no objects, no time window, no free start cell, or quotas that cannot be
@@ -123,6 +126,7 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
     if not t_hi > t_lo:
         raise EvaluationError(f"{env.name}: no ground truth after the last map update (t_end <= t_map)")
     rng = np.random.default_rng([int(seed), 8801])
+    when = _time_sampler(t_lo, t_hi, windows, env.name)
     cells = start_cells(env.grid, env.name)
     W = env.grid.shape[1]
     fixed = None if start_cell is None else int(start_cell[0]) * W + int(start_cell[1])
@@ -133,7 +137,7 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
         cache = PlanningCache(env.grid, reach_m=reach_m)
 
     def draw() -> tuple[float, str, int, str | None, dict[str, bool], str]:
-        t = float(t_hi - rng.uniform(0.0, 1.0) * (t_hi - t_lo))  # in (t_lo, t_hi]
+        t = when(float(rng.uniform(0.0, 1.0)))
         o = objs[int(rng.integers(len(objs)))]
         c = int(cells[int(rng.integers(cells.size))]) if fixed is None else fixed
         gt = env.gt_at(o, t)
@@ -175,6 +179,26 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
                 break
         out.append(query(q, d))
     return out
+
+
+def _time_sampler(t_lo: float, t_hi: float, windows: Any, name: str) -> Any:
+    """``u in [0, 1) -> t``: uniform in ``(t_lo, t_hi]``, or uniform over the windows' parts inside it."""
+    if windows is None:
+        return lambda u: float(t_hi - u * (t_hi - t_lo))
+    w = np.asarray(windows, dtype=np.float64).reshape(-1, 2)
+    w = np.column_stack([np.maximum(w[:, 0], t_lo), np.minimum(w[:, 1], t_hi)])
+    w = w[w[:, 1] > w[:, 0]]
+    if w.size == 0:
+        raise EvaluationError(f"{name}: no scoring-window time between the last map update and the end of the "
+                              "ground truth; check --windows")
+    cum = np.concatenate([[0.0], np.cumsum(w[:, 1] - w[:, 0])])
+
+    def at(u: float) -> float:
+        x = u * cum[-1]
+        k = min(int(np.searchsorted(cum, x, side="right")) - 1, len(w) - 1)
+        return float(w[k, 1] - (cum[k + 1] - x))  # in (start, end] of window k
+
+    return at
 
 
 def queries_to_frame(queries: list[Query]) -> Any:

@@ -1,27 +1,15 @@
-"""The navigation harness: every method on the same stored queries, scored like the paper's table.
+"""The navigation harness: every method on the same stored queries.
 
 :func:`run_navigation` builds (or takes) a :class:`NavigationEnv`, samples or loads one query set
-per seed, builds one filter per edge for every method, runs the agent and scores the episodes with
-:mod:`psg_data.metrics` (``success_rate``, ``spl``, ``abort_rate``, ``distance_travelled``,
-``summarize``).
+per seed (query times inside the dataset's scoring windows), builds one filter per edge for every
+method, runs the agent (for ``delta`` and every value of ``delta_sweep``) and scores the episodes
+with :mod:`psg_data.evaluation._navigation_scores` (the paper's table; metrics pooled over the
+query sets, bootstrap interval over queries). Built-in methods: ``oracle`` (the physical state at
+the query time), ``last_seen_map`` (the last map state) and ``random_receptacle`` (chance); any
+registry estimator, estimator object, filter mapping or callable otherwise.
 
-Table (the paper's "Predictive Navigation" layout), one row per method:
-
-- Static presence: SR, SPL over reachable targets that did not move since the last map update.
-- Dynamic presence: SR, SPL over reachable targets that moved.
-- Absence: AR (correct abort rate) and DIST (metres walked before terminating) over absent targets.
-- Overall: SR, SPL over reachable present targets plus absent targets. ``absent_in_overall``
-  chooses how absent targets count: ``"abort_is_success"`` (default: a correct abort is a success
-  with efficiency 1, whatever was walked), ``"abort_is_success_spl_path"`` (a correct abort is a
-  success; its SPL term is 1 only if the agent aborted without moving, else 0) or ``"exclude"``.
-
-Unreachable present targets (their receptacle cannot be reached from the start with the true door
-states, e.g. behind closed doors) are counted in ``n_unreachable`` and, by default
-(``unreachable="exclude"``), left out of SR and SPL; ``unreachable="failure"`` counts them as
-failures. No inf reaches the table; a category without queries has NaN mean and count 0.
-
-SR, SPL and AR are fractions in [0, 1] in the DataFrames (``format_table`` prints percent);
-``_mean`` / ``_std`` are across seeds (``std`` with ddof=1, 0 for a single seed).
+SR, SPL and AR are fractions in [0, 1] in the DataFrames; tables and files are written by
+:mod:`psg_data.evaluation` (:func:`~psg_data.evaluation.navigation_results`).
 """
 
 from __future__ import annotations
@@ -39,7 +27,8 @@ import numpy as np
 from psg_data.errors import EvaluationError, NotFittedError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey
 from psg_data.navigation._agent import AgentConfig, Episode, episode_record, run_episode
-from psg_data.navigation._baselines import last_seen_filters, oracle_filters
+from psg_data.evaluation._navigation_scores import ABSENT_RULES, METRICS, score_records, summarise_navigation
+from psg_data.navigation._baselines import last_seen_filters, oracle_filters, random_filters
 from psg_data.navigation._env import NavigationEnv
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, NavigationOptions
 from psg_data.navigation._planner import PlanningCache
@@ -50,10 +39,7 @@ __all__ = ["NavigationResult", "run_navigation", "build_filters", "score_records
 
 log = logging.getLogger(__name__)
 
-METRICS = ("static_sr", "static_spl", "dynamic_sr", "dynamic_spl", "absent_ar", "absent_dist_m",
-           "overall_sr", "overall_spl")
-ABSENT_RULES = ("abort_is_success", "abort_is_success_spl_path", "exclude")
-BUILTIN_METHODS = ("oracle", "last_seen_map")
+BUILTIN_METHODS = ("oracle", "last_seen_map", "random_receptacle")
 
 MethodSpec = Any
 """A registry name or 'oracle' / 'last_seen_map', a PersistenceEstimator (fitted or not), a
@@ -77,6 +63,8 @@ def build_filters(env: NavigationEnv, spec: MethodSpec, *, settings: Mapping[str
             return dict(oracle_filters(env.object_ids, sorted(env.receptacles), env.gt_at))
         if spec == "last_seen_map":
             return dict(last_seen_filters(env.map_streams))
+        if spec == "random_receptacle":
+            return dict(random_filters(env.map_streams, seed=int(dict(settings or {}).get("seed", 0))))
         from psg_data.estimators._registry import get_estimator
 
         spec = get_estimator(spec, **dict(settings or {}))
@@ -130,74 +118,23 @@ def door_belief_from_filters(filters: Mapping[EdgeKey, EdgeFilter]) -> Callable[
     return belief
 
 
-def _nan_if_empty(fn: Callable[[], float]) -> float:
-    try:
-        return float(fn())
-    except EvaluationError:
-        return float("nan")
-
-
-def score_records(df: Any, *, absent_in_overall: str = "abort_is_success", unreachable: str = "exclude"
-                  ) -> dict[str, float]:
-    """Table metrics of one method on one query set (see the module docstring).
-
-    Args:
-        df: per-query records of one (method, seed) (columns of :func:`episode_record`).
-        absent_in_overall: one of :data:`ABSENT_RULES`.
-        unreachable: 'exclude' or 'failure'.
-
-    Returns:
-        The :data:`METRICS` (NaN for an empty category) and the counts ``n_static``, ``n_dynamic``,
-        ``n_absent``, ``n_unreachable``, ``n_queries``.
-    """
-    from psg_data.metrics import abort_rate, distance_travelled, spl, success_rate
-
-    if absent_in_overall not in ABSENT_RULES:
-        raise EvaluationError(f"absent_in_overall: expected one of {ABSENT_RULES}, got {absent_in_overall!r}")
-    if unreachable not in ("exclude", "failure"):
-        raise EvaluationError(f"unreachable: expected 'exclude' or 'failure', got {unreachable!r}")
-    cat = df["category"].to_numpy()
-    reach = df["reachable"].to_numpy(bool)
-    succ = df["success"].to_numpy(bool)
-    abort = df["aborted"].to_numpy(bool)
-    p = df["path_m"].to_numpy(np.float64)
-    l_ = df["shortest_path_m"].to_numpy(np.float64)
-    present = cat != "absent"
-    scored = present & (reach if unreachable == "exclude" else True)
-    l_safe = np.where(np.isfinite(l_), l_, p)  # unreachable ones only enter as failures (S = 0)
-    out: dict[str, float] = {}
-    for c in ("static", "dynamic"):
-        m = scored & (cat == c)
-        out[f"{c}_sr"] = _nan_if_empty(lambda m=m: success_rate(succ[m]))
-        out[f"{c}_spl"] = _nan_if_empty(lambda m=m: spl(succ[m], l_safe[m], p[m]))
-    ab = cat == "absent"
-    out["absent_ar"] = _nan_if_empty(lambda: abort_rate(abort[ab]))
-    out["absent_dist_m"] = _nan_if_empty(lambda: distance_travelled(p[ab]))
-    sel = scored | (ab if absent_in_overall != "exclude" else False)
-    s_all = np.where(ab, abort, succ)
-    l_all = np.where(ab, p if absent_in_overall == "abort_is_success" else 0.0, l_safe)
-    out["overall_sr"] = _nan_if_empty(lambda: success_rate(s_all[sel]))
-    out["overall_spl"] = _nan_if_empty(lambda: spl(s_all[sel], l_all[sel], p[sel]))
-    out.update(n_static=int(np.sum(present & reach & (cat == "static"))),
-               n_dynamic=int(np.sum(present & reach & (cat == "dynamic"))), n_absent=int(np.sum(ab)),
-               n_unreachable=int(np.sum(present & ~reach)), n_queries=int(len(cat)))
-    return out
-
-
 @dataclass
 class NavigationResult:
     """Result of :func:`run_navigation`.
 
     Attributes:
-        records: per-query DataFrame (method, seed, query fields, outcome, success, path_m, ...).
-        per_seed: metrics per (method, seed).
-        summary: per method, ``<metric>_mean`` / ``<metric>_std`` across seeds and total counts.
+        records: per-query DataFrame (method, seed, delta, query fields, outcome, success, path_m, ...).
+        per_seed: metrics per (method, seed) at ``delta``.
+        summary: per method at ``delta``: ``<metric>_mean`` (pooled over the query sets),
+            ``<metric>_std`` (across them), ``<metric>_ci_low`` / ``_ci_high`` (bootstrap over
+            queries) and the summed counts.
         queries: seed -> the query set.
         config: run settings (JSON-able).
         timings_s: method -> seconds spent (filters + episodes).
         env, cache: the environment and planning cache (for plotting; not saved).
-        trails: (method, seed, query_id) -> flat cell indices walked.
+        trails: (method, seed, query_id) -> flat cell indices walked (at ``delta``).
         beliefs: (method, seed, query_id) -> receptacle beliefs at the query time.
+        sweep: per (method, delta) the summary of every delta run (``delta_sweep``; None without).
     """
 
     records: Any
@@ -210,75 +147,24 @@ class NavigationResult:
     cache: PlanningCache | None = field(default=None, repr=False)
     trails: dict[tuple[str, int, int], Any] = field(default_factory=dict, repr=False)
     beliefs: dict[tuple[str, int, int], dict[str, float]] = field(default_factory=dict, repr=False)
+    sweep: Any = None
 
-    def format_table(self, digits: int = 1, *, layout: str = "auto") -> str:
-        """Text table shaped like the paper's (percent for SR/SPL/AR, metres for DIST, mean ± std).
+    def format_table(self, *, layout: str = "auto", roles: Mapping[str, tuple[str, str]] | None = None) -> str:
+        """The paper-shaped table as plain text (:func:`psg_data.evaluation.navigation_results`, rendered):
+        ``layout`` ``sim`` (Table "Predictive Navigation"), ``real`` (Table "Real-World Navigation") or
+        ``auto`` (``real`` for the paper-real protocol)."""
+        from psg_data.evaluation._navigation_report import navigation_results
+        from psg_data.evaluation._tables import format_results
 
-        Args:
-            digits: decimals.
-            layout: ``sim`` (Table "Predictive Navigation": static / dynamic SR and SPL, absence AR
-                and DIST, overall SR and SPL), ``real`` (Table "Real-World Navigation": static SR,
-                dynamic SR, absent AR, overall SR) or ``auto`` (``real`` for the paper-real protocol).
-        """
-        s = self.summary
-        if layout == "auto":
-            layout = "real" if str(self.config.get("protocol", "")).startswith("paper-real") else "sim"
-        if layout not in ("sim", "real"):
-            raise EvaluationError(f"layout: expected 'sim', 'real' or 'auto', got {layout!r}")
+        return format_results(navigation_results(self, roles=roles, layout=layout))
 
-        def cell(row: Any, m: str) -> str:
-            mu, sd = row[f"{m}_mean"], row[f"{m}_std"]
-            if not np.isfinite(mu):
-                return "-"
-            k = 1.0 if m == "absent_dist_m" else 100.0
-            return f"{k * mu:.{digits}f} ± {k * sd:.{digits}f}"
+    def save(self, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,
+             info: Mapping[str, Any] | None = None) -> dict[str, Path]:
+        """Write records.parquet, per_seed.csv, summary.csv and the results schema (results.json,
+        table.txt) to ``out_dir``."""
+        from psg_data.evaluation._navigation_report import write_navigation_results
 
-        r0 = s.iloc[0] if len(s) else None
-        n = (lambda c: int(r0[c]) if r0 is not None else 0)
-        n_all = n("n_queries") - (n("n_unreachable") if self.config.get("unreachable") == "exclude" else 0)
-        if layout == "real":
-            metrics = ("static_sr", "dynamic_sr", "absent_ar", "overall_sr")
-            head = [f"Static ({n('n_static')})", f"Dynamic ({n('n_dynamic')})", f"Absent ({n('n_absent')})",
-                    f"Overall ({n_all})"]
-            cols = ["Estimator", "SR (%)", "SR (%)", "AR (%)", "SR (%)"]
-            spans = [(1,), (2,), (3,), (4,)]
-        else:
-            metrics = METRICS
-            head = [f"Static presence ({n('n_static')})", f"Dynamic presence ({n('n_dynamic')})",
-                    f"Absence ({n('n_absent')})", f"Overall ({n_all})"]
-            cols = ["Method", "SR (%)", "SPL (%)", "SR (%)", "SPL (%)", "AR (%)", "Dist (m)", "SR (%)", "SPL (%)"]
-            spans = [(1, 2), (3, 4), (5, 6), (7, 8)]
-        rows = [[str(r["method"])] + [cell(r, m) for m in metrics] for _, r in s.iterrows()]
-        w = [max(len(c), *(len(r[i]) for r in rows)) if rows else len(c) for i, c in enumerate(cols)]
-        for h, sp in zip(head, spans):  # widen the last column of a group to fit its header
-            short = len(h) - (sum(w[i] for i in sp) + 3 * (len(sp) - 1))
-            if short > 0:
-                w[sp[-1]] += short
-        line = lambda vals: " | ".join(v.ljust(w[i]) for i, v in enumerate(vals))  # noqa: E731
-        groups = f"{'':{w[0]}} | " + " | ".join(f"{h:^{sum(w[i] for i in sp) + 3 * (len(sp) - 1)}}"
-                                                for h, sp in zip(head, spans))
-        sep = "-+-".join("-" * x for x in w)
-        c = self.config
-        extra = (f"\nunreachable targets: {n('n_unreachable')} (rule: {c.get('unreachable')}); seeds: {c.get('seeds')}; "
-                 f"setting: {c.get('setting')}; protocol: {c.get('protocol')}; labels: {c.get('labels', 'gt')}; "
-                 f"doors: {c.get('door_belief')}")
-        return "\n".join([groups.rstrip(), line(cols), sep, *(line(r) for r in rows)]) + extra
-
-    def save(self, out_dir: str | Path) -> dict[str, Path]:
-        """Write records.parquet, per_seed.csv, summary.csv, summary.json and table.txt to ``out_dir``."""
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        paths = {"records": out / "records.parquet", "per_seed": out / "per_seed.csv",
-                 "summary": out / "summary.csv", "json": out / "summary.json", "table": out / "table.txt"}
-        self.records.to_parquet(paths["records"], index=False)
-        self.per_seed.to_csv(paths["per_seed"], index=False)
-        self.summary.to_csv(paths["summary"], index=False)
-        summ = [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
-                for r in self.summary.to_dict("records")]
-        paths["json"].write_text(json.dumps({"config": self.config, "summary": summ, "timings_s": self.timings_s},
-                                            indent=1, default=str))
-        paths["table"].write_text(self.format_table() + "\n")
-        return paths
+        return write_navigation_results(self, out_dir, roles=roles, info=info)
 
     def plot(self, method: str, query_id: int, out_path: str | Path | None = None, *, seed: int | None = None) -> Any:
         """Top-down map of one episode, a ``matplotlib.figure.Figure`` written as a PNG at
@@ -361,10 +247,24 @@ def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: Naviga
     return hook
 
 
+def _query_windows(env: NavigationEnv, options: NavigationOptions) -> Any:
+    """(K, 2) UTC seconds of the scoring windows after the map, or None (``windows="none"`` / unknown)."""
+    if options.windows == "none":
+        return None
+    if options.windows == "auto":
+        w = env.windows
+    else:
+        from psg_data.evaluation._windows import parse_windows
+
+        w = parse_windows(options.windows, env.timezone)
+    return None if w is None else w.intervals(env.t_map_s, env.t_end_s)
+
+
 def _query_sets(env: NavigationEnv, options: NavigationOptions, out_dir: str | Path | None) -> dict[int, list[Query]]:
     """One query set per seed: loaded from ``out_dir/queries`` when stored there, else drawn (and stored)."""
     qsets: dict[int, list[Query]] = {}
     start = env.start_cell() if options.start == "fixed" else None
+    windows = _query_windows(env, options)
     for sd in options.seeds:
         qpath = Path(out_dir) / "queries" / f"{env.name}_seed{sd}{options.query_tag}.parquet" if out_dir else None
         if qpath is not None and qpath.is_file():
@@ -373,7 +273,8 @@ def _query_sets(env: NavigationEnv, options: NavigationOptions, out_dir: str | P
             continue
         qsets[sd] = make_queries(env, options.n_queries, seed=sd, horizon_s=options.horizon_s,
                                  reachable_only=options.reachable_only, reach_m=options.reach_m,
-                                 quotas=dict(options.quotas) if options.quotas else None, start_cell=start)
+                                 quotas=dict(options.quotas) if options.quotas else None, start_cell=start,
+                                 windows=windows)
         if qpath is not None:
             save_queries(qsets[sd], qpath)
             save_queries(qsets[sd], qpath.with_suffix(".json"))
@@ -406,27 +307,60 @@ def _episodes(env: NavigationEnv, cache: PlanningCache, name: str, qs: list[Quer
                                 door_belief=db, observation=env.observation)) for q, db in zip(qs, door_bel)]
 
 
-def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tuple[Any, Any]:
+def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tuple[Any, Any, Any]:
+    """(per_seed, summary) at ``delta`` and the sweep summary over every delta (None without a sweep)."""
     import pandas as pd
 
-    from psg_data.evaluation import summarize
+    rules = {"absent_in_overall": options.absent_in_overall, "unreachable": options.unreachable}
+    main = records[records["delta"] == float(options.delta)]
+    per_seed, summary = summarise_navigation(main, names, **rules)
+    if not options.delta_sweep:
+        return per_seed, summary, None
+    parts = []
+    for d in options.deltas:
+        _, sm = summarise_navigation(records[records["delta"] == d], names, **rules)
+        parts.append(sm.assign(delta=d))
+    return per_seed, summary, pd.concat(parts, ignore_index=True)
 
-    per_seed_rows = []
-    for (name, sd), df in records.groupby(["method", "seed"], sort=False):
-        per_seed_rows.append({"method": name, "seed": sd, **score_records(
-            df, absent_in_overall=options.absent_in_overall, unreachable=options.unreachable)})
-    per_seed = pd.DataFrame(per_seed_rows)
-    summ_rows = []
-    for name in names:
-        ps = per_seed[per_seed["method"] == name]
-        row: dict[str, Any] = {"method": name, "n_seeds": len(ps)}
-        for m in METRICS:
-            st = summarize(ps[m].to_numpy(np.float64))
-            row[f"{m}_mean"], row[f"{m}_std"] = st.mean, st.std
-        for c in ("n_queries", "n_static", "n_dynamic", "n_absent", "n_unreachable"):
-            row[c] = int(ps[c].sum())
-        summ_rows.append(row)
-    return per_seed, pd.DataFrame(summ_rows)
+
+class _MethodRuns:
+    """Every method's episodes on the same queries (filters fitted once per registry name and settings)."""
+
+    def __init__(self, env: NavigationEnv, cache: PlanningCache, opts: NavigationOptions, cfg: AgentConfig,
+                 qsets: dict[int, list[Query]], hook: Any) -> None:
+        self.env, self.cache, self.opts, self.cfg, self.qsets, self.hook = env, cache, opts, cfg, qsets, hook
+        self.rows: list[dict[str, Any]] = []
+        self.trails: dict[tuple[str, int, int], Any] = {}
+        self.beliefs: dict[tuple[str, int, int], dict[str, float]] = {}
+        self.timings: dict[str, float] = {}
+        self.fitted: dict[Any, dict[EdgeKey, EdgeFilter]] = {}
+
+    def _filters(self, spec: MethodSpec, settings: Mapping[str, Any] | None) -> dict[str, dict[str, EdgeFilter]]:
+        key = (spec, repr(sorted((settings or {}).items()))) if isinstance(spec, str) else id(spec)
+        if key not in self.fitted:
+            self.fitted[key] = build_filters(self.env, spec, settings=settings)
+        by_obj: dict[str, dict[str, EdgeFilter]] = {}
+        for (o, r), f in self.fitted[key].items():
+            by_obj.setdefault(o, {})[r] = f
+        return by_obj
+
+    def method(self, name: str, spec: MethodSpec, settings: Mapping[str, Any] | None, mode: str | None) -> None:
+        opts = self.opts
+        by_obj = self._filters(spec, settings)
+        m_opts = replace(opts, door_belief=mode) if mode is not None else opts
+        doors_for = _door_hooks(self.env, name, spec, m_opts, settings) if self.hook is None else (
+            lambda ts, h=self.hook: [dict(h) if isinstance(h, Mapping) else dict(h(t)) for t in ts])
+        for delta in opts.deltas:
+            cfg = replace(self.cfg, delta=delta)
+            for sd in opts.seeds:
+                for q, db, ep in _episodes(self.env, self.cache, name, self.qsets[sd], by_obj, doors_for, cfg):
+                    self.rows.append(episode_record(
+                        ep, method=name, seed=sd, delta=delta, t_s=q.t_s, start_x_m=q.start_xy[0],
+                        start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle, map_receptacle=q.map_receptacle,
+                        doors_believed=json.dumps(db, sort_keys=True) if db is not None else None))
+                    if opts.keep_trails and delta == float(opts.delta):
+                        self.trails[(name, sd, q.query_id)] = ep.trail
+                        self.beliefs[(name, sd, q.query_id)] = ep.beliefs
 
 
 _LEGACY = {"seed": "seeds"}
@@ -506,48 +440,27 @@ def run_navigation(
 
     import pandas as pd
 
-    rows: list[dict[str, Any]] = []
-    trails: dict[tuple[str, int, int], Any] = {}
-    beliefs_out: dict[tuple[str, int, int], dict[str, float]] = {}
-    timings: dict[str, float] = {}
     modes = dict(door_modes or {})
     bad = {m: v for m, v in modes.items() if m not in names or v not in DOOR_BELIEFS}
     if bad:
         raise EvaluationError(f"door_modes {bad}: expected method names {names} and modes {DOOR_BELIEFS}")
-    fitted: dict[Any, dict[EdgeKey, EdgeFilter]] = {}
+    run = _MethodRuns(env, cache, opts, cfg, qsets, hook)
     for name, spec in methods:
         t0 = time.perf_counter()
-        settings = (estimator_settings or {}).get(name)
-        key = (spec, repr(sorted((settings or {}).items()))) if isinstance(spec, str) else id(spec)
-        if key not in fitted:
-            fitted[key] = build_filters(env, spec, settings=settings)
-        filt = fitted[key]
-        m_opts = replace(opts, door_belief=modes[name]) if name in modes else opts
-        doors_for = _door_hooks(env, name, spec, m_opts, settings) if hook is None else (
-            lambda ts, h=hook: [dict(h) if isinstance(h, Mapping) else dict(h(t)) for t in ts])
-        by_obj: dict[str, dict[str, EdgeFilter]] = {}
-        for (o, r), f in filt.items():
-            by_obj.setdefault(o, {})[r] = f
-        for sd in opts.seeds:
-            for q, db, ep in _episodes(env, cache, name, qsets[sd], by_obj, doors_for, cfg):
-                rows.append(episode_record(ep, method=name, seed=sd, t_s=q.t_s, start_x_m=q.start_xy[0],
-                                           start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle,
-                                           map_receptacle=q.map_receptacle,
-                                           doors_believed=json.dumps(db, sort_keys=True) if db is not None else None))
-                if opts.keep_trails:
-                    trails[(name, sd, q.query_id)] = ep.trail
-                    beliefs_out[(name, sd, q.query_id)] = ep.beliefs
-        timings[name] = time.perf_counter() - t0
-        log.info("navigation: %s done in %.2f s", name, timings[name])
-
+        run.method(name, spec, (estimator_settings or {}).get(name), modes.get(name))
+        run.timings[name] = time.perf_counter() - t0
+        log.info("navigation: %s done in %.2f s", name, run.timings[name])
+    rows, trails, beliefs_out, timings = run.rows, run.trails, run.beliefs, run.timings
     records = pd.DataFrame(rows)
-    per_seed, summary = _summarise(records, names, opts)
+    per_seed, summary, sweep = _summarise(records, names, opts)
     config = {"env": env.name, **opts.to_dict(), "door_belief": opts.door_belief if hook is None else "custom",
               "door_modes": modes or None,
               "resolution_m": env.grid.resolution_m, "robot_radius_m": env.grid.robot_radius_m,
               "grid_source": env.grid.source, "methods": names, "labels_info": env.extra.get("labels"),
-              "sightings": {"p_miss": env.observation.p_miss, "p_false": env.observation.p_false}}
-    res = NavigationResult(records, per_seed, summary, qsets, config, timings, env, cache, trails, beliefs_out)
+              "sightings": {"p_miss": env.observation.p_miss, "p_false": env.observation.p_false},
+              "truth": env.truth, "windows": env.windows.to_dict() if env.windows is not None else None,
+              "query_windows": opts.windows}
+    res = NavigationResult(records, per_seed, summary, qsets, config, timings, env, cache, trails, beliefs_out, sweep)
     if out_dir is not None:
         res.save(out_dir)
     return res

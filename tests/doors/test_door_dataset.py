@@ -70,7 +70,8 @@ def test_world_from_a_dataset(labelled_lab) -> None:  # type: ignore[no-untyped-
         assert points_in_polygon(xy, ds.rooms[rid].floor_polygon_m).all()
         assert set(world.goals[rid]) <= {r for r, rec in ds.receptacles.items() if rec.room_id == rid}
         assert world.grid.free({d: False for d in world.door_ids}).ravel()[cells[:, 0] * W + cells[:, 1]].all()
-    assert world.hours == (9.0, 16.0)  # scans at 9, 11, 13, 15 h, each under an hour
+    # a synthetic lab: its scoring windows (the bi-hourly steps 9-11, ..., 15-17), and its physical door states
+    assert world.hours == (9.0, 17.0) and world.info["truth"] == "physical state (generator)"
 
 
 def test_door_table_on_the_dataset(labelled_lab) -> None:  # type: ignore[no-untyped-def]
@@ -86,7 +87,7 @@ def test_door_table_on_the_dataset(labelled_lab) -> None:  # type: ignore[no-unt
     assert t.loc["all_open", "blocked_first_plans"] >= unreachable and t.loc["all_open", "declined"] == 0
     assert (t["n_reachable"] == 60 - unreachable).all()
     for q in r.queries:
-        assert 9.0 <= _local_hour(q.t_s, world.timezone) < 16.0 and q.t_s >= world.t_train_end_s
+        assert 9.0 <= _local_hour(q.t_s, world.timezone) < 17.0 and q.t_s >= world.t_train_end_s
 
 
 def _local_hour(t_s: float, tz: str) -> float:

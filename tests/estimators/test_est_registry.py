@@ -138,9 +138,9 @@ def test_entry_point_plugin_is_listed_and_scored(tmp_path: Path, monkeypatch: py
                                         "--seeds", "1", "--out", str(out), "--quiet", "--no-plots"])
     assert res.exit_code == 0, res.output + str(res.exception)
     assert "half" in res.output
-    summary = json.loads((out / "results.json").read_text())["summary"]
-    assert list(summary) == ["half"]
-    assert summary["half"]["mae"]["mean"] == pytest.approx(0.5)  # a constant 0.5 is 0.5 away from any 0/1 truth
+    rows = json.loads((out / "results.json").read_text())["tables"][0]["rows"]
+    assert [r["method"] for r in rows] == ["half"]
+    assert rows[0]["values"]["mae"]["mean"] == pytest.approx(0.5)  # a constant 0.5 is 0.5 away from any 0/1 truth
 
 
 def test_check_estimator_catches_broken_estimators() -> None:

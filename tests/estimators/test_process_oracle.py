@@ -161,12 +161,15 @@ def test_cli_runs_the_oracle_and_the_schedule_and_oracle_priors(lab: Path, tmp_p
                                     "-e", "perpetua_star_oracle", "-e", "last_seen", "--no-references", "--seeds", "1",
                                     "--setting", "predictive", "--out", str(out), "--quiet", "--no-plots"])
     assert res.exit_code == 0, res.output + str(res.exception)
-    data = json.loads((out / "results.json").read_text())
-    summ = data["summary"]
-    assert set(summ) == {"process_oracle", "perpetua_star_schedule", "perpetua_star_oracle", "last_seen"}
-    assert not data["errors"]
-    assert summ["process_oracle"]["mae"]["mean"] < summ["last_seen"]["mae"]["mean"]
-    assert data["config"]["estimator_params"]["process_oracle"]["dataset"] == str(lab)
+    from psg_data.evaluation import load_results
+
+    data = load_results(out)
+    table = data.table()
+    assert {r.method for r in table.rows} == {"process_oracle", "perpetua_star_schedule", "perpetua_star_oracle",
+                                             "last_seen"}
+    assert not data.errors
+    assert table.row("process_oracle").values["mae"].mean < table.row("last_seen").values["mae"].mean
+    assert data.config["estimator_params"]["process_oracle"]["dataset"] == str(lab)
 
 
 def test_cli_refuses_the_oracle_on_other_datasets(make_dataset, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

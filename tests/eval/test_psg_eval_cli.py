@@ -183,30 +183,54 @@ def test_existing_output_needs_overwrite(tmp_path: Path) -> None:
 
 
 def test_navigation_task(lab: Path, tmp_path: Path) -> None:
+    from psg_data.evaluation import load_results
+
     out = tmp_path / "nav"
-    res = run("--task", "navigation", "--dataset", str(lab), "-e", "last_seen", "--no-references", "--seeds", "1",
+    res = run("--task", "navigation", "--dataset", str(lab), "-e", "last_seen", "--seeds", "1",
               "--queries", "12", "--out", str(out), "--quiet")
     assert res.exit_code == 0, res.output + str(res.exception)
-    assert "Static presence" in res.stdout and "oracle" in res.stdout
-    data = json.loads((out / "results.json").read_text())
-    rows = {r["method"]: r for r in data["summary"]}
-    assert {"oracle", "last_seen_map", "last_seen"} <= set(rows)
+    assert "Static presence" in res.stdout and "oracle" in res.stdout and "±: " in res.stdout
+    table = load_results(out).table()
+    roles = {r.method: r.role for r in table.rows}
+    assert roles["oracle"] == "ceiling" and roles["process_oracle"] == "ceiling"
+    assert roles["last_seen_map"] == "baseline" and roles["random_receptacle"] == "chance"
+    assert roles["last_seen"] == "method" and {"perpetua", "fremen"} <= set(roles)
+    assert table.row("oracle").values["overall_sr"].mean == pytest.approx(1.0)
+    maps = sorted(p.name for p in out.glob("map_*.png"))
+    assert "map_oracle.png" in maps and "map_last_seen.png" in maps
     _assert_png(out / "map_oracle.png")
     out2 = tmp_path / "nav_reachable"
     res = run("--task", "navigation", "--dataset", str(lab), "-e", "last_seen", "--no-references", "--seeds", "1",
-              "--queries", "12", "--reachable-only", "--delta", "0.1", "--out", str(out2), "--quiet", "--no-plots")
+              "--queries", "12", "--reachable-only", "--delta", "0.1", "--out", str(out2), "--quiet")
     assert res.exit_code == 0, res.output + str(res.exception)
-    data2 = json.loads((out2 / "results.json").read_text())
-    assert data2["info"]["reachable_only"] is True and data2["info"]["delta"] == 0.1
-    assert all(r["n_unreachable"] == 0 for r in data2["summary"])
+    data2 = load_results(out2)
+    assert data2.info["reachable_only"] is True and data2.info["delta"] == 0.1
+    assert [r.method for r in data2.table().rows] == ["last_seen"]  # --no-references: only the -e rows
+    assert data2.table().row("last_seen").counts["queries"] == 12
     cmp = run("compare", str(out), str(out2))
     assert cmp.exit_code == 0 and "[navigation]" in cmp.output and "[persistence]" not in cmp.output
-    assert sum(" oracle " in l and "100.0 +- 0.0" in l for l in cmp.output.splitlines()) == 2
+    assert sum(" oracle " in l and "100.0" in l for l in cmp.output.splitlines()) == 1
     bad = tmp_path / "bad"
     bad.mkdir()
     (bad / "results.json").write_text(json.dumps({"info": {"task": "mapping"}, "summary": []}))
     res = run("compare", str(bad))
-    assert res.exit_code == 1 and "expected task persistence, navigation or doors" in res.stderr
+    assert res.exit_code == 1 and "not a psg-eval results file" in res.stderr
+
+
+def test_navigation_delta_sweep(lab: Path, tmp_path: Path) -> None:
+    from psg_data.evaluation import load_results
+
+    out = tmp_path / "sweep"
+    res = run("--task", "navigation", "--dataset", str(lab), "-e", "last_seen", "--no-references", "--seeds", "1",
+              "--queries", "15", "--delta", "0.05,0.5,0.99", "--out", str(out), "--quiet")
+    assert res.exit_code == 0, res.output + str(res.exception)
+    sweep = load_results(out).table("delta_sweep")
+    assert [r.counts["delta"] for r in sweep.rows] == ["0.05", "0.5", "0.99"]
+    # last_seen beliefs are 0 or 1: a delta of 0.99 changes nothing, the main table is the first delta
+    ar = [r.values["absent_ar"].mean for r in sweep.rows]
+    assert ar[0] == ar[1] == ar[2]
+    _assert_png(out / "delta_sweep.png")
+    assert run("--task", "persistence", "--delta", "0.1,0.2", "--out", str(tmp_path / "x")).exit_code == 1
 
 
 def test_dataset_files_untouched_by_eval(lab: Path, tmp_path: Path) -> None:

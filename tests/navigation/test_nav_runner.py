@@ -86,7 +86,11 @@ def test_oracle_is_perfect_and_unreachable_targets_are_counted(nav_dataset, tmp_
     # files: queries stored and reused; results saved
     qfiles = sorted((tmp_path / "out" / "queries").glob("*.parquet"))
     assert len(qfiles) == 2
-    assert (tmp_path / "out" / "summary.json").is_file() and (tmp_path / "out" / "table.txt").is_file()
+    assert (tmp_path / "out" / "results.json").is_file() and (tmp_path / "out" / "table.txt").is_file()
+    from psg_data.evaluation import load_results
+
+    loaded = load_results(tmp_path / "out")
+    assert loaded.task == "navigation" and loaded.table().row("oracle").values["overall_sr"].mean == pytest.approx(1.0)
     res2 = run_navigation(nav_dataset, ["oracle"], seed=[0, 1], n_queries=60, out_dir=tmp_path / "out",
                           robot_radius_m=0.2)
     assert res2.queries == res.queries
@@ -218,10 +222,23 @@ def test_door_belief_last_map_discovers_closed_doors(nav_env):
 
 
 def test_reachable_only_queries(nav_env):
-    qs = make_queries(nav_env, 60, seed=0, reachable_only=True)
+    win = nav_env.windows.intervals(nav_env.t_map_s, nav_env.t_end_s)
+    qs = make_queries(nav_env, 60, seed=0, reachable_only=True, windows=win)
     res = run_navigation(nav_env, ["oracle"], seed=0, n_queries=60, reachable_only=True)
     assert res.summary["n_unreachable"].iloc[0] == 0
     assert res.queries[0] == qs
+
+
+def test_queries_are_drawn_inside_the_scoring_windows(nav_env):
+    res = run_navigation(nav_env, ["oracle"], seed=0, n_queries=80)
+    t = np.array([q.t_s for q in res.queries[0]])
+    assert nav_env.windows is not None and nav_env.windows.contains(t).all()
+    narrow = run_navigation(nav_env, ["oracle"], seed=0, n_queries=40, windows="10-11")
+    hours = pd.to_datetime([q.t_s for q in narrow.queries[0]], unit="s", utc=True).tz_convert(nav_env.timezone).hour
+    assert set(hours) == {10}
+    anytime = run_navigation(nav_env, ["oracle"], seed=0, n_queries=40, windows="none")
+    hours = pd.to_datetime([q.t_s for q in anytime.queries[0]], unit="s", utc=True).tz_convert(nav_env.timezone).hour
+    assert len(set(hours)) > 5
 
 
 def test_env_coerce_from_path(nav_dataset):

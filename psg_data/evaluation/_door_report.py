@@ -1,0 +1,147 @@
+"""The door task's scores, tables and figure choice.
+
+Door table (one row per method; the queries of every seed pooled, intervals by bootstrap over the
+door queries):
+
+- ``blocked %``: first plans through a door closed at the query time (lower is better);
+- ``SR %`` / ``SPL %``: over the goals a route reaches at the query time;
+- ``extra m``: walked minus shortest under the true doors, successful episodes (lower is better);
+- ``wasted m``: metres walked towards goals no route reaches (ideal 0; lower is better);
+- counts: queries, declined (did not set off: the predicted doors leave no route).
+
+Reference rows: ``oracle`` (the true door states: the ceiling), ``all_open`` (every door assumed
+open), ``last_seen`` (each door's last observation), ``time_of_week_frequency``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psg_data.evaluation._aggregate import Summary
+from psg_data.evaluation._intervals import describe_interval, ratio_interval
+from psg_data.evaluation._references import describe_method
+from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, ResultTable, save_results
+
+__all__ = ["door_terms", "summarise_doors", "door_results", "DOOR_METRICS", "pick_blocked_door_query"]
+
+DOOR_METRICS: dict[str, MetricInfo] = {
+    "blocked_rate": MetricInfo("blocked_rate", "blocked %", "lower", "first plans through a door closed at the query "
+                               "time", 100.0, 1),
+    "SR": MetricInfo("SR", "SR %", "higher", "reached the goal, over the goals a route reaches at the query time",
+                     100.0, 1),
+    "SPL": MetricInfo("SPL", "SPL %", "higher", "SR weighted by shortest / walked path (true doors)", 100.0, 1),
+    "mean_extra_distance_m": MetricInfo("mean_extra_distance_m", "extra m", "lower", "walked minus shortest under the "
+                                        "true doors, successful episodes", 1.0, 2),
+    "wasted_m": MetricInfo("wasted_m", "wasted m", "lower", "walked towards goals no route reaches (ideal 0)", 1.0, 2),
+}
+
+
+def door_terms(df: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per door metric, per query: (numerator, denominator) of ``metric = sum(num) / sum(den)``."""
+    short = df["shortest_m"].to_numpy(float)
+    walked = df["walked_m"].to_numpy(float)
+    succ = df["success"].to_numpy(bool)
+    reach = np.isfinite(short)
+    extra = df["extra_m"].to_numpy(float)
+    ok_extra = np.isfinite(extra)
+    den = np.maximum(walked, np.where(reach, short, 0.0))
+    spl = np.divide(np.where(reach, short, 0.0), den, out=np.ones(len(df)), where=den > 0) * succ
+    return {"blocked_rate": (df["first_plan_blocked"].to_numpy(float), np.ones(len(df))),
+            "SR": (succ * reach * 1.0, reach * 1.0), "SPL": (spl * reach, reach * 1.0),
+            "mean_extra_distance_m": (np.where(ok_extra, extra, 0.0), ok_extra * 1.0),
+            "wasted_m": (np.where(reach, 0.0, walked), (~reach) * 1.0)}
+
+
+def summarise_doors(records: Any, names: list[str], *, seed: int = 0) -> dict[str, dict[str, Summary]]:
+    """Method -> metric -> :class:`Summary` (pooled over seeds; bootstrap over door queries; std over seeds).
+    ``extra m`` and ``wasted m`` of a method without such episodes are 0 (nothing walked), as in the table."""
+    out: dict[str, dict[str, Summary]] = {}
+    for n in names:
+        df = records[records["estimator"] == n]
+        per: dict[str, Summary] = {}
+        for m, (num, den) in door_terms(df).items():
+            iv = ratio_interval(num, den, seed=seed, unit="queries")
+            by_seed = [float(np.sum(a) / np.sum(b)) for a, b in
+                       (door_terms(g)[m] for _, g in df.groupby("seed")) if np.sum(b) > 0]
+            std = float(np.std(by_seed, ddof=1)) if len(by_seed) > 1 else 0.0
+            if iv.n == 0 and m in ("mean_extra_distance_m", "wasted_m"):
+                per[m] = Summary(0.0, 0.0, math.nan, math.nan, 0, "none", "queries")
+            else:
+                per[m] = Summary(iv.estimate, std, iv.low, iv.high, iv.n, iv.method, "queries")
+        out[n] = per
+    return out
+
+
+def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None,
+                 info: Mapping[str, Any] | None = None) -> EvalResults:
+    """The door run in the results schema: the door table, and the objects-behind-doors table when it ran."""
+    from psg_data.evaluation._navigation_report import navigation_results
+
+    roles = dict(roles or {})
+    summ = res.summary.set_index("estimator")
+    names = list(summ.index)
+    scores = summarise_doors(res.records, names)
+    rows = [ResultRow(n, roles.get(n, ("method", describe_method(n)))[0], scores[n],
+                      roles.get(n, ("method", describe_method(n)))[1],
+                      counts={"queries": int(summ.loc[n, "queries"]), "declined": int(summ.loc[n, "declined"])})
+            for n in names]
+    o = res.options
+    refs = [r for r in rows if r.role != "method"]
+    s = next((v for r in rows for v in r.values.values() if v.method != "none"), None)
+    notes = [f"{m.label} ({m.better} is better): {m.description}" for m in DOOR_METRICS.values()]
+    notes.append(f"door queries: a start in one room, a goal receptacle in another, at a time of the test days inside "
+                 f"{res.world.hours[0]:g}-{res.world.hours[1]:g} h local; doors with predicted P(open) < "
+                 f"{o.threshold} are planned closed; no_path={o.no_path}; door streams from {o.labels} "
+                 f"({res.world.info.get('doors', {}).get('from', '?')})")
+    if refs:
+        notes.append("reference rows: " + "; ".join(f"{r.method} = {r.description}" for r in refs))
+    notes.append(describe_interval(s.method, "door queries", s.n, extra=f" ({len(o.seeds)} query sets pooled)")
+                 if s else "±: -")
+    title = (f"Door navigation on {res.world.name} ({o.n_queries} queries x {len(o.seeds)} sets): first plans through "
+             "closed doors")
+    tables = [ResultTable("doors", title, list(DOOR_METRICS.values()), rows, notes,
+                          count_columns=["queries", "declined"])]
+    if res.objects is not None:
+        obj = navigation_results(res.objects, roles={"oracle": ("ceiling", "the true receptacle and doors")})
+        t = obj.tables[0]
+        t.name, t.title = "objects", ("Objects behind predicted-closed doors: each estimator with all doors open, its "
+                                      "predicted doors, the true doors")
+        tables.append(t)
+    return EvalResults("doors", tables, config={**o.to_dict(), "setting_text": f"doors, {o.setting}"},
+                       info=dict(info or {}), interval={"method": s.method if s else "none", "unit": "door queries",
+                                                        "n": s.n if s else 0, "confidence": 0.95})
+
+
+def pick_blocked_door_query(res: Any, label: str) -> int:
+    """Index (in the first seed's queries) of a door query whose all-open first plan was blocked, preferring
+    one where ``label`` planned around the closed door and arrived; else one where ``label``'s own first
+    plan was blocked; else any blocked one; else 0."""
+    first = res.first
+    eps, base = first.episodes[label], first.episodes["all_open"]
+    pools = ([i for i, (e, b) in enumerate(zip(eps, base)) if b.first_plan_blocked and not e.first_plan_blocked
+              and e.success],
+             [i for i, e in enumerate(eps) if e.first_plan_blocked],
+             [i for i, b in enumerate(base) if b.first_plan_blocked])
+    return next((p[0] for p in pools if p), 0)
+
+
+def write_door_results(res: Any, out: Path, *, roles: Mapping[str, tuple[str, str]] | None, info: Mapping[str, Any]
+                       ) -> EvalResults:
+    """results.json / summary.csv / table.txt, results.csv (door summary), by_seed.csv, records.csv,
+    objects/ (the objects run) and objects/walk.csv."""
+    results = door_results(res, roles=roles, info=info)
+    save_results(results, out)
+    res.per_seed.to_csv(out / "by_seed.csv", index=False)
+    res.records.to_csv(out / "records.csv", index=False)
+    res.summary.to_csv(out / "results.csv", index=False)
+    if res.objects is not None:
+        from psg_data.navigation import walk_summary
+
+        res.objects.save(out / "objects", roles={"oracle": ("ceiling", "the true receptacle and doors")})
+        walk_summary(res.objects).to_csv(out / "objects" / "walk.csv", index=False)
+    return results

@@ -1,0 +1,245 @@
+"""Presenting navigation results: the paper-shaped table in the results schema, the files, the figures.
+
+:func:`navigation_results` turns a :class:`~psg_data.navigation.NavigationResult` into
+:class:`~psg_data.evaluation.EvalResults` (the ``sim`` layout of the paper's "Predictive
+Navigation" table or the ``real`` layout of its "Real-World Navigation" table, reference rows
+first, a delta-sweep table when there is one); :func:`write_navigation_results` writes it with the
+per-query records; :func:`choose_map_query` picks the query the maps show (a dynamic target on
+which the methods disagree); :func:`plot_delta_sweep` draws SR / AR against delta.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from psg_data.evaluation._aggregate import Summary
+from psg_data.evaluation._intervals import describe_interval
+from psg_data.evaluation._references import describe_method
+from psg_data.evaluation._report import pct_of_ceiling
+from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, ResultTable, save_results
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
+__all__ = ["navigation_results", "write_navigation_results", "choose_map_query", "plot_delta_sweep", "NAV_METRICS"]
+
+NAV_METRICS: dict[str, MetricInfo] = {
+    "static_sr": MetricInfo("static_sr", "SR %", "higher", "success rate on present targets that did not move since "
+                            "the last map update", 100.0, 1),
+    "static_spl": MetricInfo("static_spl", "SPL %", "higher", "success weighted by shortest / walked path length "
+                             "(Anderson et al. 2018)", 100.0, 1),
+    "dynamic_sr": MetricInfo("dynamic_sr", "SR %", "higher", "success rate on present targets that moved", 100.0, 1),
+    "dynamic_spl": MetricInfo("dynamic_spl", "SPL %", "higher", "SPL on moved targets", 100.0, 1),
+    "absent_ar": MetricInfo("absent_ar", "AR %", "higher", "correct abort rate on targets absent from the scene",
+                            100.0, 1),
+    "absent_dist_m": MetricInfo("absent_dist_m", "Dist m", "lower", "metres walked before giving up on an absent "
+                                "target", 1.0, 1),
+    "overall_sr": MetricInfo("overall_sr", "SR %", "higher", "success over reachable present and absent targets "
+                             "(a correct abort counts as success)", 100.0, 1),
+    "overall_spl": MetricInfo("overall_spl", "SPL %", "higher", "SPL over the same queries", 100.0, 1),
+}
+
+_LAYOUTS = {
+    "sim": [("Static presence", ["static_sr", "static_spl"]), ("Dynamic presence", ["dynamic_sr", "dynamic_spl"]),
+            ("Absence", ["absent_ar", "absent_dist_m"]), ("Overall", ["overall_sr", "overall_spl"])],
+    "real": [("Static", ["static_sr"]), ("Dynamic", ["dynamic_sr"]), ("Absent", ["absent_ar"]),
+             ("Overall", ["overall_sr"])],
+}
+_COUNT = {"Static presence": "n_static", "Dynamic presence": "n_dynamic", "Absence": "n_absent", "Static": "n_static",
+          "Dynamic": "n_dynamic", "Absent": "n_absent"}
+
+
+def _summary_of(row: Any, m: str) -> Summary:
+    g = lambda k: float(row.get(f"{m}_{k}", math.nan))  # noqa: E731
+    return Summary(g("mean"), g("std"), g("ci_low"), g("ci_high"), int(row.get(f"{m}_n", 0) or 0),
+                   str(row.get(f"{m}_method", "none")), "queries")
+
+
+def _rows(summary: Any, metrics: list[str], roles: Mapping[str, tuple[str, str]]) -> list[ResultRow]:
+    out = []
+    for _, r in summary.iterrows():
+        name = str(r["method"])
+        role, desc = roles.get(name, ("method", describe_method(name)))
+        out.append(ResultRow(name, role, {m: _summary_of(r, m) for m in metrics}, desc,
+                             counts={"queries": int(r["n_queries"]), "query sets": int(r["n_seeds"])}))
+    return out
+
+
+def _groups(layout: str, summary: Any, cfg: dict[str, Any]) -> list[tuple[str, list[str]]]:
+    r0 = summary.iloc[0] if len(summary) else None
+    out = []
+    for g, ks in _LAYOUTS[layout]:
+        if g == "Overall":
+            n = (int(r0["n_queries"]) - (int(r0["n_unreachable"]) if cfg.get("unreachable") == "exclude" else 0)
+                 if r0 is not None else 0)
+        else:
+            n = int(r0[_COUNT[g]]) if r0 is not None else 0
+        out.append((f"{g} ({n})", ks))
+    return out
+
+
+_KINDS = {
+    "SR": ("higher", "success rate; static = present targets that did not move since the last map update, dynamic = "
+                     "moved, overall = reachable present and absent targets (a correct abort is a success)"),
+    "SPL": ("higher", "success weighted by shortest / walked path length (Anderson et al. 2018)"),
+    "AR": ("higher", "correct abort rate on targets absent from the scene"),
+    "Dist": ("lower", "metres walked before giving up on an absent target"),
+}
+
+
+def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
+    cfg = res.config
+    chance = next((r for r in rows if r.role == "chance"), None)
+    out = []
+    for kind, (better, text) in _KINDS.items():
+        keys = [m for m in metrics if NAV_METRICS[m].label.split()[0] == kind]
+        if not keys:
+            continue
+        line = f"{kind} ({better} is better): {text}"
+        if chance is not None:
+            vals = ", ".join(f"{m.split('_')[0]} {NAV_METRICS[m].scale * chance.values[m].mean:.1f}" for m in keys
+                             if math.isfinite(chance.values[m].mean))
+            line += f"; chance ({chance.method}): {vals}" if vals else ""
+        out.append(line)
+    w = cfg.get("windows") or {}
+    where = ("inside the scoring windows " + str(w.get("text")) if cfg.get("query_windows") != "none" and w
+             else "at any time after the map")
+    out.append(f"protocol {cfg.get('protocol')}: {cfg.get('setting')} agent, delta {cfg.get('delta')}, "
+               f"{cfg.get('max_attempts')} attempts, doors {cfg.get('door_belief')}, labels {cfg.get('labels', 'gt')}; "
+               f"query times {where}; scored against the {cfg.get('truth', 'schedule')} at the query time; "
+               f"unreachable present targets: {int(res.summary['n_unreachable'].iloc[0]) if len(res.summary) else 0} "
+               f"(rule: {cfg.get('unreachable')})")
+    refs = [r for r in rows if r.role != "method"]
+    if refs:
+        out.append("reference rows: " + "; ".join(f"{r.method} = {r.description}" for r in refs))
+    s = next((v for r in rows for v in r.values.values() if v.method != "none"), None)
+    n_sets = len(cfg.get("seeds") or [])
+    extra = f" ({n_sets} query sets pooled; each column resamples its own queries)"
+    out.append(describe_interval(s.method, "queries", s.n, extra=extra) if s is not None else "±: -")
+    return out
+
+
+def _main_table(res: Any, roles: Mapping[str, tuple[str, str]], layout: str) -> ResultTable:
+    if layout == "auto":
+        layout = "real" if str(res.config.get("protocol", "")).startswith("paper-real") else "sim"
+    groups = _groups(layout, res.summary, res.config)
+    metrics = [k for _, ks in groups for k in ks]
+    rows = _rows(res.summary, metrics, roles)
+    ceiling = next((r for r in rows if r.role == "ceiling"), None)
+    chance = next((r for r in rows if r.role == "chance"), None)
+    primary = "overall_sr" if ceiling is not None else None
+    if primary:
+        for r in rows:
+            r.pct_of_ceiling = pct_of_ceiling(r.values[primary].mean, ceiling.values[primary].mean,
+                                              chance.values[primary].mean if chance else 0.0)
+    infos = [NAV_METRICS[m] for m in metrics]
+    if chance is not None:
+        infos = [MetricInfo(i.key, i.label, i.better, i.description, i.scale, i.digits, chance.values[i.key].mean)
+                 for i in infos]
+    n = int(res.summary["n_queries"].iloc[0]) // max(1, len(res.config.get("seeds") or [1])) if len(res.summary) else 0
+    title = (f"Object navigation on {res.config.get('env')} ({n} queries x {len(res.config.get('seeds') or [])} query "
+             f"sets, protocol {res.config.get('protocol')}, {res.config.get('setting')}, delta {res.config.get('delta')})")
+    return ResultTable("navigation", title, infos, rows, _notes(rows, metrics, res), groups,
+                       ["queries", "query sets"], primary)
+
+
+def _sweep_table(res: Any, roles: Mapping[str, tuple[str, str]]) -> ResultTable | None:
+    if res.sweep is None:
+        return None
+    keys = ["overall_sr", "dynamic_sr", "absent_ar"]
+    rows = []
+    for _, r in res.sweep.iterrows():
+        role = roles.get(str(r["method"]), ("method", ""))[0]
+        rows.append(ResultRow(f"{r['method']} @ {r['delta']:g}", role, {m: _summary_of(r, m) for m in keys},
+                              counts={"delta": f"{r['delta']:g}"}))
+    infos = [MetricInfo(k, f"{'overall' if k == 'overall_sr' else k.split('_')[0]} {NAV_METRICS[k].label}",
+                        NAV_METRICS[k].better, NAV_METRICS[k].description, 100.0, 1) for k in keys]
+    notes = ["delta: the agent declares the target absent when no untried receptacle has a belief >= delta; a low delta "
+             "finds more moved objects and aborts less on absent ones (delta_sweep.png)"]
+    return ResultTable("delta_sweep", "Delta sweep (same queries and filters for every delta)", infos, rows, notes,
+                       count_columns=["delta"])
+
+
+def navigation_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None, layout: str = "auto",
+                       info: Mapping[str, Any] | None = None) -> EvalResults:
+    """The results-schema form of a navigation run (module docstring)."""
+    roles = dict(roles or {})
+    tables = [_main_table(res, roles, layout)]
+    sweep = _sweep_table(res, roles)
+    if sweep is not None:
+        tables.append(sweep)
+    main = tables[0]
+    s = next((v for r in main.rows for v in r.values.values() if v.method != "none"), None)
+    interval = {"method": s.method, "unit": "queries", "n": s.n, "confidence": 0.95, "text": main.notes[-1]} if s else {}
+    return EvalResults("navigation", tables, config=dict(res.config), info=dict(info or {}), interval=interval)
+
+
+def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,
+                             info: Mapping[str, Any] | None = None) -> dict[str, Path]:
+    """Write the results schema (results.json, summary.csv, table.txt), records.parquet, per_seed.csv,
+    results.csv (one row per method, every column of the summary) and sweep.csv (with a sweep)."""
+    out = Path(out_dir)
+    paths = save_results(navigation_results(res, roles=roles, info=info), out)
+    extra = {"records": out / "records.parquet", "per_seed": out / "per_seed.csv", "csv": out / "results.csv"}
+    res.records.to_parquet(extra["records"], index=False)
+    res.per_seed.to_csv(extra["per_seed"], index=False)
+    res.summary.to_csv(extra["csv"], index=False)
+    if res.sweep is not None:
+        extra["sweep"] = out / "sweep.csv"
+        res.sweep.to_csv(extra["sweep"], index=False)
+    return {**paths, **extra}
+
+
+def choose_map_query(res: Any, methods: list[str] | None = None) -> tuple[int, int]:
+    """(seed, query_id) of the first query set's most informative query for the maps: a dynamic target
+    on which the methods' outcomes and first receptacles disagree most (then: any dynamic one,
+    then query 0)."""
+    rec = res.records
+    rec = rec[rec["delta"] == float(res.config.get("delta", 0.2))] if "delta" in rec else rec
+    sd = sorted(res.queries)[0]
+    rec = rec[rec["seed"] == sd]
+    if methods:
+        rec = rec[rec["method"].isin(methods)]
+    dyn = rec[rec["category"] == "dynamic"]
+    if dyn.empty:
+        return sd, int(res.queries[sd][0].query_id)
+    sig = dyn.assign(sig=dyn["outcome"].astype(str) + "|" + dyn["predicted_receptacle"].astype(str))
+    score = sig.groupby("query_id").agg(kinds=("sig", "nunique"), found=("success", "sum"))
+    best = score.sort_values(["kinds", "found", ], ascending=[False, False]).index[0]
+    return sd, int(best)
+
+
+def plot_delta_sweep(res: Any, out_path: str | Path | None = None) -> Figure:
+    """Overall SR, dynamic SR and AR against delta, one line per method (reference rows dashed), 95 % intervals."""
+    import matplotlib
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from psg_data.evaluation._persistence_plots import save_figure
+
+    sw = res.sweep
+    fig = Figure(figsize=(13, 3.8))
+    axes = fig.subplots(1, 3)
+    cmap = matplotlib.colormaps["tab10"]
+    names = list(dict.fromkeys(sw["method"]))
+    for ax, key, title in zip(axes, ("overall_sr", "dynamic_sr", "absent_ar"),
+                              ("overall SR (%)", "dynamic SR (%)", "AR: correct aborts on absent targets (%)")):
+        for i, n in enumerate(names):
+            d = sw[sw["method"] == n].sort_values("delta")
+            m = 100 * d[f"{key}_mean"].to_numpy(float)
+            err = 100 * np.vstack([np.nan_to_num(d[f"{key}_mean"] - d[f"{key}_ci_low"]),
+                                   np.nan_to_num(d[f"{key}_ci_high"] - d[f"{key}_mean"])])
+            ax.errorbar(d["delta"], m, yerr=err, marker="o", ms=4, capsize=2, lw=1.3, color=cmap(i % 10), label=n,
+                        ls="--" if n in ("oracle", "random_receptacle", "last_seen_map") else "-")
+        ax.set_xlabel("delta (abort when no receptacle has a belief >= delta)", fontsize=8)
+        ax.set_title(title, fontsize=9)
+        ax.set_ylim(-3, 103)
+    h, lab = axes[0].get_legend_handles_labels()
+    fig.legend(h, lab, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, frameon=False,
+               title="dashed: reference rows", title_fontsize=7)
+    fig.suptitle("Navigation against delta (same queries; bars: 95 % bootstrap interval over queries)", fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, out_path)
