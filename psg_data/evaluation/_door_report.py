@@ -102,8 +102,9 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
         notes.append("reference rows: " + "; ".join(f"{r.method} = {r.description}" for r in refs))
     notes.append(describe_interval(s.method, "door queries", s.n, extra=f" ({len(o.seeds)} query sets pooled)")
                  if s else "±: -")
-    title = (f"Door navigation on {res.world.name} ({o.n_queries} queries x {len(o.seeds)} sets): first plans through "
-             "closed doors")
+    where = (info or {}).get("dataset_label") or res.world.name
+    title = (f"Door navigation on {where} (doors from {o.labels}; {o.n_queries} queries x {len(o.seeds)} sets): first "
+             "plans through closed doors")
     tables = [ResultTable("doors", title, list(DOOR_METRICS.values()), rows, notes,
                           count_columns=["queries", "declined"])]
     if res.objects is not None:
@@ -118,15 +119,16 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
 
 
 def pick_blocked_door_query(res: Any, label: str) -> int:
-    """Index (in the first seed's queries) of a door query whose all-open first plan was blocked, preferring
-    one where ``label`` planned around the closed door and arrived; else one where ``label``'s own first
-    plan was blocked; else any blocked one; else 0."""
+    """Index (in the first seed's queries) of a door query whose all-open first plan ran into a closed
+    door, preferring one where ``label`` planned around it and arrived, then one where ``label``
+    predicted the door closed and did not set off (nothing wasted), then one where ``label``'s own
+    first plan was blocked too; else 0."""
     first = res.first
     eps, base = first.episodes[label], first.episodes["all_open"]
-    pools = ([i for i, (e, b) in enumerate(zip(eps, base)) if b.first_plan_blocked and not e.first_plan_blocked
-              and e.success],
-             [i for i, e in enumerate(eps) if e.first_plan_blocked],
-             [i for i, b in enumerate(base) if b.first_plan_blocked])
+    blocked = [i for i, b in enumerate(base) if b.first_plan_blocked]
+    pools = ([i for i in blocked if not eps[i].first_plan_blocked and eps[i].success],
+             [i for i in blocked if eps[i].declined],
+             [i for i in blocked if eps[i].first_plan_blocked], blocked)
     return next((p[0] for p in pools if p), 0)
 
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from psg_data.errors import EstimatorError, EvaluationError
 
-__all__ = ["EstimatorSpec", "dataset_hints", "with_hints", "require_hints", "NEEDS"]
+__all__ = ["EstimatorSpec", "dataset_hints", "with_hints", "require_hints", "NEEDS", "label_noise", "with_label_noise"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,29 @@ def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
     given = dict(spec.settings)
     extra = [(k, v) for k, v in hints.items() if k in params and k not in given and params[k] is None]
     return EstimatorSpec(spec.label, spec.name, spec.settings + tuple(extra)) if extra else spec
+
+
+def label_noise(labels: str) -> tuple[float, float] | None:
+    """(P_M, P_F) of a ``noisy:P[,P_F]`` label source, else None."""
+    from psg_data.errors import LabelingError
+    from psg_data.labeling import parse_source
+
+    try:
+        spec = parse_source(labels)
+    except LabelingError:
+        return None
+    return (float(spec.p_m), float(spec.p_f)) if spec.kind == "noisy" else None
+
+
+def with_label_noise(spec: EstimatorSpec, labels: str) -> EstimatorSpec:
+    """The ceiling knows the data's noise model: ``process_oracle`` on ``noisy:P`` labels gets
+    ``p_m`` / ``p_f`` of the source unless the user set them (learned estimators never do)."""
+    noise = label_noise(labels)
+    if spec.name != "process_oracle" or noise is None:
+        return spec
+    given = dict(spec.settings)
+    extra = tuple((k, v) for k, v in zip(("p_m", "p_f"), noise) if k not in given)
+    return EstimatorSpec(spec.label, spec.name, spec.settings + extra) if extra else spec
 
 
 NEEDS: dict[str, tuple[tuple[str, ...], str]] = {

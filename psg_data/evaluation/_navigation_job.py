@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from psg_data.evaluation._hints import EstimatorSpec, with_hints
+from psg_data.evaluation._hints import EstimatorSpec, with_hints, with_label_noise
 from psg_data.evaluation._references import PAPER_METHODS, door_references, navigation_references
 
 __all__ = ["navigation_methods", "run_navigation_job", "door_methods", "run_door_job"]
@@ -16,8 +16,8 @@ __all__ = ["navigation_methods", "run_navigation_job", "door_methods", "run_door
 _NAV_BUILTINS = ("oracle", "last_seen_map", "random_receptacle")
 
 
-def navigation_methods(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, references: bool = True
-                       ) -> tuple[dict[str, str], dict[str, dict[str, Any]], dict[str, tuple[str, str]]]:
+def navigation_methods(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, references: bool = True,
+                       labels: str = "gt") -> tuple[dict[str, str], dict[str, dict[str, Any]], dict[str, tuple[str, str]]]:
     """(label -> method name, label -> settings with the dataset's hints, label -> (role, description))."""
     methods: dict[str, str] = {}
     roles: dict[str, tuple[str, str]] = {}
@@ -33,7 +33,7 @@ def navigation_methods(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *,
     for s in rows:
         methods[s.label] = s.name
         if s.name not in _NAV_BUILTINS:
-            s = with_hints(s, hints)
+            s = with_label_noise(with_hints(s, hints), labels)
         if s.settings:
             settings[s.label] = dict(s.settings)
     return methods, settings, roles
@@ -49,8 +49,8 @@ def _maps(res: Any, out: Path, methods: list[str]) -> None:
     for label in methods:
         key = (label, sd, qid)
         r = rec.loc[(label, sd, qid, float(res.config["delta"]))]
-        title = (f"{label}: {q.object_id} ({q.category}; on {q.gt_receptacle or 'nothing'}, on "
-                 f"{q.map_receptacle or 'nothing'} at the last map), query {qid}: {r['outcome']}, {r['path_m']:.1f} m")
+        title = (f"{label}: {r['outcome']} after {r['path_m']:.1f} m (query {qid} of seed {sd})\n{q.object_id} "
+                 f"({q.category}): on {q.gt_receptacle or 'nothing'}, on {q.map_receptacle or 'nothing'} at the last map")
         plot_query(res.env, q, out / f"map_{label}.png", beliefs=res.beliefs.get(key), trail=res.trails.get(key),
                    cache=res.cache, title=title)
 
@@ -71,7 +71,7 @@ def run_navigation_job(specs: Sequence[EstimatorSpec], dataset: Path, options: A
     from psg_data.navigation import run_navigation
 
     hints = dataset_hints(open_dataset(dataset))
-    methods, settings, roles = navigation_methods(specs, hints, references=references)
+    methods, settings, roles = navigation_methods(specs, hints, references=references, labels=options.labels)
     if len(deltas) > 1:
         options = replace(options, delta=float(deltas[0]), delta_sweep=tuple(float(d) for d in deltas[1:]))
     t0 = time.perf_counter()
@@ -81,7 +81,7 @@ def run_navigation_job(specs: Sequence[EstimatorSpec], dataset: Path, options: A
     if plots and res.env is not None:
         _maps(res, out, list(methods))
         if res.sweep is not None:
-            plot_delta_sweep(res, out / "delta_sweep.png")
+            plot_delta_sweep(res, out / "delta_sweep.png", roles=roles)
     return res, navigation_results(res, roles=roles, info=full)
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from psg_data.evaluation._aggregate import Summary
-from psg_data.evaluation._intervals import describe_interval
+from psg_data.evaluation._intervals import MIN_BOOTSTRAP_UNITS
 from psg_data.evaluation._references import describe_method
 from psg_data.evaluation._report import pct_of_ceiling
 from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, ResultTable, save_results
@@ -117,8 +117,16 @@ def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
         out.append("reference rows: " + "; ".join(f"{r.method} = {r.description}" for r in refs))
     s = next((v for r in rows for v in r.values.values() if v.method != "none"), None)
     n_sets = len(cfg.get("seeds") or [])
-    extra = f" ({n_sets} query sets pooled; each column resamples its own queries)"
-    out.append(describe_interval(s.method, "queries", s.n, extra=extra) if s is not None else "±: -")
+    if s is None:
+        out.append("±: -")
+        return out
+    counts = {g: v.n for g, v in (("static", rows[0].values.get("static_sr")), ("dynamic", rows[0].values.get("dynamic_sr")),
+                                  ("absent", rows[0].values.get("absent_ar")), ("overall", rows[0].values.get("overall_sr")))
+              if v is not None}
+    what = ", ".join(f"{k} {n}" for k, n in counts.items())
+    out.append(f"±: half-width of the 95 % interval over each column's queries, resampled whole ({what}; {n_sets} "
+               f"query sets pooled): expanded percentile bootstrap, or a jackknife t-interval under "
+               f"{MIN_BOOTSTRAP_UNITS} queries")
     return out
 
 
@@ -151,7 +159,9 @@ def _sweep_table(res: Any, roles: Mapping[str, tuple[str, str]]) -> ResultTable 
         return None
     keys = ["overall_sr", "dynamic_sr", "absent_ar"]
     rows = []
-    for _, r in res.sweep.iterrows():
+    order = {m: i for i, m in enumerate(res.config.get("methods", []))}
+    sweep = res.sweep.assign(_o=res.sweep["method"].map(order)).sort_values(["_o", "delta"], kind="stable")
+    for _, r in sweep.iterrows():
         role = roles.get(str(r["method"]), ("method", ""))[0]
         rows.append(ResultRow(f"{r['method']} @ {r['delta']:g}", role, {m: _summary_of(r, m) for m in keys},
                               counts={"delta": f"{r['delta']:g}"}))
@@ -168,6 +178,9 @@ def navigation_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None 
     """The results-schema form of a navigation run (module docstring)."""
     roles = dict(roles or {})
     tables = [_main_table(res, roles, layout)]
+    label = (info or {}).get("dataset_label")
+    if label:
+        tables[0].title = tables[0].title.replace(f"on {res.config.get('env')} ", f"on {label} ", 1)
     sweep = _sweep_table(res, roles)
     if sweep is not None:
         tables.append(sweep)
@@ -206,13 +219,15 @@ def choose_map_query(res: Any, methods: list[str] | None = None) -> tuple[int, i
     dyn = rec[rec["category"] == "dynamic"]
     if dyn.empty:
         return sd, int(res.queries[sd][0].query_id)
-    sig = dyn.assign(sig=dyn["outcome"].astype(str) + "|" + dyn["predicted_receptacle"].astype(str))
-    score = sig.groupby("query_id").agg(kinds=("sig", "nunique"), found=("success", "sum"))
-    best = score.sort_values(["kinds", "found", ], ascending=[False, False]).index[0]
+    sig = dyn.assign(sig=dyn["outcome"].astype(str) + "|" + dyn["predicted_receptacle"].astype(str),
+                     far=dyn["shortest_path_m"].fillna(0.0) >= 3.0)
+    score = sig.groupby("query_id").agg(far=("far", "all"), kinds=("sig", "nunique"), found=("success", "sum"))
+    best = score.sort_values(["far", "kinds", "found"], ascending=[False, False, False]).index[0]
     return sd, int(best)
 
 
-def plot_delta_sweep(res: Any, out_path: str | Path | None = None) -> Figure:
+def plot_delta_sweep(res: Any, out_path: str | Path | None = None, *,
+                     roles: Mapping[str, tuple[str, str]] | None = None) -> Figure:
     """Overall SR, dynamic SR and AR against delta, one line per method (reference rows dashed), 95 % intervals."""
     import matplotlib
     import numpy as np
@@ -233,7 +248,7 @@ def plot_delta_sweep(res: Any, out_path: str | Path | None = None) -> Figure:
             err = 100 * np.vstack([np.nan_to_num(d[f"{key}_mean"] - d[f"{key}_ci_low"]),
                                    np.nan_to_num(d[f"{key}_ci_high"] - d[f"{key}_mean"])])
             ax.errorbar(d["delta"], m, yerr=err, marker="o", ms=4, capsize=2, lw=1.3, color=cmap(i % 10), label=n,
-                        ls="--" if n in ("oracle", "random_receptacle", "last_seen_map") else "-")
+                        ls="--" if n in (roles or {}) else "-")
         ax.set_xlabel("delta (abort when no receptacle has a belief >= delta)", fontsize=8)
         ax.set_title(title, fontsize=9)
         ax.set_ylim(-3, 103)

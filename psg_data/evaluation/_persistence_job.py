@@ -18,7 +18,7 @@ from typing import Any
 
 from psg_data.errors import EvaluationError
 from psg_data.evaluation._dataset_task import PersistenceTask
-from psg_data.evaluation._hints import EstimatorSpec, with_hints
+from psg_data.evaluation._hints import EstimatorSpec, with_hints, with_label_noise
 from psg_data.evaluation._options import PersistenceOptions
 from psg_data.evaluation._oracles import TruthFactory
 from psg_data.evaluation._persistence_result import PersistenceResult, merge_results
@@ -55,7 +55,8 @@ def factories_for(specs: Sequence[EstimatorSpec], task: PersistenceTask) -> dict
         if s.name == "ground_truth":
             out[s.label] = TruthFactory(task.ground_truth)
         else:
-            out[s.label] = RegistryFactory(s.name, with_hints(s, task.estimator_hints).settings)
+            s2 = with_label_noise(with_hints(s, task.estimator_hints), str(task.info.get("labels_spec", "gt")))
+            out[s.label] = RegistryFactory(s.name, s2.settings)
     return out
 
 
@@ -149,5 +150,5 @@ def write_persistence_outputs(result: PersistenceResult, out: Path, *, info: dic
         if result.traces:
             plot_beliefs(result.traces, out / "belief.png", timezone=timezone, skip=flat)
         plot_metric_bars(results, out / "bars.png")
-        plot_horizon(result, out / "horizon.png", skip=flat)
+        plot_horizon(result, out / "horizon.png", skip=[n for n in flat if n != "always_absent"] + ["always_absent"])
     return results

@@ -72,6 +72,11 @@ def _draw_order(traces: Sequence[PredictionTrace]) -> list[PredictionTrace]:
     return sorted(traces, key=lambda tr: -float(np.sum(np.abs(np.diff(tr.belief)))))
 
 
+def _wiggly(belief: NDArray[np.float64]) -> bool:
+    """A belief that swings by more than 0.15 per evaluation time on average (drawn thin and light)."""
+    return belief.size > 2 and float(np.mean(np.abs(np.diff(belief)))) > 0.15
+
+
 def _pos_of(t: NDArray[np.float64], ref_t: NDArray[np.float64], ref_x: NDArray[np.float64]) -> NDArray[np.float64]:
     """Positions of times ``t`` on the compressed axis of ``ref_t`` (nearest earlier grid time + offset)."""
     i = np.clip(np.searchsorted(ref_t, t, side="right") - 1, 0, ref_t.size - 1)
@@ -88,7 +93,9 @@ def _edge_panel(ax: Any, mine: list[PredictionTrace], colours: dict[str, Any], t
         ax.axvline(x[c] - 0.5 * (x[c] - x[c - 1]), color="0.5", lw=0.8, ls=":")
     for tr in _draw_order(mine):
         xb, yb = _broken(x, tr.belief, cuts)
-        ax.plot(xb, yb, lw=1.3, color=colours[tr.estimator], label=tr.estimator, alpha=0.9)
+        busy = _wiggly(tr.belief)
+        ax.plot(xb, yb, lw=0.7 if busy else 1.4, color=colours[tr.estimator], alpha=0.45 if busy else 0.95,
+                label=tr.estimator, zorder=1 if busy else 2)
     if ref.obs_t_s.size:
         inside = (ref.obs_t_s >= ref.t_s[0]) & (ref.obs_t_s <= ref.t_s[-1])
         ox = _pos_of(ref.obs_t_s[inside], ref.t_s, x)
@@ -130,6 +137,8 @@ def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path | None 
 
         handles.append(Line2D([], [], color="0.5", lw=0.8, ls=":"))
         labels.append("cut: time outside the scoring windows (not scored, not drawn)")
+        handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.45))
+        labels.append("thin, light line: a belief that oscillates between evaluation times")
         fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False, bbox_to_anchor=(0.5, 0.0))
     fig.suptitle(title or f"Belief over the test window, the {len(edges)} edges whose state changes most "
                           f"(seed {seed}, local time {timezone})", fontsize=10)
@@ -150,9 +159,10 @@ def _bar_panel(ax: Any, table: Any, metric: Any, colours: list[Any]) -> None:
     bars = ax.bar(x, np.nan_to_num(means), yerr=np.nan_to_num(err), color=colours, capsize=3, edgecolor="0.25", lw=0.6)
     for b, r in zip(bars, rows):
         b.set_hatch(_ROLE_HATCH.get(r.role, ""))
-    for xi, m in zip(x, means):
+    for xi, m, h in zip(x, means, hi):
         if math.isfinite(m):
-            ax.text(xi, min(m, 1.0) + 0.02, f"{m:.2f}", ha="center", va="bottom", fontsize=7)
+            top = h if math.isfinite(h) else m
+            ax.text(xi, min(top, 1.02) + 0.015, f"{m:.2f}", ha="center", va="bottom", fontsize=7)
     if metric.chance is not None and math.isfinite(metric.chance):
         ax.axhline(metric.chance, color="k", ls="--", lw=1.0)
     ax.set_xticks(x, [r.method for r in rows], rotation=35, ha="right", fontsize=7)
@@ -193,9 +203,20 @@ def plot_metric_bars(results: EvalResults | Any, out_path: str | Path | None = N
     return save_figure(fig, out_path)
 
 
+def _bin_shares(result: Any, order: list[str]) -> dict[str, float]:
+    """Share of the scored time in each horizon bin (first estimator, first seed and draw)."""
+    rows = [r for r in result.breakdown_rows if r.by == "horizon"]
+    if not rows:
+        return {}
+    r0 = rows[0]
+    mine = [r for r in rows if (r.estimator, r.seed, r.draw) == (r0.estimator, r0.seed, r0.draw)]
+    total = sum(r.span_s for r in mine) or 1.0
+    return {b: sum(r.span_s for r in mine if r.key == b) / total for b in order}
+
+
 def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Sequence[str] = ()) -> Figure:
     """The metrics by time since the edge's last observation the filter had (``by_horizon.csv``), with
-    intervals; one line per row, the chance level dashed."""
+    intervals; one line per row; the chance row (``always_absent``) dashed black."""
     import matplotlib
     from matplotlib.figure import Figure
 
@@ -204,9 +225,10 @@ def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Seque
 
     df = result.breakdown("horizon")
     order = [b for b in [*horizon_bin_names(), "no observation yet"] if b in set(df["horizon"])]
+    shares = _bin_shares(result, order)
     names = [n for n in result.estimators if n not in set(skip)]
     cmap = matplotlib.colormaps["tab10"]
-    fig = Figure(figsize=(13, 4.0))
+    fig = Figure(figsize=(13, 4.2))
     axes = fig.subplots(1, 3)
     x = np.arange(len(order))
     for ax, key in zip(axes, ("mae", "balanced_accuracy", "f1")):
@@ -215,15 +237,19 @@ def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Seque
             d = df[(df.estimator == n) & (df.metric == key)].set_index("horizon").reindex(order)
             m = d["mean"].to_numpy(float)
             err = np.vstack([np.nan_to_num(m - d["ci_low"].to_numpy(float)), np.nan_to_num(d["ci_high"].to_numpy(float) - m)])
-            ax.errorbar(x + (i - len(names) / 2) * 0.04, m, yerr=err, marker="o", ms=4, lw=1.2, capsize=2,
+            ax.errorbar(x + (i - (len(names) - 1) / 2) * 0.05, m, yerr=err, marker="o", ms=4, lw=1.2, capsize=2,
                         color=cmap(i % 10), label=n)
-        if key == "balanced_accuracy":
-            ax.axhline(0.5, color="k", ls="--", lw=1.0, label="chance (0.5)")
-        ax.set_xticks(x, order, fontsize=8)
-        ax.set_xlabel("time since the edge's last observation used", fontsize=8)
+        if "always_absent" in set(df.estimator):
+            c = df[(df.estimator == "always_absent") & (df.metric == key)].set_index("horizon").reindex(order)
+            ax.plot(x, c["mean"].to_numpy(float), "k--", lw=1.0, label="chance (always_absent)")
+        ax.set_xticks(x, [f"{b}\n{100 * shares.get(b, 0):.0f} % of the time" for b in order], fontsize=8)
+        ax.set_xlim(-0.5, len(order) - 0.5)
+        ax.set_xlabel("time since the edge's last observation the filter had", fontsize=8)
         ax.set_title(f"{info.label} ({info.better} is better)", fontsize=9)
     h, lab = axes[1].get_legend_handles_labels()
     fig.legend(h, lab, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, frameon=False)
-    fig.suptitle("Scores by forecast horizon (points: estimate; bars: 95 % interval, as in the table)", fontsize=9)
+    setting = str(result.config.get("setting_text", ""))
+    fig.suptitle(f"Scores by forecast horizon ({setting}; points: estimate, bars: 95 % interval as in the table; "
+                 "under each bin its share of the scored time)", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, out_path)

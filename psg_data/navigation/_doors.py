@@ -631,7 +631,12 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.legend(loc="upper center", fontsize=7, ncol=2, bbox_to_anchor=(0.45, -0.2))
+    from matplotlib.patches import Patch
+
+    handles, _ = ax.get_legend_handles_labels()
+    handles += [Patch(facecolor="0.25", label="walls and furniture (obstacles)"),
+                Patch(facecolor=cmap(0.9), edgecolor="0.3", label="door: colour = predicted P(open), text = truth")]
+    ax.legend(handles=handles, loc="upper center", fontsize=7, ncol=2, bbox_to_anchor=(0.45, -0.2))
     short = f"{episode.shortest_m:.1f} m" if math.isfinite(episode.shortest_m) else "none (no route is open)"
     ax.set_title(title or f"query {query.query_id} to {query.goal}\n{episode.method} walked {episode.walked_m:.1f} m; "
                           f"shortest with the true doors {short}", fontsize=10)
