@@ -67,7 +67,6 @@ def plot_query(
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
-    from matplotlib.patches import Polygon
 
     grid = cache.grid if cache is not None else env.grid
     cfg = grid.door_config(query.doors_open)
@@ -80,20 +79,7 @@ def plot_query(
     ax = fig.subplots()
     ax.imshow(img, origin="lower", extent=grid.extent_m, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
     cmap = matplotlib.colormaps["viridis"]
-    bel = dict(beliefs or {})
-    for rid, rec in env.receptacles.items():
-        fp = box_footprint(rec.box)
-        b = bel.get(rid)
-        face = cmap(float(b)) if b is not None else (0.85, 0.85, 0.85, 1.0)
-        ax.add_patch(Polygon(fp, closed=True, facecolor=face, edgecolor="black", lw=0.6,
-                             hatch=None if b is not None else "///"))
-        if rid == query.gt_receptacle:
-            ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="gold", lw=2.5))
-        if rid == query.map_receptacle:
-            ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="magenta", lw=1.5, ls="--"))
-        if b is not None and b >= 0.05:
-            c = fp.mean(axis=0)
-            ax.text(c[0], c[1], f"{b:.2f}", ha="center", va="center", fontsize=6, color="white")
+    _draw_receptacles(ax, env, query, dict(beliefs or {}), cmap)
     _draw_doors(ax, env, query, door_p_open)
     sx, sy = query.start_xy
     ax.plot([sx], [sy], "o", color="tab:blue", ms=7, label="start")
@@ -112,19 +98,7 @@ def plot_query(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    from matplotlib.patches import Patch
-
-    proxies = [Patch(facecolor="none", edgecolor="gold", lw=2.5, label="true receptacle"),
-               Patch(facecolor="none", edgecolor="magenta", ls="--", lw=1.5, label="receptacle at the last map"),
-               Patch(facecolor=(0.85, 0.85, 0.85), edgecolor="black", hatch="///", label="no edge (never seen there)")]
-    if door_p_open is None:
-        proxies += [Patch(facecolor="limegreen", edgecolor="black", label="door open (truth)"),
-                    Patch(facecolor="red", edgecolor="black", label="door closed (truth)")]
-    else:
-        proxies += [Patch(facecolor=_DOOR_CMAP[0], edgecolor="black", label="door predicted closed"),
-                    Patch(facecolor=_DOOR_CMAP[2], edgecolor="black", label="door predicted open")]
-    handles, _ = ax.get_legend_handles_labels()
-    ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.2))
+    _query_legend(ax, door_p_open)
     ax.set_title(title or f"{query.object_id} ({query.category}), query {query.query_id}")
     if out_path is not None:
         out = Path(out_path)
@@ -134,6 +108,43 @@ def plot_query(
 
 
 _DOOR_CMAP = ("#e75480", "#f2e6c9", "#008080")  # pink (predicted closed) .. teal (predicted open)
+
+
+def _draw_receptacles(ax: Any, env: NavigationEnv, query: Query, bel: Mapping[str, float], cmap: Any) -> None:
+    """Receptacles coloured by belief (hatched without an edge), true one gold, last-map one dashed magenta."""
+    from matplotlib.patches import Polygon
+
+    for rid, rec in env.receptacles.items():
+        fp = box_footprint(rec.box)
+        b = bel.get(rid)
+        face = cmap(float(b)) if b is not None else (0.85, 0.85, 0.85, 1.0)
+        ax.add_patch(Polygon(fp, closed=True, facecolor=face, edgecolor="black", lw=0.6,
+                             hatch=None if b is not None else "///"))
+        if rid == query.gt_receptacle:
+            ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="gold", lw=2.5))
+        if rid == query.map_receptacle:
+            ax.add_patch(Polygon(fp, closed=True, fill=False, edgecolor="magenta", lw=1.5, ls="--"))
+        if b is not None and b >= 0.05:
+            c = fp.mean(axis=0)
+            ax.text(c[0], c[1], f"{b:.2f}", ha="center", va="center", fontsize=6, color="white")
+
+
+def _query_legend(ax: Any, door_p_open: Mapping[str, float] | None) -> None:
+    """Every symbol of the map in one legend under it."""
+    from matplotlib.patches import Patch
+
+    proxies = [Patch(facecolor="none", edgecolor="gold", lw=2.5, label="true receptacle (at the query time)"),
+               Patch(facecolor="none", edgecolor="magenta", ls="--", lw=1.5, label="receptacle at the last map"),
+               Patch(facecolor=(0.85, 0.85, 0.85), edgecolor="black", hatch="///", label="no edge (never seen there)"),
+               Patch(facecolor="0.15", label="walls"), Patch(facecolor="0.75", label="too close to an obstacle")]
+    if door_p_open is None:
+        proxies += [Patch(facecolor="limegreen", edgecolor="black", label="door open (truth)"),
+                    Patch(facecolor="red", edgecolor="black", label="door closed (truth)")]
+    else:
+        proxies += [Patch(facecolor=_DOOR_CMAP[0], edgecolor="black", label="door predicted closed"),
+                    Patch(facecolor=_DOOR_CMAP[2], edgecolor="black", label="door predicted open")]
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=handles + proxies, loc="upper center", fontsize=7, ncol=4, bbox_to_anchor=(0.5, -0.2))
 
 
 def _draw_doors(ax: Any, env: NavigationEnv, query: Query, p_open: Mapping[str, float] | None) -> None:

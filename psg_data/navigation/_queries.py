@@ -154,30 +154,36 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
         xy = env.grid.cell_to_world(ij)
         return Query(k, int(seed), o, t, ij, (float(xy[0]), float(xy[1])), cat, gt, env.map_state.get(o), doors)
 
-    out: list[Query] = []
     if quotas is not None:
-        want = {c: int(n) for c, n in quotas.items() if int(n) > 0}
-        got = {c: 0 for c in want}
-        budget = 2000 * max(sum(want.values()), 1)
-        for _ in range(budget):
-            if got == want:
-                break
-            d = draw()
-            if got.get(d[5], 0) < want.get(d[5], 0) and reachable(d[3], d[4], d[2]):
-                got[d[5]] += 1
-                out.append(query(len(out), d))
-        if got != want:
-            raise EvaluationError(f"{env.name}: could not draw the query quotas {want} in {budget} draws (got {got}); "
-                                  "the query window has too few targets of some category")
-        return out
+        return _fill_quotas(quotas, draw, reachable, query, env.name)
     if n_queries < 1:
         raise EvaluationError(f"n_queries must be >= 1, got {n_queries}")
+    out: list[Query] = []
     for q in range(n_queries):
         for _ in range(max(1, max_tries)):
             d = draw()
             if reachable(d[3], d[4], d[2]):
                 break
         out.append(query(q, d))
+    return out
+
+
+def _fill_quotas(quotas: Mapping[str, int], draw: Any, reachable: Any, query: Any, name: str) -> list[Query]:
+    """Draws kept while their category is not full (and their present target reachable), in draw order."""
+    want = {c: int(n) for c, n in quotas.items() if int(n) > 0}
+    got = {c: 0 for c in want}
+    budget = 2000 * max(sum(want.values()), 1)
+    out: list[Query] = []
+    for _ in range(budget):
+        if got == want:
+            break
+        d = draw()
+        if got.get(d[5], 0) < want.get(d[5], 0) and reachable(d[3], d[4], d[2]):
+            got[d[5]] += 1
+            out.append(query(len(out), d))
+    if got != want:
+        raise EvaluationError(f"{name}: could not draw the query quotas {want} in {budget} draws (got {got}); "
+                              "the query window has too few targets of some category")
     return out
 
 

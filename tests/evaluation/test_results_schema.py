@@ -1,0 +1,76 @@
+"""One versioned results schema for every task: written and read by one module, rendered by one renderer."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from psg_data.errors import EvaluationError
+from psg_data.evaluation import (
+    EvalResults,
+    MetricInfo,
+    ResultRow,
+    ResultTable,
+    Summary,
+    format_results,
+    load_results,
+    results_frame,
+    save_results,
+)
+
+
+def _results() -> EvalResults:
+    m = [MetricInfo("mae", "MAE", "lower", "mean error", chance=0.4), MetricInfo("f1", "F1", "higher", "f1")]
+    s = lambda v, lo, hi: Summary(v, 0.0, lo, hi, 21, "bootstrap", "objects")  # noqa: E731
+    rows = [ResultRow("mine", "method", {"mae": s(0.2, 0.15, 0.25), "f1": s(0.5, 0.4, 0.6)}, "my estimator",
+                      counts={"edges": 56}),
+            ResultRow("ceil", "ceiling", {"mae": s(0.1, 0.08, 0.12), "f1": s(0.7, 0.6, 0.8)}, "the best", 100.0),
+            ResultRow("zero", "chance", {"mae": s(0.4, 0.3, 0.5), "f1": Summary(0.0, 0.0, math.nan, math.nan, 1, "none", "objects")}),
+            ResultRow("base", "baseline", {"mae": s(0.25, 0.2, 0.3), "f1": s(0.55, 0.5, 0.6)})]
+    t = ResultTable("persistence", "A table", m, rows, ["MAE: ...", "±: what it is"], count_columns=["edges"],
+                    primary="f1")
+    return EvalResults("persistence", [t], config={"setting_text": "adaptive"}, info={"command": "psg-eval"})
+
+
+def test_save_and_load_round_trip(tmp_path: Path) -> None:
+    res = _results()
+    paths = save_results(res, tmp_path)
+    data = json.loads(paths["json"].read_text())
+    assert data["schema"] == "psg-eval-results" and data["schema_version"] == 1
+    back = load_results(tmp_path)
+    assert back.to_dict() == res.to_dict()
+    assert back.table().row("ceil").pct_of_ceiling == 100.0
+    assert math.isnan(back.table().row("zero").values["f1"].ci_low)
+    df = results_frame(back)
+    assert len(df) == 8 and set(df["role"]) == {"method", "ceiling", "chance", "baseline"}
+
+
+def test_loader_refuses_unknown_files_with_one_line(tmp_path: Path) -> None:
+    (tmp_path / "results.json").write_text(json.dumps({"summary": {}}))
+    with pytest.raises(EvaluationError, match="not a psg-eval results file"):
+        load_results(tmp_path)
+    (tmp_path / "results.json").write_text(json.dumps({"schema": "psg-eval-results", "schema_version": 99}))
+    with pytest.raises(EvaluationError, match="schema version 99"):
+        load_results(tmp_path)
+    (tmp_path / "results.json").write_text("{not json")
+    with pytest.raises(EvaluationError, match="not valid JSON"):
+        load_results(tmp_path)
+    with pytest.raises(EvaluationError, match="missing"):
+        load_results(tmp_path / "nowhere")
+
+
+def test_the_renderer_orders_reference_rows_first_and_marks_the_best_non_ceiling_row() -> None:
+    text = format_results(_results())
+    lines = text.splitlines()
+    order = [next(i for i, ln in enumerate(lines) if ln.startswith(name + " ")) for name in ("ceil", "base", "zero", "mine")]
+    assert order == sorted(order)
+    mine = next(ln for ln in lines if ln.startswith("mine "))
+    assert "0.200 ± 0.050*" in mine and "56" in mine  # best MAE among the non-ceiling rows, half-width of the interval
+    ceil = next(ln for ln in lines if ln.startswith("ceil "))
+    assert "*" not in ceil and "100 %" in ceil
+    zero = next(ln for ln in lines if ln.startswith("zero "))
+    assert "0.000 " in zero and "0.000 ±" not in zero  # no interval: the estimate alone
+    assert lines[-1] == "±: what it is" and "\x1b" not in text  # plain text, notes under the table
