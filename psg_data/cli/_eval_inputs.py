@@ -10,7 +10,7 @@ from psg_data.errors import EstimatorError, EvaluationError
 from psg_data.evaluation._hints import EstimatorSpec, dataset_hints, require_hints, with_hints
 
 __all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice", "resolve_dataset",
-           "persistence_task_for", "dataset_hints", "require_hints", "available_hints", "BENCHMARK", "DEMO"]
+           "persistence_task_for", "persistence_tasks", "dataset_hints", "require_hints", "available_hints", "BENCHMARK", "DEMO"]
 
 BENCHMARK = "persistence-benchmark"
 DEMO = "demo"
@@ -137,6 +137,12 @@ def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool) -> 
     if choice.label == "demo lab":
         task.name = "the built-in lab (demo, lab seed 0)"
     return task
+
+
+def persistence_tasks(choice: DatasetChoice, *, labels: str, seeds: list[int], quiet: bool) -> tuple[list[Any], dict]:
+    """Former form of :func:`persistence_task_for` (one task in a list, and its ``info``), kept for scripts."""
+    task = persistence_task_for(choice, labels=labels, quiet=quiet)
+    return [task], dict(task.info)
 
 
 def _label_demo_if_needed(ds: Any, labels: str, quiet: bool) -> None:

@@ -193,7 +193,7 @@ def load_results(path: str | Path) -> EvalResults:
         EvaluationError: missing, not JSON, or not a known results schema (one line).
     """
     p = Path(path)
-    if p.is_dir():
+    if p.is_dir() or p.suffix != ".json":
         p = p / "results.json"
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
