@@ -103,6 +103,19 @@ def t_interval(values: ArrayLike, *, confidence: float = 0.95, unit: str = "repe
     return Interval(mean, mean - half, mean + half, n, "t", unit, confidence)
 
 
+def _ratio_start(num: ArrayLike, den: ArrayLike, unit: str, confidence: float
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], Interval | None]:
+    """Units kept, and the interval when there are fewer than two (no spread to estimate)."""
+    _check_confidence(confidence)
+    n_, d_ = _ratio_inputs(num, den)
+    nan = float("nan")
+    if n_.size == 0:
+        return n_, d_, Interval(nan, nan, nan, 0, "none", unit, confidence)
+    if n_.size == 1:
+        return n_, d_, Interval(float(n_.sum() / d_.sum()), nan, nan, 1, "none", unit, confidence)
+    return n_, d_, None
+
+
 def _ratio_inputs(num: ArrayLike, den: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     n = np.asarray(num, dtype=np.float64).reshape(-1)
     d = np.asarray(den, dtype=np.float64).reshape(-1)
@@ -126,16 +139,12 @@ def cluster_bootstrap(num: ArrayLike, den: ArrayLike, *, confidence: float = 0.9
     """
     from scipy import stats
 
-    _check_confidence(confidence)
     if n_bootstrap < 1:
         raise EvaluationError(f"n_bootstrap must be >= 1, got {n_bootstrap}")
-    n_, d_ = _ratio_inputs(num, den)
-    n = int(n_.size)
-    if n == 0:
-        return Interval(float("nan"), float("nan"), float("nan"), 0, "none", unit, confidence)
-    est = float(n_.sum() / d_.sum())
-    if n == 1:
-        return Interval(est, float("nan"), float("nan"), 1, "none", unit, confidence)
+    n_, d_, trivial = _ratio_start(num, den, unit, confidence)
+    if trivial is not None:
+        return trivial
+    n, est = int(n_.size), float(n_.sum() / d_.sum())
     rng = np.random.default_rng(seed)
     counts = rng.multinomial(n, np.full(n, 1.0 / n), size=n_bootstrap).astype(np.float64)
     den_b = counts @ d_
@@ -152,14 +161,10 @@ def cluster_jackknife(num: ArrayLike, den: ArrayLike, *, confidence: float = 0.9
     """
     from scipy import stats
 
-    _check_confidence(confidence)
-    n_, d_ = _ratio_inputs(num, den)
-    n = int(n_.size)
-    if n == 0:
-        return Interval(float("nan"), float("nan"), float("nan"), 0, "none", unit, confidence)
-    est = float(n_.sum() / d_.sum())
-    if n == 1:
-        return Interval(est, float("nan"), float("nan"), 1, "none", unit, confidence)
+    n_, d_, trivial = _ratio_start(num, den, unit, confidence)
+    if trivial is not None:
+        return trivial
+    n, est = int(n_.size), float(n_.sum() / d_.sum())
     loo = (n_.sum() - n_) / (d_.sum() - d_)
     se = math.sqrt((n - 1) / n * float(np.sum((loo - loo.mean()) ** 2)))
     half = float(stats.t.ppf(0.5 + confidence / 2.0, n - 1)) * se
@@ -182,7 +187,7 @@ def describe_interval(method: str, unit: str, n: int, confidence: float = 0.95, 
     if method == "t":
         what = f"t-interval over {n} {unit} (mean ± t * s / sqrt(n))"
     elif method == "bootstrap":
-        what = f"expanded percentile bootstrap over the {n} {unit} (2000 resamples; {unit} resampled whole)"
+        what = f"expanded percentile bootstrap over the {n} {unit} ({unit} resampled whole)"
     elif method == "jackknife-t":
         what = f"t-interval over the {n} {unit} with a jackknife standard error (too few {unit} for a bootstrap)"
     else:

@@ -262,8 +262,9 @@ def merge_results(results: Sequence[PersistenceResult]) -> PersistenceResult:
             draws.append(d)
     config = dict(first.config)
     config["draws"] = draws
-    config["n_edges"] = round(sum(r.config.get("n_edges", 0) for r in results) / len(results), 1)
-    config["n_objects"] = round(sum(r.config.get("n_objects", 0) for r in results) / len(results), 1)
+    for k in ("n_edges", "n_objects"):
+        v = sum(r.config.get(k, 0) for r in results) / len(results)
+        config[k] = int(v) if float(v).is_integer() else round(v, 1)
     config["per_draw"] = [{k: r.config.get(k) for k in ("draws", "n_edges", "n_objects", "n_test_observations")}
                           for r in results]
     merged = PersistenceResult(config=config, edges=[e for r in results for e in r.edges],

@@ -110,9 +110,9 @@ def format_table(table: ResultTable, *, width: int | None = WIDE, notes: bool = 
     """Plain text of one table (and its notes): what ``table.txt`` holds."""
     buf = io.StringIO()
     con = _console(buf, width, True)
-    con.print(render_table(table))
-    text = buf.getvalue().rstrip()
-    lines = [ln.rstrip() for ln in text.splitlines()]
+    con.print(render_table(table, show_title=False))
+    text = buf.getvalue().rstrip("\n")
+    lines = [table.title, *(ln.rstrip() for ln in text.splitlines())]
     if notes:
         lines += table.notes
     return "\n".join(lines)
@@ -132,7 +132,8 @@ def print_results(results: EvalResults, *, file: Any = None) -> None:
     for k, t in enumerate(results.tables):
         if k:
             con.print()
-        con.print(render_table(t))
+        con.print(t.title, markup=False, style="bold" if is_tty else None, overflow="ignore", crop=False)
+        con.print(render_table(t, show_title=False))
         for line in t.notes:
             con.print(line, markup=False, style="dim" if is_tty else None, overflow="ignore", crop=False)
 
@@ -154,7 +155,7 @@ def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | Non
         from rich.table import Table
         from rich.text import Text
 
-        t = Table(title=Text(merged.title), box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+        t = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
         for c in ("run", "Method", "ref", "setting", *(_headers(merged)), "±"):
             t.add_column(Text(c), justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right",
                          no_wrap=True)
@@ -166,5 +167,5 @@ def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | Non
                          *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], what]
                 t.add_row(*(Text(c) for c in cells))
         con.print(t)
-        blocks.append("\n".join(ln.rstrip() for ln in buf.getvalue().rstrip().splitlines()))
+        blocks.append("\n".join([merged.title, *(ln.rstrip() for ln in buf.getvalue().rstrip("\n").splitlines())]))
     return "\n\n".join(blocks)
