@@ -148,7 +148,11 @@ def write_persistence_outputs(result: PersistenceResult, out: Path, *, info: dic
         flat = [n for n, (role, _) in roles.items() if role == "chance"] + \
             [n for n in result.estimators if n.endswith("output=median")]
         if result.traces:
-            plot_beliefs(result.traces, out / "belief.png", timezone=timezone, skip=flat)
+            from psg_data.evaluation._report import choose_plot_edges
+
+            truth = {t.edge: (t.t_s, t.truth) for t in result.traces}
+            keep = set(choose_plot_edges(truth, k=4))  # all traces are kept when --rerun asks for them
+            plot_beliefs([t for t in result.traces if t.edge in keep], out / "belief.png", timezone=timezone, skip=flat)
         plot_metric_bars(results, out / "bars.png")
         plot_horizon(result, out / "horizon.png", skip=[n for n in flat if n != "always_absent"] + ["always_absent"])
     return results

@@ -450,7 +450,8 @@ def run_persistence_task(estimators: Any, task: PersistenceTask, options: Persis
         EvaluationError: empty test split or ground truth, bad settings, unknown timezone, or an
             estimator that cannot be sent to worker processes.
     """
-    opts = (options or PersistenceOptions()).resolve(task)
+    given = options or PersistenceOptions()
+    opts = given.resolve(task)
     _check_task(task)
     jobs = _resolve_jobs(jobs)
     factories = resolve_estimators(estimators)
@@ -464,7 +465,10 @@ def run_persistence_task(estimators: Any, task: PersistenceTask, options: Persis
     else:
         with _open_pool(jobs, executor) as pool:
             _execute_pool(run, pool, jobs)
-    return _assemble(run, opts)
+    result = _assemble(run, opts)
+    if given.horizon != "auto":
+        result.config["horizon_reason"] = "set by the caller (--horizon)"
+    return result
 
 
 def evaluate_persistence(estimators: Any, train_streams: Sequence[EdgeStream], test_streams: Sequence[EdgeStream],

@@ -95,7 +95,7 @@ def _setting_note(cfg: dict[str, Any]) -> str:
         h = format_duration(float(cfg["horizon"]))
         text += f" (a prediction at t uses the observations up to t - {h}; horizon: {cfg.get('horizon_reason')})"
     elif cfg.get("setting") == "adaptive":
-        text += f" (a prediction at t uses the observations up to t; {cfg.get('horizon_reason')})"
+        text += f" (a prediction at t uses the observations up to t; horizon: {cfg.get('horizon_reason')})"
     else:
         text += " (the test week forecast from the training data; no test observation is applied)"
     w = cfg.get("windows")
