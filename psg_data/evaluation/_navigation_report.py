@@ -107,8 +107,9 @@ def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
     w = cfg.get("windows") or {}
     where = ("inside the scoring windows " + str(w.get("text")) if cfg.get("query_windows") != "none" and w
              else "at any time after the map")
+    doors = "as in each row's brackets" if cfg.get("door_modes") else cfg.get("door_belief")
     out.append(f"protocol {cfg.get('protocol')}: {cfg.get('setting')} agent, delta {cfg.get('delta')}, "
-               f"{cfg.get('max_attempts')} attempts, doors {cfg.get('door_belief')}, labels {cfg.get('labels', 'gt')}; "
+               f"{cfg.get('max_attempts')} attempts, doors {doors}, labels {cfg.get('labels', 'gt')}; "
                f"query times {where}; scored against the {cfg.get('truth', 'schedule')} at the query time; "
                f"unreachable present targets: {int(res.summary['n_unreachable'].iloc[0]) if len(res.summary) else 0} "
                f"(rule: {cfg.get('unreachable')})")
