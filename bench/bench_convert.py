@@ -6,6 +6,7 @@ Usage::
     python bench/bench_convert.py --size-mb 1000           # full comparison (640x480, 8 recordings)
     python bench/bench_convert.py --size-mb 1000 --out-dir /dev/shm   # outputs on tmpfs
     python bench/bench_convert.py --memory-mb 2000         # peak RSS converting one 2 GB recording
+    python bench/bench_convert.py --size-mb 1000 --baseline-tree /tmp/base   # before/after, side by side
 
 Rows (ratios are throughput in MB/s of input, higher is better; each repeat measures the baseline
 and the conversion back to back, so they share the machine's conditions):
@@ -22,6 +23,10 @@ and the conversion back to back, so they share the machine's conditions):
                           default; full) vs image_check none, in rotating order within each repeat:
                           throughput, and CPU time of the process (all threads) as a ratio none / level
   memory:                 peak RSS of a conversion in a fresh subprocess (ru_maxrss, workers included)
+  --baseline-tree DIR:    convert --jobs 1 of the compressed and the raw set with this tree's psg_data
+                          and with the one in DIR (e.g. ``git worktree add /tmp/base main``), each
+                          conversion in a fresh process, in alternating order within each repeat;
+                          the archives of both must be identical byte for byte
 
 Recordings are ROS 1 bags exported from one synthetic canonical scan and hard-linked ``--recordings``
 times (each recording is a separate scan of the output). They are built in ``--tmp`` and deleted.
@@ -327,6 +332,71 @@ def run_memory(tmp: Path, out_dir: Path, memory_mb: float, jobs: int) -> dict[st
     return {"mb": mb, "frames": n, **r}
 
 
+_AB_CODE = """
+import json, sys, time
+sys.path.insert(0, {tree!r})
+import psg_data
+from psg_data.convert import convert
+from psg_data.loaders import Dataset
+t = time.perf_counter()
+convert({src!r}, {out!r}, jobs={jobs})
+seconds = time.perf_counter() - t
+files = Dataset({out!r}).table("files").to_pylist()
+print(json.dumps({{"seconds": seconds, "package": psg_data.__file__,
+                  "archives": {{f["path"]: f["sha256"] for f in files if f["path"].endswith(".tar")}}}}))
+"""
+
+
+def _convert_in(tree: Path, src: Path, out: Path, jobs: int) -> dict[str, object]:
+    """One conversion in a fresh interpreter importing psg_data from ``tree``: seconds and archive digests."""
+    code = _AB_CODE.format(tree=str(tree), src=str(src), out=str(out), jobs=jobs)
+    res = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True, cwd="/")
+    r = json.loads(res.stdout.strip().splitlines()[-1])
+    if not str(r["package"]).startswith(str(tree)):
+        raise RuntimeError(f"psg_data came from {r['package']}, not from {tree}")
+    _rm(out)
+    return r
+
+
+def run_ab(tmp: Path, out_dir: Path, size_mb: float, n_rec: int, repeat: int, baseline: Path,
+           cases: tuple[str, ...]) -> dict[str, object]:
+    """Before/after: this tree's convert --jobs 1 against ``baseline``'s, on the same recordings."""
+    w, h = (640, 480) if size_mb >= 500 else (320, 240)
+    per = bytes_per_frame(tmp, w, h)
+    sets = {}
+    for case in cases:
+        n = max(4, round(size_mb * 1e6 / per[case] / n_rec))
+        print(f"building {n_rec} recordings x {n} frames ({case}), {w}x{h}, in {tmp} ...", file=sys.stderr)
+        rec = build_recordings(tmp, f"rec_{case}", n_rec, n, w, h, case)
+        sets[case] = (rec, dir_size(rec) / 1e6, n)
+    trees = {"baseline": baseline.resolve(), "current": ROOT}
+    secs: dict[str, dict[str, list[float]]] = {c: {"baseline": [], "current": []} for c in cases}
+    loads = []
+    for k in range(repeat):
+        for case, (rec, mb, _) in sets.items():
+            order = ["baseline", "current"] if k % 2 == 0 else ["current", "baseline"]
+            got = {}
+            for which in order:
+                got[which] = _convert_in(trees[which], rec, out_dir / f"out_{which}", 1)
+                secs[case][which].append(float(got[which]["seconds"]))  # type: ignore[arg-type]
+            if got["baseline"]["archives"] != got["current"]["archives"]:
+                raise RuntimeError(f"{case}: the archives differ between the baseline and the current tree")
+            loads.append(os.getloadavg()[0])
+            print(f"repeat {k + 1}/{repeat} {case}: " + ", ".join(f"{x} {secs[case][x][-1]:.2f}s" for x in order)
+                  + f" (archives identical), load {loads[-1]:.2f}", file=sys.stderr)
+    print(f"\nbefore/after, convert --jobs 1, {n_rec} recordings each, {w}x{h}; {os.cpu_count()} CPUs, "
+          f"load average {min(loads):.2f}-{max(loads):.2f}; archives identical byte for byte")
+    print(f"{'case':12s} {'MB':>7s} {'baseline MB/s':>14s} {'current MB/s':>13s} {'current/baseline':>17s} (each repeat)")
+    rows = []
+    for case, (rec, mb, n) in sets.items():
+        b, c = secs[case]["baseline"], secs[case]["current"]
+        ratios = [x / y for x, y in zip(b, c)]
+        print(f"{case:12s} {mb:7.0f} {mb / float(np.median(b)):14.1f} {mb / float(np.median(c)):13.1f} "
+              f"{float(np.median(b)) / float(np.median(c)):17.3f} ({' '.join(f'{r:.2f}' for r in ratios)})")
+        rows.append({"case": case, "mb": mb, "frames": n, "baseline_s": b, "current_s": c, "ratios": ratios})
+    return {"baseline_tree": str(baseline), "rows": rows, "load": loads}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size-mb", type=float, default=None, help="total size of each set of recordings (default 60)")
@@ -338,18 +408,22 @@ def main() -> None:
     ap.add_argument("--cases", default="compressed,raw", help="comparisons to run: compressed, raw or both")
     ap.add_argument("--tmp", type=Path, default=None, help="where to build the recordings (default: system tmp)")
     ap.add_argument("--out-dir", type=Path, default=None, help="where conversions write (default: beside inputs)")
+    ap.add_argument("--baseline-tree", type=Path, default=None,
+                    help="source tree of a baseline psg_data: before/after runs of --cases (see above)")
     args = ap.parse_args()
     if args.size_mb is None:
         args.size_mb = 20.0 if args.quick else 60.0
     tmp = Path(tempfile.mkdtemp(prefix="psg_bench_convert_", dir=args.tmp))
     out_dir = Path(tempfile.mkdtemp(prefix="psg_bench_out_", dir=args.out_dir)) if args.out_dir else tmp
     try:
+        cases = tuple(c.strip() for c in args.cases.split(",") if c.strip())
         if args.memory_mb:
             res = run_memory(tmp, out_dir, args.memory_mb, args.jobs)
+        elif args.baseline_tree:
+            res = run_ab(tmp, out_dir, args.size_mb, args.recordings, args.repeat or 3, args.baseline_tree, cases)
         else:
             repeat = args.repeat or (3 if args.size_mb >= 500 else 1)
-            res = run_comparison(tmp, out_dir, args.size_mb, args.recordings, repeat,
-                                 tuple(c.strip() for c in args.cases.split(",") if c.strip()))
+            res = run_comparison(tmp, out_dir, args.size_mb, args.recordings, repeat, cases)
         print(json.dumps(res))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -22,6 +22,7 @@ __all__ = [
     "EstimatorError",
     "NotFittedError",
     "EvaluationError",
+    "NotOpenError",
 ]
 
 
@@ -69,3 +70,7 @@ class NotFittedError(EstimatorError, AttributeError):
 
 class EvaluationError(PsgDataError, ValueError):
     """An evaluation could not run (empty split, missing labels, ...)."""
+
+
+class NotOpenError(PsgDataError, RuntimeError):
+    """A reader was used before ``open()`` (or after ``close()``)."""

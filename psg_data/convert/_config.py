@@ -43,7 +43,6 @@ class ConvertConfig:
         side_dir: directory of the side files (default: the input directory).
         name / timezone: dataset name and IANA timezone (default: site file, else input name / UTC).
         image_layout: ``tar`` (one archive per scan, default) or ``files`` (one file per image).
-        direct_io: write scan archives with ``O_DIRECT`` where the file system supports it.
         image_check: integrity check of every encoded input image, passed through or decoded:
             ``structure`` (PNG chunk CRCs and zlib header, JPEG markers through EOI; default),
             ``full`` (also PNG inflated, JPEG decoded) or ``none`` (see docs/RAW_FORMATS.md).
@@ -74,7 +73,6 @@ class ConvertConfig:
     name: str | None = None
     timezone: str | None = None
     image_layout: str = "tar"
-    direct_io: bool = True
     image_check: str = "structure"
     strict: bool = False
 
@@ -85,8 +83,6 @@ class ConvertConfig:
             raise ConversionError(f"config: image_check: expected none, structure or full, got {self.image_check!r}")
         if not isinstance(self.strict, bool):
             raise ConversionError(f"config: strict: expected true or false, got {self.strict!r}")
-        if not isinstance(self.direct_io, bool):
-            raise ConversionError(f"config: direct_io: expected true or false, got {self.direct_io!r}")
         if self.input_format not in ("auto", "ros1", "ros2", "mcap", "tum", "scannet"):
             raise ConversionError(f"config: input_format: expected auto, ros1, ros2, mcap, tum or scannet, got "
                                   f"{self.input_format!r}")

@@ -5,11 +5,9 @@ See docs/RAW_FORMATS.md for the inputs, topics, side files, configuration and ex
 
 from __future__ import annotations
 
-import gc
 import json
 import logging
 import shutil
-import sys
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -30,7 +28,7 @@ from psg_data.convert._scan import (
     run_task,
 )
 from psg_data.errors import ConversionError, PsgDataError
-from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format, release_kept
+from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format
 from psg_data.loaders.raw._folders import _list_file, folder_format
 from psg_data.loaders.raw._images import inspect_encoded
 from psg_data.loaders.raw._side import SideData, read_side_files
@@ -41,10 +39,6 @@ __all__ = ["convert", "ConversionReport", "plan_sources", "plan_parallelism"]
 log = logging.getLogger(__name__)
 
 _STATE_FILE = "state.json"
-_SWITCH_INTERVAL_S = 0.001
-"""GIL switch interval while converting (Python's default is 5 ms): the archive's hashing and
-writing threads need the GIL briefly per 16 MiB buffer, and the reading thread rarely releases it,
-so with the default each of those hand-offs can stall a stage for up to 5 ms."""
 _FORMAT_FAMILY = {"ros1": "ros1", "ros2-sqlite3": "ros2", "ros2-mcap": "ros2", "mcap": "mcap",
                   "tum": "tum", "scannet": "scannet"}
 
@@ -155,9 +149,7 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
         return "jpeg" if first and first[0][-1].lower().endswith((".jpg", ".jpeg")) else "png"
     if kind == "scannet":
         return "jpeg" if any((src / "color").glob("*.jpg")) else "png"
-    rec = RosRecording(src)
-    rec.open()
-    try:
+    with RosRecording(src) as rec:
         topics = discover_topics(rec.topics, cfg, str(src))
         if topics["color_type"] != "sensor_msgs/msg/CompressedImage":
             return "png"
@@ -165,8 +157,6 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
             info = inspect_encoded(rec.compressed_image(raw, conn.topic).data)
             return "jpeg" if info is not None and info.kind == "jpeg" else "png"
         return "png"
-    finally:
-        rec.close(keep=True)  # the first task converts this recording: it takes the open reader
 
 
 def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None]:
@@ -195,11 +185,6 @@ def _init_worker() -> None:
     import rosbags.highlevel  # noqa: F401
 
     import psg_data.writers  # noqa: F401
-    from psg_data.writers._tar_archive import reuse_buffers
-
-    reuse_buffers().__enter__()  # for the life of the worker: its tasks reuse write buffers
-    sys.setswitchinterval(_SWITCH_INTERVAL_S)
-    gc.freeze()
 
 def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None,
                   scheduler: str | None = None) -> list[ScanResult]:
@@ -235,26 +220,19 @@ def _run_here(tasks: list[ScanTask], progress: Callable[..., Any] | None) -> lis
     """
     import cv2
 
-    from psg_data.writers._tar_archive import reuse_buffers
-
-    before, switch = cv2.getNumThreads(), sys.getswitchinterval()
+    before = cv2.getNumThreads()
     cv2.setNumThreads(1)
-    sys.setswitchinterval(_SWITCH_INTERVAL_S)
-    gc.freeze()  # the objects alive now (modules, typestores) need no scanning by the collections to come
     try:
-        with reuse_buffers():
-            writer = open_task_writer(tasks[0])
-            try:
-                results = [r for t in tasks for r in run_task(t, progress, writer)]
-                for r in results:
-                    r.record = writer.scan_record(r.scan_id)
-            finally:
-                writer.abort(keep_partial=True)  # our writer finishes the dataset
+        writer = open_task_writer(tasks[0])
+        try:
+            results = [r for t in tasks for r in run_task(t, progress, writer)]
+            for r in results:
+                r.record = writer.scan_record(r.scan_id)
+        finally:
+            writer.abort(keep_partial=True)  # our writer finishes the dataset
         return results
     finally:
         cv2.setNumThreads(before)
-        sys.setswitchinterval(switch)
-        gc.unfreeze()
 
 
 def plan_parallelism(jobs: int, n_tasks: int, threads: int | None = None) -> tuple[int, int]:
@@ -312,14 +290,11 @@ def convert(
             left behind.
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
     """
-    try:
-        if scheduler is not None:
-            from psg_data._executors import check_scheduler
+    if scheduler is not None:
+        from psg_data._executors import check_scheduler
 
-            check_scheduler(scheduler)
-        return _convert(input_path, out, config, overwrite, jobs, threads, progress, scheduler)
-    finally:
-        release_kept()
+        check_scheduler(scheduler)
+    return _convert(input_path, out, config, overwrite, jobs, threads, progress, scheduler)
 
 
 def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | None, overwrite: bool, jobs: int,
@@ -353,7 +328,7 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     try:
         writer = DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding,
                                overwrite=overwrite, resume=resume, threads=0, image_layout=cfg.image_layout,
-                               direct_io=cfg.direct_io, inputs=inputs)
+                               inputs=inputs)
     except PsgDataError:
         raise
     except Exception as exc:
@@ -380,7 +355,7 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
                                   dict(side.cameras), sorted(completed)))
         procs, worker_threads = plan_parallelism(jobs, len(tasks), threads)
         for t in tasks:
-            t.threads, t.direct_io, t.image_layout = worker_threads, cfg.direct_io, cfg.image_layout
+            t.threads, t.image_layout = worker_threads, cfg.image_layout
         if tasks and (procs > 1 or scheduler is not None):
             results = _run_parallel(tasks, procs, progress, scheduler)
         elif tasks:

@@ -37,14 +37,12 @@ from psg_data.loaders.raw._images import (
     decode_depth_image,
 )
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer
-from psg_data.loaders.raw._wire import parse_compressed_image, parse_tf_message
 from psg_data.schemas._camera_checks import intrinsics_problems
 from psg_data.schemas._image_check import DamagedImage
 from psg_data.schemas._image_check import check_image, looks_like_image
 from psg_data.schemas._image_headers import parse_image_header_end
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.writers._dataset_writer import encode_color, encode_depth
-from psg_data.writers._tar_archive import FileRange
 
 __all__ = ["ScanTask", "ScanResult", "run_task", "open_task_writer", "discover_topics", "STATE_DIR", "SKIP_REASONS",
            "SKIP_KINDS", "explain_nothing"]
@@ -67,7 +65,6 @@ SKIP_REASONS = {
     "corrupt_image": "frame whose colour or depth image is truncated or damaged (see image_check)",
 }
 
-_PREADV = hasattr(os, "preadv")  # FileRange payloads need os.preadv (not on Windows)
 _IMAGE = "sensor_msgs/msg/Image"
 _COMPRESSED = "sensor_msgs/msg/CompressedImage"
 _INFO = "sensor_msgs/msg/CameraInfo"
@@ -92,7 +89,6 @@ class ScanTask:
     skip_scans: list[str] = field(default_factory=list)
     threads: int = 0
     """Image-encoding threads beside the reading thread (0: encode in the reading thread)."""
-    direct_io: bool = True
     image_layout: str = "tar"
 
 
@@ -177,16 +173,12 @@ def discover_topics(topics: dict[str, str], cfg: ConvertConfig, where: str) -> d
 
 
 class _Payload:
-    """A colour or depth image as it arrived: a message, encoded bytes or a file.
+    """A colour or depth image as it arrived: a message, encoded bytes (a view of the message) or a file."""
 
-    ``span``: where encoded bytes lie in the recording file (a FileRange), when they are stored
-    there as they are: passed through, they are then read straight into the archive buffer.
-    """
+    __slots__ = ("kind", "obj", "fmt")
 
-    __slots__ = ("kind", "obj", "fmt", "span")
-
-    def __init__(self, kind: str, obj: Any, fmt: str = "", span: Any = None) -> None:
-        self.kind, self.obj, self.fmt, self.span = kind, obj, fmt, span
+    def __init__(self, kind: str, obj: Any, fmt: str = "") -> None:
+        self.kind, self.obj, self.fmt = kind, obj, fmt
 
 
 def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> CameraIntrinsics:
@@ -494,7 +486,7 @@ class _FrameWriter:
         info = self._encoded("color", data, p.fmt or "file", where, "colour image")
         if _passthrough_ok(info, self.encoding):
             self.passthrough["color"] += 1
-            return (data if p.span is None else p.span), None, (info.width, info.height)
+            return data, None, (info.width, info.height)
         arr = decode_compressed_color(data, p.fmt or "file", where)
         return None, arr, (arr.shape[1], arr.shape[0])
 
@@ -517,10 +509,6 @@ class _FrameWriter:
                                   f"('16UC1; compressedDepth png')")
         if self.scale_is_mm and src.upper() in ("16UC1", "MONO16") and info.bit_depth == 16 and info.channels == 1:
             self.passthrough["depth"] += 1
-            if p.span is not None:  # the PNG is the tail of the payload (after the compressedDepth header)
-                skip = len(data) - len(png)
-                sp = p.span
-                return FileRange(sp.fd, sp.offset + skip, len(png), sp.owner), None, (info.width, info.height)
             return png, None, (info.width, info.height)
         if info.bit_depth != 16:
             raise ConversionError(f"{where}: depth PNG is {info.bit_depth}-bit; expected 16-bit depth")
@@ -741,7 +729,7 @@ def open_task_writer(task: ScanTask) -> Any:
     from psg_data.writers import DatasetWriter
 
     return DatasetWriter(task.out, color_encoding=task.color_encoding, overwrite=True, resume=True,
-                         threads=task.threads, direct_io=task.direct_io, image_layout=task.image_layout)
+                         threads=task.threads, image_layout=task.image_layout)
 
 
 def _release_rule(asm: _Assembler, poses: _PoseSource, cfg: ConvertConfig) -> Callable[[], bool]:
@@ -822,19 +810,16 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
             if info_t != color_t and info_t != depth_t and info_t != poses.odom_topic:
                 wanted.discard(info_t)
             read_bytes = 0
-            src_file, cdr = rec.file, rec.is_cdr
-            for conn, _, raw, foff in rec.located_messages(wanted):
+            for conn, _, raw in rec.raw_messages(wanted):
                 topic = conn.topic
                 n_raw = len(raw)
                 pending_bytes += n_raw
                 read_bytes += n_raw
                 if topic == color_t or topic == depth_t:
                     if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
-                        ci = parse_compressed_image(raw, cdr) or rec.compressed_image(raw, topic)
-                        span = None if foff is None or ci.data_offset is None or not _PREADV else \
-                            FileRange(src_file.fd, foff + ci.data_offset, len(ci.data), src_file)
+                        ci = rec.compressed_image(raw, topic)
                         stamp, frame_id = ci.stamp_ns, ci.frame_id
-                        payload = _Payload("bytes", ci.data, ci.format, span)
+                        payload = _Payload("bytes", ci.data, ci.format)
                     else:
                         msg = rec.deserialize(raw, conn.msgtype, topic)
                         stamp, frame_id, payload = _stamp(msg.header), str(msg.header.frame_id), _Payload("msg", msg)
@@ -849,8 +834,7 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
                     continue
                 if conn.msgtype == _TF:
                     static = topic in static_t
-                    samples = parse_tf_message(raw, cdr)  # header, frames and 7 floats: no full message
-                    for smp in (rec.tf_transforms(raw, topic) if samples is None else samples):
+                    for smp in rec.tf_transforms(raw, topic):  # header, frames and 7 floats: no full message
                         tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
                     if colors:
                         emit()

@@ -42,7 +42,7 @@ from psg_data.schemas._tables import (
     table_path,
 )
 from psg_data.writers._safe_output import check_output, commit_tree, make_staging
-from psg_data.writers._tar_archive import BufferPool, FileRange, TarArchiveWriter
+from psg_data.writers._tar_archive import TarArchiveWriter
 
 __all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "encode_color", "encode_depth", "PNG_LEVEL", "JPEG_QUALITY"]
 
@@ -174,7 +174,7 @@ class ScanWriter:
         if writer.image_layout == "tar":
             path = writer.tmp / self._archive_rel
             path.parent.mkdir(parents=True, exist_ok=True)
-            self._archive = TarArchiveWriter(path, writer._buffers(), direct_io=writer.direct_io)
+            self._archive = TarArchiveWriter(path)
         self._done = False
 
     def __enter__(self) -> ScanWriter:
@@ -250,8 +250,7 @@ class ScanWriter:
         ``color_bytes`` must be in the dataset's colour encoding (PNG or JPEG) and
         ``depth_png_bytes`` a 16-bit single-channel PNG in millimetres; the caller checks that.
         Both may be any bytes-like object (a ``memoryview`` of a message buffer is copied once,
-        straight into the archive's write buffer) or a :class:`~psg_data.writers._tar_archive.FileRange`
-        of an open file (read straight into the write buffer).
+        straight into the archive's write buffer).
         """
         i = self._record(stamp_ns, T_world_camera, camera_id)
         if not self._queue:
@@ -283,7 +282,6 @@ class ScanWriter:
             cols.depth_offset.append(self._archive.add(self._depth_member % i, depth, mtime))
             cols.depth_size.append(_nbytes(depth))
         else:
-            color, depth = (x.read() if isinstance(x, FileRange) else x for x in (color, depth))
             crel = COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i, ext=self._ext)
             drel = DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i)
             self._files[crel] = self._w._write_file(crel, color)
@@ -341,12 +339,12 @@ class ScanWriter:
 
 
 def _nbytes(data: Any) -> int:
-    return data.size if isinstance(data, FileRange) else memoryview(data).nbytes
+    return memoryview(data).nbytes
 
 
 def _owned(data: Any) -> Any:
-    """``data`` as bytes of its own (a FileRange's file may be closed before it is stored)."""
-    return data.read() if isinstance(data, FileRange) else bytes(data)
+    """``data`` as bytes of its own (the caller may reuse its buffer before it is stored)."""
+    return bytes(data)
 
 
 def encode_color(rgb: NDArray[np.uint8], encoding: str) -> bytes:
@@ -396,7 +394,6 @@ class DatasetWriter:
         threads: image-encoding threads (OpenCV releases the GIL); 0 encodes in the calling thread.
         image_layout: ``tar`` (one archive per scan, the default) or ``files`` (one file per image);
             see docs/FORMAT.md.
-        direct_io: write scan archives with ``O_DIRECT`` where the file system supports it.
         extra: provenance stored in the manifest's ``extra``.
         inputs: paths the dataset is made from: ``root`` may not be, contain or lie inside one.
 
@@ -417,7 +414,6 @@ class DatasetWriter:
         resume: bool = False,
         threads: int = 2,
         image_layout: str = "tar",
-        direct_io: bool = True,
         extra: Mapping[str, Any] | None = None,
         inputs: Iterable[str | Path | None] = (),
     ) -> None:
@@ -431,14 +427,12 @@ class DatasetWriter:
         self.timezone = timezone
         self.color_encoding = color_encoding
         self.image_layout = image_layout
-        self.direct_io = direct_io
         self.extra: dict[str, Any] = dict(extra or {})
         self.tmp = self.root.with_name(self.root.name + _PARTIAL_SUFFIX)
         make_staging(self.tmp, resume=resume)
         self._tmp_str = str(self.tmp)
         self._threads = max(0, int(threads))
         self._pool = ThreadPoolExecutor(max_workers=self._threads) if self._threads else None
-        self._buffer_pool: BufferPool | None = None
         self._open: set[ScanWriter] = set()
         self._pending: list[ScanWriter] = []
         """Closed scans whose archives are still being written (see ScanWriter.close)."""
@@ -532,11 +526,6 @@ class DatasetWriter:
                 return
             self._pending.pop(0)
             sw._complete()
-
-    def _buffers(self) -> BufferPool:
-        if self._buffer_pool is None:
-            self._buffer_pool = BufferPool()
-        return self._buffer_pool
 
     def completed_scans(self) -> dict[str, dict[str, Any]]:
         """Scans of an interrupted write that are complete and whose images match their checksums.
@@ -634,8 +623,6 @@ class DatasetWriter:
             self._pending.clear()
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
-        if self._buffer_pool is not None:
-            self._buffer_pool.close()
         self._closed = True
         if not keep_partial:
             shutil.rmtree(self.tmp, ignore_errors=True)
@@ -668,8 +655,6 @@ class DatasetWriter:
         self._settle(block=True)
         if self._pool is not None:
             self._pool.shutdown(wait=True)
-        if self._buffer_pool is not None:
-            self._buffer_pool.close()
         scans = sorted(self._scans.values(), key=lambda s: (s["start_stamp_ns"], s["scan_id"]))
         frames = pa.concat_tables([self._frames[s["scan_id"]] for s in scans]) if scans else \
             TABLES["frames"].schema.empty_table()

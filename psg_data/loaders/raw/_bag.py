@@ -9,16 +9,28 @@ from __future__ import annotations
 
 import functools
 import logging
+import mmap
 import os
 import sqlite3
 import struct
 import zlib
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
-from psg_data.errors import ConversionError
-from psg_data.loaders.raw._wire import CompressedFields, TfSample, parse_compressed_image, parse_tf_message
+from psg_data.errors import ConversionError, NotOpenError
+from psg_data.loaders.raw._wire import (
+    CompressedFields,
+    DecodedStrings,
+    TfLayouts,
+    TfSample,
+    parse_compressed_image,
+    parse_tf_message,
+)
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
 
 __all__ = ["RosRecording", "recording_format", "find_recordings", "RECORDING_FORMATS", "CompressedFields",
            "parse_compressed_image", "parse_tf_message", "TfSample"]
@@ -66,22 +78,8 @@ def find_recordings(directory: str | Path) -> list[tuple[Path, str]]:
     return found
 
 
-_KEPT: dict[tuple[str, int, int], Any] = {}
-"""Readers kept open by ``RosRecording.close(keep=True)``, by (path, size, mtime)."""
-
-
-def release_kept() -> None:
-    """Close the readers kept open for reuse (a conversion calls this when it ends)."""
-    while _KEPT:
-        _, reader = _KEPT.popitem()
-        try:
-            reader.close()
-        except Exception:  # pragma: no cover - closing is best effort
-            log.debug("closing a kept reader failed", exc_info=True)
-
-
 @functools.lru_cache(maxsize=256)
-def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
+def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Typestore:
     """A typestore holding ``msgtype`` as the recording defines it (cached across recordings).
 
     Built only for the types a conversion deserialises; checked against the connection's MD5 sum.
@@ -94,25 +92,6 @@ def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Any:
     if digest and have != digest:
         raise ValueError(f"message definition of {msgtype} has MD5 {have}, the connection says {digest}")
     return ts
-
-
-class SharedFd:
-    """A read-only file descriptor, closed when the last reference to this object goes.
-
-    The converter hands image bytes to the archive writer as ``FileRange`` objects of the bag, which the
-    archive reads after ``add`` returns (in its hashing thread); a range whose ``owner`` is the
-    bag's SharedFd keeps the file open until then, so the recording may close at any time.
-    """
-
-    __slots__ = ("fd",)
-
-    def __init__(self, path: str | os.PathLike[str]) -> None:
-        self.fd = os.open(path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
-
-    def __del__(self, _close: Any = os.close) -> None:
-        fd, self.fd = getattr(self, "fd", -1), -1
-        if fd >= 0:
-            _close(fd)
 
 
 _U32 = struct.Struct("<I")
@@ -133,7 +112,7 @@ def _record_op(header: bytes) -> int:
 
 
 class _Ros1Internals(NamedTuple):
-    identity: Any
+    identity: Callable[[bytes], bytes]
     """rosbags' decompressor of uncompressed chunks (``decompressors["none"]``)."""
 
 
@@ -182,20 +161,12 @@ class _Ros1Reader:
 
         self.path = path
         self._bag = Reader(path)
-        self.connections: list[Any] = []
-        self._by_type: dict[str, Any] = {}
-        self._mm: Any = None
-        self.file: Any = None
-        """The bag file (a SharedFd), open for reading while the reader is or a FileRange of it
-        lives (message locations refer to it)."""
-
-    @property
-    def fd(self) -> int | None:
-        return None if self.file is None else self.file.fd
+        self.connections: list[Connection] = []
+        self._by_type: dict[str, Connection] = {}
+        self._mm: mmap.mmap | None = None
 
     def open(self) -> None:
         self._bag.open()
-        self.file = SharedFd(self.path)
         self.connections = list(self._bag.connections)
         for c in self.connections:
             self._by_type.setdefault(c.msgtype, c)
@@ -204,13 +175,19 @@ class _Ros1Reader:
         if self._mm is not None:
             try:
                 self._mm.close()
-            except BufferError:  # views of it still alive: unmapped when they are gone
+            except BufferError:  # views of it still alive (e.g. images queued for an archive): unmapped with them
                 pass
             self._mm = None
-        self.file = None  # closed now, or when the last FileRange of it is read
         self._bag.close()
 
-    def _index(self, connections: Collection[Any]) -> tuple[list[tuple[int, int, int, int, int, Any]], Any] | None:
+    def _map(self) -> mmap.mmap:
+        if self._mm is None:
+            with open(self.path, "rb") as fh:
+                self._mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        return self._mm
+
+    def _index(self, connections: Collection[Connection]
+               ) -> tuple[list[tuple[int, int, int, int, int, Connection]], Callable[[bytes], bytes]] | None:
         """``(entries, identity)`` for the zero-copy loop, or None when rosbags' internals differ."""
         internals = _rosbags_ros1_internals()
         if internals is None:
@@ -227,27 +204,22 @@ class _Ros1Reader:
         entries.sort()  # (time, connection order, index order): rosbags' merge order, ties included
         return entries, internals.identity
 
-    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any, int | None]]:
-        """``(connection, time_ns, view, offset)``: ``offset`` is the message's byte offset in the
-        file, None for a message from a compressed chunk."""
-        import mmap
-
+    def messages(self, connections: Collection[Connection] = ()) -> Iterator[tuple[Connection, int, memoryview | bytes]]:
+        """``(connection, time_ns, view)`` in log-time order."""
         conns = list(connections) or self.connections
         fast = self._index(conns)
         if fast is None:  # rosbags' public reader (copies each message)
-            for c, t, raw in self._bag.messages(connections=conns):
-                yield c, t, raw, None
+            yield from self._bag.messages(connections=conns)
             return
         entries, identity = fast
         if not entries:
             return
-        if self._mm is None:
-            self._mm = mmap.mmap(self.fd, 0, access=mmap.ACCESS_READ)
-        whole = memoryview(self._mm)
+        mm = self._map()
+        whole = memoryview(mm)
         chunks = self._bag.chunks
         page = mmap.PAGESIZE
-        release = getattr(self._mm, "madvise", None)
-        cur_pos, cur, cur_span, base = -1, whole, (0, 0), None
+        release = getattr(mm, "madvise", None)
+        cur_pos, cur, cur_span = -1, whole, (0, 0)
         lo = hi = 0  # pages of chunks left and not yet released: [lo, hi)
         u32 = _U32.unpack_from
         try:
@@ -264,11 +236,11 @@ class _Ros1Reader:
                     if end > len(whole):
                         raise ValueError(f"chunk at byte {pos} ends beyond the end of the file")
                     if ch.decompressor is identity:
-                        cur, base = whole[ch.datapos:end], ch.datapos
+                        cur = whole[ch.datapos:end]
                         start = ch.datapos - ch.datapos % page
                         cur_span = (start, end - start)
                     else:
-                        cur, base = memoryview(ch.decompressor(bytes(whole[ch.datapos:end]))), None
+                        cur = memoryview(ch.decompressor(bytes(whole[ch.datapos:end])))
                         cur_span = (0, 0)
                     cur_pos = pos
                 o = offset
@@ -285,17 +257,17 @@ class _Ros1Reader:
                     if op != _OP_CONNECTION:
                         raise ValueError(f"expected message data at chunk offset {offset}, found record op {op}")
                     o += dlen
-                yield conn, time_ns, cur[o:o + dlen], (None if base is None else base + o)
+                yield conn, time_ns, cur[o:o + dlen]
         finally:
             del cur, whole
 
-    def deserialize(self, raw: Any, msgtype: str) -> Any:
+    def deserialize(self, raw: memoryview | bytes, msgtype: str) -> object:
         c = self._by_type[msgtype]
         return _ros1_typestore(msgtype, c.digest, c.msgdef.data).deserialize_ros1(bytes(raw), msgtype)
 
 
 @functools.lru_cache(maxsize=256)
-def _ros2_typestore(msgtype: str, fmt: str, msgdef: str) -> Any:
+def _ros2_typestore(msgtype: str, fmt: str, msgdef: str) -> Typestore:
     """A typestore holding ``msgtype`` from its connection's definition (ROS 2 / MCAP recordings).
 
     Built only for the types a conversion deserialises, so that a topic whose definition rosbags
@@ -325,16 +297,14 @@ class _Ros2Reader:
     """
 
     is2 = True
-    fd = None
-    file = None
 
     def __init__(self, path: Path) -> None:
         from rosbags.rosbag2 import Reader
 
         self.path = path
         self._bag = Reader(path)
-        self.connections: list[Any] = []
-        self._by_type: dict[str, Any] = {}
+        self.connections: list[Connection] = []
+        self._by_type: dict[str, Connection] = {}
 
     def open(self) -> None:
         self._bag.open()
@@ -345,10 +315,10 @@ class _Ros2Reader:
     def close(self) -> None:
         self._bag.close()
 
-    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, Any]]:
+    def messages(self, connections: Collection[Connection] = ()) -> Iterator[tuple[Connection, int, memoryview | bytes]]:
         yield from self._bag.messages(connections=list(connections) or self.connections)
 
-    def deserialize(self, raw: Any, msgtype: str) -> Any:
+    def deserialize(self, raw: memoryview | bytes, msgtype: str) -> object:
         c = self._by_type[msgtype]
         md = c.msgdef
         return _ros2_typestore(msgtype, md.format.name, md.data or "").deserialize_cdr(bytes(raw), msgtype)
@@ -394,132 +364,110 @@ class RosRecording:
             if f.stat().st_size == 0:
                 raise ConversionError(f"{f}: zero-byte file; expected a {fmt} recording")
         self.size_bytes = sum(f.stat().st_size for f in files)
-        self._reader: Any = None
+        self._reader_: _Ros1Reader | _Ros2Reader | None = None
+        self._strings: DecodedStrings = {}
+        self._tf_layouts: TfLayouts = {}
 
     def __enter__(self) -> RosRecording:
         self.open()
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def open(self) -> None:
-        kept = _KEPT.pop(self._key(), None)
-        if kept is not None:  # opened (and indexed) moments ago by another RosRecording of this file
-            self._reader = kept
-            return
+        """Open and index the recording.
+
+        Raises:
+            ConversionError: the recording is unreadable, truncated or not indexed.
+        """
         try:
-            self._reader = _Ros1Reader(self.path) if self.format == "ros1" else _Ros2Reader(self.path)
-            self._reader.open()
+            reader = _Ros1Reader(self.path) if self.format == "ros1" else _Ros2Reader(self.path)
+            reader.open()
         except ConversionError:
             raise
         except Exception as exc:  # rosbags raises many types for damaged files
-            self._reader = None
             if not _is_read_error(exc):
                 raise
             raise _wrap(self.path, exc) from exc
+        self._reader_ = reader
 
-    def close(self, keep: bool = False) -> None:
-        """Close the recording; with ``keep``, hand the open reader to the next RosRecording of the
-        same file in this process instead (see :func:`release_kept`)."""
-        if self._reader is not None:
-            if keep:
-                old = _KEPT.pop(self._key(), None)
-                if old is not None:
-                    old.close()
-                _KEPT[self._key()] = self._reader
-                self._reader = None
-                return
+    def close(self) -> None:
+        """Close the recording (views of its messages stay valid while they are referenced)."""
+        if self._reader_ is not None:
             try:
-                self._reader.close()
+                self._reader_.close()
             finally:
-                self._reader = None
+                self._reader_ = None
 
-    def _key(self) -> tuple[str, int, int]:
-        st = self.path.stat()
-        return str(self.path.resolve()), st.st_size, st.st_mtime_ns
+    @property
+    def _reader(self) -> _Ros1Reader | _Ros2Reader:
+        if self._reader_ is None:
+            raise NotOpenError(f"{self.path}: the recording is not open; call open() or use it in a with block")
+        return self._reader_
 
     @property
     def topics(self) -> dict[str, str]:
         """Topic -> message type (ROS 2 style name)."""
         return {c.topic: c.msgtype for c in self._reader.connections}
 
-    @property
-    def message_counts(self) -> dict[str, int]:
-        out: dict[str, int] = {}
-        for c in self._reader.connections:
-            out[c.topic] = out.get(c.topic, 0) + int(c.msgcount)
-        return out
-
-    def raw_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Any, int, Any]]:
+    def raw_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Connection, int, memoryview | bytes]]:
         """``(connection, log_time_ns, serialized bytes)`` in log-time order (no deserialisation).
 
         The bytes are a ``memoryview`` of the recording where it allows (ROS 1 bags), else ``bytes``.
-        """
-        for conn, t, raw, _ in self.located_messages(topics):
-            yield conn, t, raw
 
-    def located_messages(self, topics: Collection[str] = ()) -> Iterator[tuple[Any, int, Any, int | None]]:
-        """:meth:`raw_messages` with each message's byte offset in the file (:attr:`fd`): a view
-        that is stored as is there (uncompressed ROS 1 chunk) can be read from it directly. The
-        offset is None where the message is not stored as is (compressed chunk, ROS 2 storage)."""
-        conns = [c for c in self._reader.connections if not topics or c.topic in topics]
+        Raises:
+            ConversionError: corrupt data found while reading.
+        """
+        reader = self._reader
+        conns = [c for c in reader.connections if not topics or c.topic in topics]
         if topics and not conns:
             return
         try:
-            if isinstance(self._reader, _Ros1Reader):
-                yield from self._reader.messages(connections=conns)
-            else:
-                for c, t, raw in self._reader.messages(connections=conns):
-                    yield c, t, raw, None
+            yield from reader.messages(connections=conns)
         except Exception as exc:  # corrupt data found while reading (every reader library's own types)
             if not _is_read_error(exc):
                 raise
             raise _wrap(self.path, exc) from exc
 
-    def deserialize(self, raw: bytes, msgtype: str, topic: str) -> Any:
+    def deserialize(self, raw: memoryview | bytes, msgtype: str, topic: str) -> object:
+        """A message object of ``msgtype`` from its serialized bytes.
+
+        Raises:
+            ConversionError: the bytes do not deserialize as ``msgtype``.
+        """
         try:
             return self._reader.deserialize(raw, msgtype)
         except Exception as exc:
             raise ConversionError(f"{self.path}: {topic}: cannot deserialize a {msgtype} message ({exc})") from exc
 
-    def compressed_image(self, raw: bytes, topic: str) -> CompressedFields:
+    def compressed_image(self, raw: memoryview | bytes, topic: str) -> CompressedFields:
         """Stamp, frame id, format and data of a serialized ``sensor_msgs/CompressedImage``.
 
         Uses :func:`parse_compressed_image` and falls back to the full deserialiser.
         """
-        fields = parse_compressed_image(raw, self._reader.is2)
+        fields = parse_compressed_image(raw, self.is_cdr, cache=self._strings)
         if fields is not None:
             return fields
-        msg = self.deserialize(raw, "sensor_msgs/msg/CompressedImage", topic)
+        msg: Any = self.deserialize(raw, "sensor_msgs/msg/CompressedImage", topic)
         h = msg.header
         return CompressedFields(int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec), str(h.frame_id),
-                                str(msg.format), memoryview(msg.data), None)
+                                str(msg.format), memoryview(msg.data))
 
     @property
     def is_cdr(self) -> bool:
         """Whether messages are CDR (ROS 2) rather than ROS 1 serialized."""
-        return bool(self._reader.is2)
+        return self._reader.is2
 
-    @property
-    def fd(self) -> int | None:
-        """The recording file open for reading (ROS 1 bags; what ``located_messages`` offsets refer to)."""
-        return getattr(self._reader, "fd", None)
-
-    @property
-    def file(self) -> Any:
-        """:attr:`fd` as a :class:`SharedFd` (the ``owner`` of FileRanges of it)."""
-        return getattr(self._reader, "file", None)
-
-    def tf_transforms(self, raw: bytes, topic: str) -> list[TfSample]:
+    def tf_transforms(self, raw: memoryview | bytes, topic: str) -> list[TfSample]:
         """The transforms of a serialized ``tf2_msgs/TFMessage``.
 
         Uses :func:`parse_tf_message` and falls back to the full deserialiser.
         """
-        fast = parse_tf_message(raw, self._reader.is2)
+        fast = parse_tf_message(raw, self.is_cdr, cache=self._tf_layouts)
         if fast is not None:
             return fast
-        msg = self.deserialize(raw, "tf2_msgs/msg/TFMessage", topic)
+        msg: Any = self.deserialize(raw, "tf2_msgs/msg/TFMessage", topic)
         out = []
         for tr in msg.transforms:
             t, q = tr.transform.translation, tr.transform.rotation
@@ -529,7 +477,7 @@ class RosRecording:
                                 (float(q.x), float(q.y), float(q.z), float(q.w))))
         return out
 
-    def messages(self, topics: Collection[str] = ()) -> Iterator[tuple[str, str, int, Any]]:
+    def messages(self, topics: Collection[str] = ()) -> Iterator[tuple[str, str, int, object]]:
         """``(topic, msgtype, log_time_ns, message)`` in log-time order."""
         for conn, t, raw in self.raw_messages(topics):
             yield conn.topic, conn.msgtype, t, self.deserialize(raw, conn.msgtype, conn.topic)

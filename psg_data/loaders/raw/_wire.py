@@ -24,8 +24,6 @@ class CompressedFields(NamedTuple):
     format: str
     data: memoryview
     """The encoded image: a zero-copy view of the serialized message."""
-    data_offset: int | None = None
-    """Offset of ``data`` in the serialized message (None if it is not a view of it)."""
 
 
 class TfSample(NamedTuple):
@@ -39,13 +37,19 @@ class TfSample(NamedTuple):
     rotation_xyzw: tuple[float, float, float, float]
 
 
+DecodedStrings = dict[tuple[bool, bytes], tuple[str, str]]
+"""A cache of :func:`parse_compressed_image`: (frame_id, format) by their serialized bytes."""
+TfLayouts = dict[tuple[bool, int], "_TfLayout"]
+"""A cache of :func:`parse_tf_message`: message shapes by (CDR, length)."""
+
 _U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
 _STAMP1 = struct.Struct("<III")
 _SEVEN_DOUBLES = struct.Struct("<7d")
 
 
-def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFields | None:
+def parse_compressed_image(raw: bytes | memoryview, cdr: bool,
+                           cache: DecodedStrings | None = None) -> CompressedFields | None:
     """Read header stamp, frame id, format and data of a serialized ``CompressedImage`` directly.
 
     The image bytes stay a view of ``raw``.
@@ -54,6 +58,8 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
         raw: one serialized message: ROS 1 (``cdr=False``) or little-endian CDR with its 4-byte
             encapsulation header (``cdr=True``).
         cdr: serialization of ``raw``.
+        cache: the caller's dictionary of decoded frame ids and formats by their serialized bytes
+            (the same in every message of a topic), kept between calls; at most 64 entries.
     """
     mv = memoryview(raw)
     n = len(mv)
@@ -72,7 +78,6 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
             if ln2 < 1 or o + 4 + ln2 > n:
                 return None
             o2 = (o + 4 + ln2 + 3) & ~3
-            base = 4
         else:
             b = mv
             _, sec, nsec = _STAMP1.unpack_from(b, 0)
@@ -84,29 +89,25 @@ def parse_compressed_image(raw: bytes | memoryview, cdr: bool) -> CompressedFiel
             if o + 4 + ln2 > n:
                 return None
             o2 = o + 4 + ln2
-            base = 0
         key = (cdr, bytes(b[start:o2]))  # both strings with their lengths: the same in every message of a topic
-        names = _CI_STRINGS.get(key)
+        names = None if cache is None else cache.get(key)
         if names is None:
             if cdr:
                 names = bytes(b[12:12 + ln - 1]).decode(), bytes(b[o + 4:o + 3 + ln2]).decode()
             else:
                 names = bytes(b[16:16 + ln]).decode(), bytes(b[o + 4:o + 4 + ln2]).decode()
-            if len(_CI_STRINGS) >= 64:
-                _CI_STRINGS.clear()
-            _CI_STRINGS[key] = names
+            if cache is not None:
+                if len(cache) >= 64:
+                    cache.clear()
+                cache[key] = names
         o = o2
         (ln,) = _U32.unpack_from(b, o)
         end = o + 4 + ln
         if end > n or n - end > 3:  # CDR may pad the end to 4 bytes; nothing else may follow
             return None
-        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), names[0], names[1], b[o + 4:end], base + o + 4)
+        return CompressedFields(int(sec) * 1_000_000_000 + int(nsec), names[0], names[1], b[o + 4:end])
     except (struct.error, UnicodeDecodeError):
         return None
-
-
-_CI_STRINGS: dict[tuple[bool, bytes], tuple[str, str]] = {}
-"""Decoded (frame_id, format) of recent CompressedImage messages, by their serialized bytes."""
 
 
 def _string(b: memoryview | bytes, o: int, n: int, cdr: bool) -> tuple[str, int] | None:
@@ -153,20 +154,23 @@ class _TfLayout:
         return out
 
 
-_TF_LAYOUTS: dict[tuple[bool, int], _TfLayout] = {}
-"""Recent TF message shapes by (CDR, length): a stream repeats one or two of them."""
-
-
-def parse_tf_message(raw: bytes | memoryview, cdr: bool) -> list[TfSample] | None:
+def parse_tf_message(raw: bytes | memoryview, cdr: bool,
+                     cache: TfLayouts | None = None) -> list[TfSample] | None:
     """The transforms of a serialized ``tf2_msgs/TFMessage`` (ROS 1 or little-endian CDR).
 
     Returns None when ``raw`` does not have exactly the expected layout (see the module docstring).
-    A message with the shape of a recent one (same length, same bytes outside the stamps and the
-    numbers: same frames) is read with one struct unpack.
+
+    Args:
+        raw: one serialized message.
+        cdr: serialization of ``raw``.
+        cache: the caller's dictionary of recent message shapes by (CDR, length), kept between
+            calls (a stream repeats one or two; at most 8 entries): a message with the shape of a
+            recent one (same length, same bytes outside the stamps and the numbers: same frames)
+            is read with one struct unpack.
     """
     b = memoryview(raw)
     n = len(b)
-    layout = _TF_LAYOUTS.get((cdr, n))
+    layout = None if cache is None else cache.get((cdr, n))
     if layout is not None:
         got = layout.read(b)
         if got is not None:
@@ -213,10 +217,10 @@ def parse_tf_message(raw: bytes | memoryview, cdr: bool) -> list[TfSample] | Non
             out.append(TfSample(parent, child, int(sec) * 1_000_000_000 + int(nsec), (tx, ty, tz), (qx, qy, qz, qw)))
         if n - o > (3 if cdr else 0):
             return None
-        layout = _TfLayout(bytes(raw), numeric, [(t.parent, t.child) for t in out])
-        if len(_TF_LAYOUTS) >= 8:
-            _TF_LAYOUTS.clear()
-        _TF_LAYOUTS[(cdr, len(raw))] = layout
+        if cache is not None:
+            if len(cache) >= 8:
+                cache.clear()
+            cache[(cdr, len(raw))] = _TfLayout(bytes(raw), numeric, [(t.parent, t.child) for t in out])
         return out
     except (struct.error, UnicodeDecodeError):
         return None
