@@ -6,14 +6,15 @@ image bytes padded to 512, then the end-of-archive zero blocks, padded with zero
 4 KiB. The byte offset of every member's data is returned to the caller, who stores it in the
 ``frames`` table: a reader then fetches one image with a single ``pread`` of a known range.
 
-Members are copied into a batch buffer; each full batch goes to one writer thread, which hashes it
-(SHA-256, for ``files.parquet``) and writes it with plain buffered writes, both without the GIL,
-while the caller goes on reading and encoding. Three buffers per archive bound its memory.
+Members are gathered into batches of about 8 MiB (headers, the caller's bytes, padding); one writer
+thread hashes each batch (SHA-256, for ``files.parquet``) and writes it with one ``writev``, both
+without the GIL, while the caller goes on reading and encoding. Read-only data (``bytes``, views of
+a memory-mapped recording) is not copied; writable buffers are, since their owner may reuse them.
 
-Pages of the archive written more than :data:`DROP_BEHIND_BYTES` ago are dropped from the page
-cache (``posix_fadvise(DONTNEED)``, where the system has it): a conversion writes gigabytes that
-will not be read back soon, and on the development VM new page-cache pages cost so much that
-writing without this ran at 0.4x the conversion's throughput with it (BENCHMARKS.md).
+Pages of the archive more than :data:`DROP_BEHIND_BYTES` behind its end are dropped from the page
+cache (``posix_fadvise(DONTNEED)`` where the system has it): a conversion writes gigabytes that are
+not read back soon, and on the development VM filling fresh page-cache pages cost so much that
+converting ran at about half the speed without this (BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -32,8 +33,10 @@ ARCHIVE_ALIGN = 4096
 """Archives are padded with zero blocks to a multiple of this."""
 BATCH_BYTES = 8 << 20
 """Bytes handed to the writer thread at a time."""
+_BATCH_PIECES = 512
+"""At most this many buffers per batch (one ``writev``; POSIX guarantees 16, Linux takes 1024)."""
 DROP_BEHIND_BYTES = 16 << 20
-"""Pages of the archive further than this behind the end are dropped from the page cache."""
+"""Pages of the archive further than this behind its end are dropped from the page cache."""
 _ZEROS = bytes(ARCHIVE_ALIGN)
 
 
@@ -71,12 +74,26 @@ def ustar_header(name: str, size: int, mtime: int = 0) -> bytes:
     return raw.ljust(100, b"\0") + _MODE_IDS + size_mtime + checksum + _TAIL
 
 
+def _write_all(fd: int, pieces: list[memoryview]) -> None:
+    """Write every piece in order (one ``writev`` for a regular file; more if it writes less)."""
+    writev = getattr(os, "writev", None)
+    i = 0
+    while i < len(pieces):
+        k = writev(fd, pieces[i:]) if writev is not None else os.write(fd, pieces[i])
+        while i < len(pieces) and k >= len(pieces[i]):
+            k -= len(pieces[i])
+            i += 1
+        if k:
+            pieces[i] = pieces[i][k:]
+
+
 class TarArchiveWriter:
     """Write one tar archive of images (see the module docstring).
 
     Args:
         path: archive path (created or truncated).
-        batch_bytes: size of each of the three batch buffers.
+        batch_bytes: bytes gathered before a batch goes to the writer thread (two batches at most
+            wait for it, which bounds the memory an archive holds).
     """
 
     def __init__(self, path: str | os.PathLike[str], *, batch_bytes: int = BATCH_BYTES) -> None:
@@ -85,34 +102,38 @@ class TarArchiveWriter:
                                        0o666)
         self._sha = hashlib.sha256()
         self._size = 0
-        """Bytes of the archive so far (handed over and buffered)."""
-        self._written = 0
-        """Bytes written by the writer thread."""
-        self._free: queue.SimpleQueue[bytearray] = queue.SimpleQueue()
-        for _ in range(3):
-            self._free.put(bytearray(batch_bytes))
-        self._todo: queue.SimpleQueue[tuple[bytearray, int] | None] = queue.SimpleQueue()
-        self._buf, self._n = self._free.get(), 0
+        """Bytes of the archive so far (handed over and gathered)."""
+        self._batch: list[memoryview] = []
+        self._batch_bytes = 0
+        self._limit = batch_bytes
+        self._slots = threading.Semaphore(2)
+        self._todo: queue.SimpleQueue[list[memoryview] | None] = queue.SimpleQueue()
         self._error: BaseException | None = None
         self._finished = False
         self._thread = threading.Thread(target=self._write_batches, name="psg-tar-write", daemon=True)
         self._thread.start()
 
     def add(self, name: str, data: Any, mtime: int = 0) -> int:
-        """Append a member ``name`` holding ``data`` (any bytes-like object); returns its data offset."""
+        """Append a member ``name`` holding ``data`` (any bytes-like object); returns its data offset.
+
+        Read-only ``data`` must not change until :meth:`result` returns (bytes and memory maps
+        opened read-only do not); writable buffers are copied.
+        """
         view = memoryview(data).cast("B")
-        self._put(ustar_header(name, view.nbytes, mtime))
+        if not view.readonly:
+            view = memoryview(view.tobytes())
+        self._put(memoryview(ustar_header(name, view.nbytes, mtime)))
         offset = self._size
         self._put(view)
-        self._put(_ZEROS[:-view.nbytes % TAR_BLOCK])
+        self._put(memoryview(_ZEROS)[:-view.nbytes % TAR_BLOCK])
         return offset
 
     def finish(self) -> None:
         """Append the end of the archive; returns while the writer thread completes it (see :meth:`result`)."""
         if self._finished:
             raise ValueError(f"{self.path}: archive already finished")
-        self._put(_ZEROS[:2 * TAR_BLOCK])
-        self._put(_ZEROS[:-self._size % ARCHIVE_ALIGN])
+        self._put(memoryview(_ZEROS)[:2 * TAR_BLOCK])
+        self._put(memoryview(_ZEROS)[:-self._size % ARCHIVE_ALIGN])
         self._hand_over()
         self._finished = True
         self._todo.put(None)
@@ -141,40 +162,43 @@ class TarArchiveWriter:
         """Stop without finishing the archive (the caller removes the file)."""
         self._stop()
 
-    def _put(self, data: bytes | memoryview) -> None:
-        view = memoryview(data)
-        while view:
-            k = min(len(view), len(self._buf) - self._n)
-            self._buf[self._n:self._n + k] = view[:k]
-            self._n += k
-            self._size += k
-            view = view[k:]
-            if self._n == len(self._buf):
-                self._hand_over()
+    def _put(self, piece: memoryview) -> None:
+        if not piece:
+            return
+        self._batch.append(piece)
+        self._batch_bytes += len(piece)
+        self._size += len(piece)
+        if self._batch_bytes >= self._limit or len(self._batch) >= _BATCH_PIECES:
+            self._hand_over()
 
     def _hand_over(self) -> None:
         self._check()
-        if self._n:
-            self._todo.put((self._buf, self._n))
-            self._buf, self._n = self._free.get(), 0
+        if self._batch:
+            self._slots.acquire()  # waits while two batches wait for the writer thread
+            self._todo.put(self._batch)
+            self._batch, self._batch_bytes = [], 0
 
     def _write_batches(self) -> None:
-        while (item := self._todo.get()) is not None:
-            buf, n = item
+        end = 0
+        while (batch := self._todo.get()) is not None:
             if self._error is None:
                 try:
-                    self._write(memoryview(buf)[:n])
+                    end = self._write(batch, end)
                 except BaseException as exc:  # reported to the caller by its next call
                     self._error = exc
-            self._free.put(buf)
+            self._slots.release()
 
-    def _write(self, batch: memoryview) -> None:
-        self._sha.update(batch)
-        self._written += len(batch)
-        while batch:
-            batch = batch[os.write(self._fd, batch):]  # type: ignore[arg-type]
-        if self._written > DROP_BEHIND_BYTES and hasattr(os, "posix_fadvise"):
-            os.posix_fadvise(self._fd, 0, self._written - DROP_BEHIND_BYTES, os.POSIX_FADV_DONTNEED)  # type: ignore[arg-type]
+    def _write(self, batch: list[memoryview], offset: int) -> int:
+        """Hash and write one batch that starts at byte ``offset`` of the archive; returns its end."""
+        assert self._fd is not None
+        end = offset
+        for piece in batch:
+            self._sha.update(piece)
+            end += len(piece)
+        _write_all(self._fd, batch)
+        if end > DROP_BEHIND_BYTES and hasattr(os, "posix_fadvise"):
+            os.posix_fadvise(self._fd, 0, end - DROP_BEHIND_BYTES, os.POSIX_FADV_DONTNEED)
+        return end
 
     def _check(self) -> None:
         if self._error is not None:

@@ -277,10 +277,10 @@ def test_write_failure_is_one_line_and_resumable(tmp_path: Path, tiny_dataset: P
     raw = export_raw(tiny_dataset, tmp_path / "raw", "ros1")
     real_write = ta.TarArchiveWriter._write
 
-    def full_disk(self, batch):  # type: ignore[no-untyped-def]
+    def full_disk(self, *args):  # type: ignore[no-untyped-def]
         if self.path.endswith("scan_001.tar"):
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real_write(self, batch)
+        return real_write(self, *args)
 
     monkeypatch.setattr(ta.TarArchiveWriter, "_write", full_disk)
     out = tmp_path / "out"

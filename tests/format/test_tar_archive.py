@@ -113,12 +113,40 @@ def test_write_failure_is_reported_with_the_path(tmp_path: Path, monkeypatch: py
 
     w = TarArchiveWriter(tmp_path / "a.tar", batch_bytes=8 * 1024)
     monkeypatch.setattr(os, "write", write)
+    monkeypatch.setattr(os, "writev", write)
     with pytest.raises(OSError, match=r"a\.tar: writing the image archive failed: .*No space left"):
         for i in range(50):  # the error surfaces at a later add() or at close()
             w.add(f"color/{i:06d}.png", bytes(5000))
         w.close()
     w.abort()
     assert w.done
+
+
+def test_partial_writes_are_completed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """writev may write less than asked (a signal, a pipe): the rest follows, in order."""
+    real = os.writev
+
+    def short_writev(fd: int, pieces: list[memoryview]) -> int:
+        first = memoryview(pieces[0])
+        return real(fd, [first[:max(1, len(first) // 3)]])
+
+    rng = np.random.default_rng(5)
+    members = [(f"color/{i:06d}.jpg", rng.bytes(int(n)), i) for i, n in enumerate(rng.integers(1, 3000, 12))]
+    monkeypatch.setattr(os, "writev", short_writev)
+    offsets, size, sha = _write(tmp_path / "a.tar", members, batch_bytes=4096)
+    monkeypatch.undo()
+    _check(tmp_path / "a.tar", members, offsets, size, sha)
+
+
+def test_writable_buffers_are_copied_read_only_ones_are_not(tmp_path: Path) -> None:
+    buf = bytearray(b"a" * 5000)
+    w = TarArchiveWriter(tmp_path / "a.tar")
+    w.add("color/000000.png", buf)
+    buf[:] = b"b" * 5000  # the caller reuses its buffer before the archive is written
+    w.add("color/000001.png", buf)
+    offsets = [512, 6144]
+    _check(tmp_path / "a.tar", [("color/000000.png", b"a" * 5000, 0), ("color/000001.png", b"b" * 5000, 0)],
+           offsets, *w.close())
 
 
 def test_finish_returns_before_the_archive_is_written(tmp_path: Path) -> None:
