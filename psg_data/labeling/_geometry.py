@@ -5,8 +5,8 @@ with OpenCV camera axes (x right, y down, z forward).
 
 3D IoU of oriented boxes (:func:`box_iou`) is exact when both boxes are rotated about the world z
 axis only ("yaw-only": the box's z axis is the world z axis, up to sign): the intersection volume is
-then the area of the intersection of the two footprint rectangles (convex polygon clipping,
-Sutherland-Hodgman) times the overlap of their z intervals. For general rotations it is estimated
+then the area of the intersection of the two footprint rectangles (``cv2.intersectConvexConvex``)
+times the overlap of their z intervals. For general rotations it is estimated
 by testing a regular grid of ``GENERAL_IOU_GRID**3`` points of the smaller box against the other box
 (error about 1/GENERAL_IOU_GRID of the smaller box's volume).
 """
@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data._geometry import box_footprint, convex_polygon_intersection, polygon_area
 from psg_data.errors import LabelingError
 from psg_data.schemas._records import Box, CameraIntrinsics
 
@@ -207,56 +208,6 @@ def is_yaw_only(R: NDArray[np.float64], tol: float = _YAW_TOL) -> bool:
     return bool(abs(abs(R[2, 2]) - 1.0) <= tol and np.all(np.abs(R[2, :2]) <= tol) and np.all(np.abs(R[:2, 2]) <= tol))
 
 
-def polygon_area(poly: NDArray[np.float64]) -> float:
-    """Area of a simple polygon (M, 2) (shoelace formula, absolute value)."""
-    if len(poly) < 3:
-        return 0.0
-    x, y = poly[:, 0], poly[:, 1]
-    return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2.0)
-
-
-def _ccw(poly: NDArray[np.float64]) -> NDArray[np.float64]:
-    x, y = poly[:, 0], poly[:, 1]
-    signed = np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))
-    return poly if signed >= 0 else poly[::-1]
-
-
-def convex_polygon_intersection(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Intersection of two convex polygons (M, 2), (K, 2) (Sutherland-Hodgman clipping of ``a`` by ``b``).
-
-    Returns the (P, 2) intersection polygon, counter-clockwise; P = 0 if they do not overlap.
-    """
-    out = [tuple(p) for p in _ccw(np.asarray(a, float))]
-    clip = _ccw(np.asarray(b, float))
-    for i in range(len(clip)):
-        if not out:
-            break
-        c0, c1 = clip[i], clip[(i + 1) % len(clip)]
-        ex, ey = c1[0] - c0[0], c1[1] - c0[1]
-
-        def side(p: tuple[float, float]) -> float:
-            return ex * (p[1] - c0[1]) - ey * (p[0] - c0[0])
-
-        inp = out
-        out = []
-        for j in range(len(inp)):
-            p, q = inp[j], inp[(j + 1) % len(inp)]
-            sp, sq = side(p), side(q)
-            if sp >= 0:
-                out.append(p)
-            if (sp >= 0) != (sq >= 0):
-                t = sp / (sp - sq)
-                out.append((p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])))
-    return np.asarray(out, float).reshape(-1, 2)
-
-
-def _footprint(b: Box) -> NDArray[np.float64]:
-    e = np.asarray(b.extent_m, float)
-    R = np.asarray(b.rotation, float)
-    loc = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float) * e[:2] / 2
-    return loc @ R[:2, :2].T + np.asarray(b.center_m, float)[:2]
-
-
 def _z_range(b: Box) -> tuple[float, float]:
     c = float(np.asarray(b.center_m, float)[2])
     h = float(np.asarray(b.extent_m, float)[2]) / 2
@@ -273,7 +224,7 @@ def _intersection_volume(a: Box, b: Box) -> float:
         dz = min(za[1], zb[1]) - max(za[0], zb[0])
         if dz <= 0:
             return 0.0
-        return polygon_area(convex_polygon_intersection(_footprint(a), _footprint(b))) * dz
+        return polygon_area(convex_polygon_intersection(box_footprint(a), box_footprint(b))) * dz
     small, big = (a, b) if _volume(a) <= _volume(b) else (b, a)
     g = (np.arange(GENERAL_IOU_GRID) + 0.5) / GENERAL_IOU_GRID - 0.5
     X, Y, Z = np.meshgrid(g, g, g, indexing="ij")

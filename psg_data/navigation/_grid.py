@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from psg_data._geometry import box_footprint, points_in_polygon
 from psg_data.errors import EvaluationError
 from psg_data.schemas._records import Box, Door, Receptacle, Room
 
@@ -49,63 +50,12 @@ DoorConfig = tuple[bool, ...]
 # --------------------------------------------------------------------------------------------
 # geometry helpers
 # --------------------------------------------------------------------------------------------
-def points_in_polygon(xy: NDArray[np.float64], polygon: ArrayLike) -> NDArray[np.bool_]:
-    """Even-odd point-in-polygon test (vectorised over points).
-
-    Args:
-        xy: (N, 2) points, metres.
-        polygon: (V, 2) vertices (either orientation, not repeated at the end).
-
-    Returns:
-        (N,) True for points strictly inside (points on an edge may go either way).
-    """
-    p = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
-    x, y = xy[:, 0], xy[:, 1]
-    inside = np.zeros(xy.shape[0], dtype=bool)
-    for k in range(p.shape[0]):
-        (xa, ya), (xb, yb) = p[k], p[(k + 1) % p.shape[0]]
-        crosses = (ya > y) != (yb > y)
-        if not np.any(crosses):
-            continue
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xc = xa + (y - ya) * (xb - xa) / (yb - ya)
-        inside ^= crosses & (x < xc)
-    return inside
-
-
 def _segment_distance(xy: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distance of each (N, 2) point to the segment a-b, metres."""
     d = b - a
     L2 = float(d @ d)
     t = np.zeros(xy.shape[0]) if L2 == 0 else np.clip((xy - a) @ d / L2, 0.0, 1.0)
     return np.linalg.norm(xy - (a + t[:, None] * d), axis=1)
-
-
-def _convex_hull(pts: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Convex hull (Andrew's monotone chain) of (N, 2) points, counter-clockwise."""
-    P = np.unique(np.round(pts, 12), axis=0)
-    if P.shape[0] < 3:
-        return P
-
-    def cross(o: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
-
-    lower: list[NDArray[np.float64]] = []
-    for q in P:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], q) <= 0:
-            lower.pop()
-        lower.append(q)
-    upper: list[NDArray[np.float64]] = []
-    for q in P[::-1]:
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], q) <= 0:
-            upper.pop()
-        upper.append(q)
-    return np.asarray(lower[:-1] + upper[:-1])
-
-
-def box_footprint(box: Box) -> NDArray[np.float64]:
-    """Top-down footprint of an oriented box: convex hull of its corners projected on z = 0, (V, 2) metres."""
-    return _convex_hull(box.corners()[:, :2])
 
 
 # --------------------------------------------------------------------------------------------

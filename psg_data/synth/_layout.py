@@ -14,10 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data._geometry import yaw_rotation
 from psg_data.schemas._records import Box, Door, Receptacle, Room
 from psg_data.synth._catalog import FURNITURE, OBJECTS, ROOM_FURNITURE, ObjectSpec
 
-__all__ = ["LabLayout", "WallBox", "Instance", "make_layout", "yaw_matrix",
+__all__ = ["LabLayout", "WallBox", "Instance", "make_layout",
            "WALL_HEIGHT_M", "DOOR_WIDTH_M", "DOOR_HEIGHT_M", "WALL_THICKNESS_M",
            "ID_NONE", "ID_FLOOR", "ID_CEILING", "WALL_ID0", "DOOR_ID0", "RECEPTACLE_ID0", "OBJECT_ID0"]
 
@@ -49,14 +50,6 @@ _ROOMS = [  # id, name, theme, x range, n receptacles
     ("room_c", "workshop", "workshop", (12.0, 17.0), 8),
 ]
 _Y_RANGE = (0.0, 5.5)
-
-
-def yaw_matrix(yaw_rad: float) -> NDArray[np.float64]:
-    """3x3 rotation about +z by ``yaw_rad`` (entries rounded so that right angles are exact)."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    R[np.abs(R) < 1e-12] = 0.0
-    return R
 
 
 @dataclass(frozen=True)
@@ -280,7 +273,7 @@ def make_layout(seed: int) -> LabLayout:
                 rec_id = f"{rid[-1]}{count:02d}_{cat}"
                 receptacles.append(Receptacle(
                     rec_id, f"{cat.replace('_', ' ')} {count} ({name})", rid,
-                    Box(np.array([cx, cy, spec.height_m / 2]), np.array([w, d, spec.height_m]), yaw_matrix(yaw)),
+                    Box(np.array([cx, cy, spec.height_m / 2]), np.array([w, d, spec.height_m]), yaw_rotation(yaw)),
                     cat))
                 jitter = rng.uniform(-0.06, 0.06, 3)
                 colors.append(tuple(float(c) for c in np.clip(np.asarray(spec.color) + jitter, 0.05, 0.95)))

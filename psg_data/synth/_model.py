@@ -444,9 +444,3 @@ class LabModel:
         plan = self.scan_plan(scan)
         return self.render_frame(plan.poses[frame_index], plan.state, noise=noise,
                                  rng=self.noise_rng(plan.index, frame_index))
-
-
-def yaw_noise_rotation(yaw_rad: float) -> NDArray[np.float64]:
-    """3x3 rotation about +z by ``yaw_rad``."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -43,10 +43,11 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from psg_data._geometry import yaw_rotation
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.synth._catalog import CONFUSABLE
 from psg_data.synth._layout import OBJECT_ID0, RECEPTACLE_ID0
-from psg_data.synth._model import LabModel, yaw_noise_rotation
+from psg_data.synth._model import LabModel
 from psg_data.synth._render import SceneState
 
 __all__ = ["write_detections", "detect", "DETECTIONS_SCHEMA", "visible_instances"]
@@ -178,7 +179,7 @@ def _row(scan_id: str, label: str, kind: str, center: Any, extent: Any, rotation
     if not perfect:
         c = c + rng.normal(0.0, sigma, 3)
         e = e * np.exp(rng.normal(0.0, 0.1, 3))
-        R = yaw_noise_rotation(rng.normal(0.0, np.deg2rad(5.0))) @ R
+        R = yaw_rotation(rng.normal(0.0, np.deg2rad(5.0))) @ R
         score = float(rng.beta(8, 2) if true else rng.beta(2, 3))
     return {"scan_id": scan_id, "label": label, "kind": kind, "centroid_m": c.tolist(), "box_center_m": c.tolist(),
             "box_extent_m": e.tolist(), "box_rotation": R.reshape(9).tolist(), "score": score,

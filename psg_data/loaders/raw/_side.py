@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from psg_data._geometry import yaw_rotation
 from psg_data.errors import ConversionError
 
 __all__ = ["SideData", "read_side_files", "SIDE_TABLES", "SITE_NAMES"]
@@ -80,11 +80,6 @@ def _num_list(value: str, path: Path, line: int, col: str) -> Any:
             raise ConversionError(f"{path}:{line}: {col}: expected a JSON array of numbers, got {value!r}") from exc
 
 
-def _yaw_rotation(yaw: float) -> list[float]:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return [c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]
-
-
 def _read_csv(path: Path) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     with open(path, newline="", encoding="utf-8") as fh:
@@ -102,7 +97,7 @@ def _read_csv(path: Path) -> list[dict[str, Any]]:
                     out["center_m"] = [float(out.pop(f"center_{a}")) for a in "xyz"]
                     out["extent_m"] = [float(out.pop(f"extent_{a}")) for a in "xyz"]
                     yaw = out.pop("yaw_rad", None)
-                    out.setdefault("rotation", _yaw_rotation(float(yaw or 0.0)))
+                    out.setdefault("rotation", yaw_rotation(float(yaw or 0.0)).reshape(9).tolist())
                 except (KeyError, TypeError, ValueError) as exc:
                     raise ConversionError(f"{path}:{line}: box columns: expected numbers in center_x..z and "
                                           f"extent_x..z ({exc})") from exc
