@@ -30,7 +30,7 @@ def _is_complete(root: Path) -> bool:
     from psg_data.errors import FormatError
     from psg_data.schemas._manifest import read_manifest
     from psg_data.schemas._tables import table_path
-    from psg_data.writers._dataset_writer import sha256_file
+    from psg_data.schemas._checksum import sha256_file
 
     try:
         info = read_manifest(root)

@@ -156,4 +156,4 @@ def _label_demo_if_needed(ds: Any, labels: str, quiet: bool) -> None:
 
     logging.getLogger(__name__).info("labelling the demo lab with source %s (once)", labels)
     label_dataset(ds.root, labels)
-    ds._arrow.clear()
+    ds.refresh()

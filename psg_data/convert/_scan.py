@@ -920,11 +920,3 @@ def run_task(task: ScanTask, progress: Callable[..., Any] | None = None, writer:
         if own:
             writer.abort(keep_partial=True)  # the parent's writer finishes the dataset
     return results
-
-
-def make_static(parent: str, child: str, T: NDArray[np.float64]) -> dict[str, Any]:
-    """A ``static_transforms`` config entry from a 4x4 transform."""
-    from psg_data.loaders.raw._transforms import matrix_to_quat_xyzw
-
-    return {"parent": parent, "child": child, "translation": [float(v) for v in T[:3, 3]],
-            "rotation_xyzw": [float(v) for v in matrix_to_quat_xyzw(T[:3, :3])]}

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from psg_data.errors import LabelingError
-from psg_data.estimators._base import EdgeStream
+from psg_data.schemas._streams import EdgeStream
 from psg_data.labeling._association import AssociationParams, PerceptionInfo, perception_labels
 from psg_data.labeling._codes import ErrorRates, LabelGrid, error_rates, ground_truth, inject_noise, privileged_codes
 from psg_data.labeling._detections import read_detections

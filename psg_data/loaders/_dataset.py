@@ -81,6 +81,13 @@ class Dataset:
         self._arrow = {}
         self._images = _ImageFiles(self.root)
 
+    def refresh(self) -> None:
+        """Forget the tables and records read so far: the next use reads them again from disk
+        (after another writer, e.g. :func:`psg_data.labeling.label_dataset`, changed the dataset)."""
+        self._arrow = {}
+        for name in [k for k, v in type(self).__dict__.items() if isinstance(v, cached_property)]:
+            self.__dict__.pop(name, None)
+
     def frame_view(self, scan_ids: Sequence[str] | None = None, *, color: bool = True,
                    depth: bool = True) -> FrameView:
         """Every frame of ``scan_ids`` (default: all scans) by one flat index: ``len(view)``, and
@@ -198,13 +205,21 @@ class Dataset:
             out[str(scan[a])] = {k: v[a:b] for k, v in cols.items()}
         return out
 
+    @cached_property
+    def _scan_row_by_id(self) -> dict[str, dict[str, Any]]:
+        return {r["scan_id"]: r for r in self._scan_rows}
+
     def scan(self, scan_id: str) -> Scan:
-        """The scan with id ``scan_id``."""
-        rows = {r["scan_id"]: r for r in self._scan_rows}
-        if scan_id not in rows:
+        """The scan with id ``scan_id``.
+
+        Raises:
+            KeyError: no scan has that id.
+        """
+        row = self._scan_row_by_id.get(scan_id)
+        if row is None:
             raise KeyError(f"{self.root}: no scan {scan_id!r}; scans are {', '.join(self.scan_ids[:5])}"
                            f"{', ...' if len(self.scan_ids) > 5 else ''}")
-        return Scan(self, rows[scan_id], self._frames_by_scan.get(scan_id, {}))
+        return Scan(self, row, self._frames_by_scan.get(scan_id, {}))
 
     def scan_at(self, stamp_ns: int) -> Scan | None:
         """The scan whose [start, end] contains ``stamp_ns``, else the latest scan that started before it.

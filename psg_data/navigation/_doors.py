@@ -474,10 +474,9 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
 
 
 # -- the evaluation world ---------------------------------------------------------------------------
-def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, noise: float = 0.0,
-                    scan_hours: tuple[int, ...] = (9, 11, 13, 15), resolution_m: float = 0.1,
-                    robot_radius_m: float = 0.2, train_streams: Sequence[EdgeStream] | None = None,
-                    lab_door: str = "door_ab", pattern: str = "weekly") -> DoorWorld:
+def door_loop_world(door_ab_open: Callable[[float], bool], train_streams: Sequence[EdgeStream], *,
+                    t_train_end_s: float, t_end_s: float, timezone: str = "UTC", resolution_m: float = 0.1,
+                    robot_radius_m: float = 0.2, name: str = "door_loop") -> DoorWorld:
     """Two rooms joined by a direct door and by a hallway: the paper's "Predictive Navigation" setting.
 
     Layout (metres, world x east, y north): room A ``[0, 6] x [0, 8]``, room B ``[6, 12] x [0, 8]``,
@@ -486,41 +485,17 @@ def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, nois
     directly (the shorter route, at the far end of the rooms); ``door_a_hall`` (x = 1, y = 0) and
     ``door_b_hall`` (x = 11, y = 0) lead through the hallway (a few metres longer) and are always
     open. Finding ``door_ab`` closed costs the walk to it and back (about 10 m or more), believing
-    it closed when it is open costs the longer route. ``door_ab``
-    follows door ``lab_door`` of the synthetic lab with ``seed``: ``pattern="lab"`` is the lab's own
-    door schedule (open during working days, closed at night, closed at weekends with probability
-    0.6 a day, sometimes closed during the day); ``pattern="weekly"`` (default) keeps the lab
-    door's working-day pattern on Monday-Friday and closes the door all weekend (a clean weekly
-    pattern).
+    it closed when it is open costs the longer route.
 
-    Training streams (unless given): the door states at the lab's scan times (``scan_hours`` local,
-    every day of the first ``train_days`` days), each observation flipped with probability
-    ``noise`` (seeded), for all three doors. Queries come from the remaining days.
+    Args:
+        door_ab_open: whether ``door_ab`` is open at a time (seconds since the epoch, UTC).
+        train_streams: the doors' training observations (edges ``(door_id, "open")``).
+        t_train_end_s / t_end_s: end of training and of the world's time span, seconds since the epoch.
+        timezone: IANA timezone of the world's clock.
+        resolution_m / robot_radius_m: occupancy grid cell size and robot radius, metres.
+        name: a label for reports.
     """
     from psg_data.schemas._records import Box, Door, Receptacle, Room
-    from psg_data.synth import LabConfig, LabModel
-
-    if not 0 < train_days < days:
-        raise EvaluationError(f"train_days: {train_days}, expected 0 < train_days < days ({days})")
-    lab = LabModel(LabConfig(seed=seed, days=days, train_days=train_days, scan_hours=tuple(scan_hours),
-                             generator="continuous-v1"))  # the door models below are continuous-time ones
-    sched = lab.schedule
-    if lab_door not in sched.doors:
-        raise EvaluationError(f"lab_door {lab_door!r}: the lab has doors {sorted(sched.doors)}")
-    from psg_data.synth._lab_schedule import DOOR_OPEN
-
-    if pattern == "lab":
-        tl = sched.doors[lab_door]
-    elif pattern == "weekly":
-        from psg_data.synth._schedule import EntityModel, WeekPattern, generate_timeline
-
-        k = sched.door_ids.index(lab_door)
-        base = sched.door_models[lab_door]
-        week = WeekPattern("closed_weekends", ((0.5, 0.5), (0.5, 0.5)), ((0,),) * 5 + ((1,), (1,)))
-        model = EntityModel(lab_door, (base.day_patterns[0], base.day_patterns[1]), (week,))
-        tl = generate_timeline(model, 1000 + k, seed, lab.config.date, days, lab.config.timezone)
-    else:
-        raise EvaluationError(f"pattern {pattern!r}: expected 'lab' or 'weekly'")
 
     rooms = [Room("room_a", "room A", np.array([[0, 0], [6, 0], [6, 8], [0, 8.0]])),
              Room("room_b", "room B", np.array([[6, 0], [12, 0], [12, 8], [6, 8.0]])),
@@ -535,34 +510,18 @@ def door_loop_world(*, seed: int = 0, days: int = 21, train_days: int = 14, nois
     grid = grid_from_geometry(rooms, recs, doors, resolution_m=resolution_m, robot_radius_m=robot_radius_m)
 
     def doors_at(t_s: float) -> dict[str, bool]:
-        ns = np.array([int(round(t_s * 1e9))], np.int64)
-        return {"door_ab": bool(int(np.asarray(tl.at(ns)).reshape(-1)[0]) == DOOR_OPEN),
-                "door_a_hall": True, "door_b_hall": True}
+        return {"door_ab": bool(door_ab_open(t_s)), "door_a_hall": True, "door_b_hall": True}
 
-    t_train_end_s = float(sched.day_starts_ns[train_days]) / 1e9
-    t_end_s = float(sched.end_ns) / 1e9
-    if train_streams is None:
-        train = [p for p in lab.scans if p.day < train_days]
-        t = np.array([p.start_ns for p in train], np.float64) / 1e9
-        rng = np.random.default_rng([int(seed), 9001])
-        streams = []
-        for d in ("door_ab", "door_a_hall", "door_b_hall"):
-            y = np.array([doors_at(ti)[d] for ti in t], np.int8)
-            flip = rng.random(y.size) < noise
-            y = np.where(flip, 1 - y, y).astype(np.int8)
-            streams.append(EdgeStream((d, "open"), t, y, {"source": f"schedule, noise {noise:g}"}))
-        train_streams = streams
     free = grid.free(grid.door_config({d.door_id: True for d in doors}))
     centers = grid.cell_centers()
-    H, W = grid.shape
+    W = grid.shape[1]
     starts = {}
     for rid, (x0, x1) in (("room_a", (1.0, 5.0)), ("room_b", (7.0, 11.0))):
         m = (free.ravel() & (centers[:, 0] >= x0) & (centers[:, 0] <= x1) & (centers[:, 1] >= 0.8)
              & (centers[:, 1] <= 4.0))
-        idx = np.flatnonzero(m)
-        starts[rid] = np.stack(np.divmod(idx, W), axis=1).astype(np.int64)
-    return DoorWorld(grid, doors_at, list(train_streams), t_train_end_s, t_end_s, lab.config.timezone, starts,
-                     {"room_a": ["a_desk"], "room_b": ["b_desk"]}, name=f"door_loop(lab seed {seed}, {lab_door})")
+        starts[rid] = np.stack(np.divmod(np.flatnonzero(m), W), axis=1).astype(np.int64)
+    return DoorWorld(grid, doors_at, list(train_streams), t_train_end_s, t_end_s, timezone, starts,
+                     {"room_a": ["a_desk"], "room_b": ["b_desk"]}, name=name)
 
 
 # -- the figure -------------------------------------------------------------------------------------

@@ -100,7 +100,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from psg_data.writers import sha256_file
+    from psg_data.schemas._checksum import sha256_file
 
     root = Path(path)
     c = _Collector()

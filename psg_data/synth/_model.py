@@ -235,8 +235,7 @@ class LabModel:
 
         lab = LabModel(seed=0)
         dense = lab.schedule.dense(step_s=3600)      # hourly ground truth of all 21 objects
-        plan = lab.scans[0]
-        fr = lab.render_scan_frame(0, 0)              # the images stored for frame 0 of scan 0
+        plan = lab.scans[0]                           # poses and scene state of the first scan
     """
 
     def __init__(self, config: LabConfig | None = None, *, seed: int | None = None) -> None:
@@ -438,9 +437,3 @@ class LabModel:
         nz = self.config.noise if isinstance(noise, str) else noise
         return self.renderer(st).render(T_world_camera, camera or self.camera, noise=nz, rng=rng)
 
-    def render_scan_frame(self, scan: int | str, frame_index: int, *, noise: DepthNoise | None | str = "config"
-                          ) -> RenderedFrame:
-        """Render frame ``frame_index`` of a planned scan exactly as :func:`build_lab` stores it."""
-        plan = self.scan_plan(scan)
-        return self.render_frame(plan.poses[frame_index], plan.state, noise=noise,
-                                 rng=self.noise_rng(plan.index, frame_index))

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import PsgDataError
-from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.schemas._streams import EdgeKey, EdgeStream
 
 __all__ = ["PersistenceBenchmark", "make_persistence_benchmark", "BENCHMARK_FEATURES"]
 

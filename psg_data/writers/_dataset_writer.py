@@ -29,6 +29,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from psg_data.errors import FormatError
+from psg_data.schemas._checksum import sha256_file
 from psg_data.schemas._manifest import DatasetInfo
 from psg_data.schemas._records import CameraIntrinsics, Door, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import (
@@ -56,15 +57,6 @@ _SCANS_DIR = ".scans"
 """Inside ``ROOT.partial``: per completed scan, its frames (``ID.arrow``) and a JSON record
 (``ID.json``, written last) with the scan row and file checksums: what a resumed write adopts."""
 _WRITE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0)
-
-
-def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
-    """Hex SHA-256 of a file, read in chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _package_version() -> str:

@@ -85,8 +85,15 @@ def test_tf_tree_without_path(tmp_path: Path) -> None:
     assert_error(tmp_path, [str(bag)], "TF tree has no path from 'map' to 'camera_color_optical_frame'")
 
 
+def make_static(parent: str, child: str, T: np.ndarray) -> dict[str, object]:
+    """A ``static_transforms`` config entry from a 4x4 transform."""
+    from psg_data.loaders.raw._transforms import matrix_to_quat_xyzw
+
+    return {"parent": parent, "child": child, "translation": [float(v) for v in T[:3, 3]],
+            "rotation_xyzw": [float(v) for v in matrix_to_quat_xyzw(T[:3, :3])]}
+
+
 def test_missing_tf_static_supplied_in_config(tmp_path: Path) -> None:
-    from psg_data.convert._scan import make_static
     from psg_data.synth._raw_export import R_CAMERA_LINK_OPTICAL, STATIC_BASE_CAMERA_LINK
     from .conftest import pose
 

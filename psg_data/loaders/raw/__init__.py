@@ -18,7 +18,7 @@ from psg_data.loaders.raw._images import (
     make_compressed_depth,
 )
 from psg_data.loaders.raw._side import SideData, read_side_files
-from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform, matrix_to_quat_xyzw, slerp
+from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer, make_transform, matrix_to_quat_xyzw
 from psg_data.loaders.raw._wire import CompressedFields, TfSample, parse_compressed_image, parse_tf_message
 
 __all__ = [
@@ -28,5 +28,5 @@ __all__ = [
     "decode_color_image", "decode_compressed_color", "decode_compressed_depth", "decode_depth_image",
     "inspect_encoded", "make_compressed_depth",
     "SideData", "read_side_files",
-    "PoseSeries", "TfBuffer", "make_transform", "matrix_to_quat_xyzw", "slerp",
+    "PoseSeries", "TfBuffer", "make_transform", "matrix_to_quat_xyzw",
 ]

@@ -19,10 +19,8 @@ from numpy.typing import NDArray
 from psg_data.errors import ConversionError
 
 __all__ = [
-    "quat_xyzw_to_matrix",
     "matrix_to_quat_xyzw",
     "make_transform",
-    "slerp",
     "PoseSeries",
     "TfBuffer",
 ]
@@ -92,11 +90,6 @@ def _interpolate(p: Pose7, r: Pose7, a: float) -> Pose7:
     return (p[0] + a * (r[0] - p[0]), p[1] + a * (r[1] - p[1]), p[2] + a * (r[2] - p[2]), qx, qy, qz, qw)
 
 
-def quat_xyzw_to_matrix(q: Iterable[float]) -> NDArray[np.float64]:
-    """3x3 rotation of a (not necessarily unit) quaternion ``(x, y, z, w)`` (NaN if degenerate)."""
-    return _matrix(_pose7((0.0, 0.0, 0.0), tuple(q)))[:3, :3]
-
-
 def matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit quaternion ``(x, y, z, w)`` with ``w >= 0`` of a 3x3 rotation (Shepperd's method)."""
     R = np.asarray(R, dtype=np.float64)
@@ -120,12 +113,6 @@ def matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
 def make_transform(translation: Iterable[float], quat_xyzw: Iterable[float]) -> NDArray[np.float64]:
     """4x4 transform from a translation (metres) and a quaternion ``(x, y, z, w)``."""
     return _matrix(_pose7(tuple(translation), tuple(quat_xyzw)))
-
-
-def slerp(q0: NDArray[np.float64], q1: NDArray[np.float64], a: float) -> NDArray[np.float64]:
-    """Spherical linear interpolation between unit quaternions (shortest arc), ``a`` in [0, 1]."""
-    p, r = _pose7((0, 0, 0), q0), _pose7((0, 0, 0), q1)
-    return np.array(_interpolate(p, r, float(a))[3:])
 
 
 @dataclass
@@ -242,9 +229,6 @@ class TfBuffer:
     @property
     def frames(self) -> list[str]:
         return sorted({f for k in (*self.static, *self.dynamic) for f in k})
-
-    def has_frame(self, frame: str) -> bool:
-        return self._norm(frame) in self.frames
 
     def path(self, source: str, target: str) -> list[tuple[str, str, bool]] | None:
         """Edges ``(parent, child, forward)`` from ``source`` to ``target`` or None if disconnected."""
