@@ -624,7 +624,7 @@ class _ScanSink:
             return
         self.last_key_T = T
         assert self.camera is not None
-        if self.camera.camera_id not in self.w._cameras:
+        if self.camera.camera_id not in self.w.cameras:
             self.w.add_camera(self.camera)
         try:
             cb, ca, csize = self.fw.color(cp, self.names[0])

@@ -17,10 +17,11 @@ import logging
 import os
 import shutil
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, fields, is_dataclass
+from dataclasses import asdict, dataclass, fields, is_dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -141,6 +142,23 @@ class _FrameColumns:
         return to_arrow("frames", pa.table(cols))
 
 
+@dataclass(frozen=True)
+class _ScanContext:
+    """What a :class:`ScanWriter` gets from its dataset writer."""
+
+    root: Path
+    """The staging directory the images go to."""
+    color_encoding: str
+    image_layout: str
+    cameras: Mapping[str, CameraIntrinsics]
+    encoder: ThreadPoolExecutor | None
+    """Image-encoding threads (None: encode in the caller's thread)."""
+    threads: int
+    on_close: Callable[[ScanWriter], None]
+    """Called once the scan is closed (its archive may still be being written)."""
+    on_abort: Callable[[ScanWriter], None]
+
+
 class ScanWriter:
     """Adds the frames of one scan; obtained from :meth:`DatasetWriter.scan`.
 
@@ -149,22 +167,22 @@ class ScanWriter:
     before its images are encoded; they are stored in order as the encodings finish.
     """
 
-    def __init__(self, writer: DatasetWriter, scan_id: str, source: str | None, split: str | None) -> None:
-        self._w = writer
+    def __init__(self, context: _ScanContext, scan_id: str, source: str | None, split: str | None) -> None:
+        self._ctx = context
         self.scan_id = scan_id
         self.source = source
         self.split = split
         self._cols = _FrameColumns()
         self._queue: deque[tuple[int, Any, Any]] = deque()
         self._files: dict[str, tuple[int, str]] = {}
-        self._ext = "jpg" if writer.color_encoding == "jpeg" else "png"
+        self._ext = "jpg" if context.color_encoding == "jpeg" else "png"
         self._archive: TarArchiveWriter | None = None
         self._archive_rel = ARCHIVE_PATH_TEMPLATE.format(scan_id=scan_id)
         cname, dname = ARCHIVE_MEMBER_TEMPLATES  # as %-templates: formatted twice per frame
         self._color_member = cname.replace("{frame_index:06d}", "%06d").replace("{ext}", self._ext)
         self._depth_member = dname.replace("{frame_index:06d}", "%06d")
-        if writer.image_layout == "tar":
-            path = writer.tmp / self._archive_rel
+        if context.image_layout == "tar":
+            path = context.root / self._archive_rel
             path.parent.mkdir(parents=True, exist_ok=True)
             self._archive = TarArchiveWriter(path)
         self._done = False
@@ -188,7 +206,7 @@ class ScanWriter:
             T = np.asarray(T, dtype=np.float64)
         if T.shape != (4, 4):
             raise FormatError(f"scan {self.scan_id}: T_world_camera must be 4x4, got shape {T.shape}")
-        if camera_id not in self._w._cameras:
+        if camera_id not in self._ctx.cameras:
             raise FormatError(f"scan {self.scan_id}: unknown camera_id {camera_id!r}; add it with add_camera first")
         return self._cols.append(int(stamp_ns), T, camera_id)
 
@@ -209,7 +227,7 @@ class ScanWriter:
             depth_mm: (H, W) uint16 millimetres, 0 = invalid.
             camera_id: a camera added with :meth:`DatasetWriter.add_camera`.
         """
-        cam = self._w._cameras.get(camera_id)
+        cam = self._ctx.cameras.get(camera_id)
         color_rgb = np.asarray(color_rgb)
         depth_mm = np.asarray(depth_mm)
         if cam is not None:
@@ -221,11 +239,11 @@ class ScanWriter:
                 raise FormatError(f"scan {self.scan_id}: depth must be {expect[0]}x{expect[1]} uint16 mm, "
                                   f"got {depth_mm.shape} {depth_mm.dtype}")
         i = self._record(stamp_ns, T_world_camera, camera_id)
-        pool = self._w._pool
+        pool = self._ctx.encoder
         if pool is None:
-            self._store(i, encode_color(color_rgb, self._w.color_encoding), encode_depth(depth_mm))
+            self._store(i, encode_color(color_rgb, self._ctx.color_encoding), encode_depth(depth_mm))
         else:
-            self._push(i, pool.submit(encode_color, color_rgb, self._w.color_encoding),
+            self._push(i, pool.submit(encode_color, color_rgb, self._ctx.color_encoding),
                        pool.submit(encode_depth, depth_mm))
         return i
 
@@ -255,13 +273,13 @@ class ScanWriter:
         self._queue.append((i, color, depth))
         while self._queue:
             _, c, d = self._queue[0]
-            if len(self._queue) <= 2 * self._w._threads and (
+            if len(self._queue) <= 2 * self._ctx.threads and (
                     (isinstance(c, Future) and not c.done()) or (isinstance(d, Future) and not d.done())):
                 break
             self._store(*self._queue.popleft())
 
     def _store(self, i: int, color: Any, depth: Any) -> None:
-        if self._w._pool is not None:
+        if self._ctx.encoder is not None:
             if isinstance(color, Future):
                 color = color.result()
             if isinstance(depth, Future):
@@ -276,14 +294,14 @@ class ScanWriter:
         else:
             crel = COLOR_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i, ext=self._ext)
             drel = DEPTH_PATH_TEMPLATE.format(scan_id=self.scan_id, frame_index=i)
-            self._files[crel] = self._w._write_file(crel, color)
-            self._files[drel] = self._w._write_file(drel, depth)
+            self._files[crel] = _write_image_file(self._ctx.root, crel, color)
+            self._files[drel] = _write_image_file(self._ctx.root, drel, depth)
             cols.color_path.append(crel)
             cols.depth_path.append(drel)
 
     def frames_table(self) -> pa.Table:
         """The scan's rows of ``frames`` (every frame stored)."""
-        return self._cols.table(self.scan_id, self._archive_rel if self._w.image_layout == "tar" else None)
+        return self._cols.table(self.scan_id, self._archive_rel if self._ctx.image_layout == "tar" else None)
 
     def abort(self) -> None:
         """Drop the scan: cancel pending encodings and stop its archive (the file stays partial)."""
@@ -295,7 +313,7 @@ class ScanWriter:
         if self._archive is not None:
             self._archive.abort()
         self._done = True
-        self._w._open.discard(self)
+        self._ctx.on_abort(self)
 
     def close(self) -> None:
         """Store pending frames and finish the scan.
@@ -318,16 +336,50 @@ class ScanWriter:
             self.abort()
             raise
         self._done = True
-        self._w._open.discard(self)
-        self._w._pending.append(self)
-        self._w._settle(block=False)
+        self._ctx.on_close(self)
 
-    def _complete(self) -> None:
-        """Wait for the archive (tar layout) and register the scan with the dataset writer."""
+    @property
+    def archive_done(self) -> bool:
+        """Whether a closed scan's archive is completely written (always, in the files layout)."""
+        return self._archive is None or self._archive.done
+
+    def record(self) -> dict[str, Any]:
+        """The closed scan as :meth:`DatasetWriter.scan_record` describes it, once its archive is
+        written (waits for it).
+
+        Raises:
+            OSError: writing the archive failed.
+        """
         if self._archive is not None:
             self._files[self._archive_rel] = self._archive.result()
             self._archive = None
-        self._w._finish_scan(self)
+        stamps = self._cols.stamp_ns
+        scan = {"scan_id": self.scan_id, "start_stamp_ns": min(stamps), "end_stamp_ns": max(stamps),
+                "source": self.source, "split": self.split}
+        return {"scan": scan, "frames": self.frames_table(), "files": dict(self._files)}
+
+    def stop_archive(self) -> None:
+        """Stop writing a closed scan's archive (the dataset writer is aborting)."""
+        if self._archive is not None:
+            self._archive.abort()
+
+
+def _write_image_file(root: Path, rel: str, data: Any) -> tuple[int, str]:
+    """Write one image file (``files`` layout) under ``root``; returns (size, sha256) hashed from memory."""
+    path = os.path.join(root, rel)
+    try:
+        fd = os.open(path, _WRITE_FLAGS, 0o666)
+    except FileNotFoundError:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        fd = os.open(path, _WRITE_FLAGS, 0o666)
+    view = memoryview(data).cast("B")
+    size = view.nbytes
+    try:
+        while view:
+            view = view[os.write(fd, view):]
+    finally:
+        os.close(fd)
+    return size, hashlib.sha256(data).hexdigest()
 
 
 def _nbytes(data: Any) -> int:
@@ -422,7 +474,6 @@ class DatasetWriter:
         self.extra: dict[str, Any] = dict(extra or {})
         self.tmp = self.root.with_name(self.root.name + _PARTIAL_SUFFIX)
         make_staging(self.tmp, resume=resume)
-        self._tmp_str = str(self.tmp)
         self._threads = max(0, int(threads))
         self._pool = ThreadPoolExecutor(max_workers=self._threads) if self._threads else None
         self._open: set[ScanWriter] = set()
@@ -450,7 +501,13 @@ class DatasetWriter:
 
     # -- static tables ----------------------------------------------------------------------
     def add_camera(self, camera: CameraIntrinsics) -> None:
+        """Add (or replace) a camera; frames name it by ``camera.camera_id``."""
         self._cameras[camera.camera_id] = camera
+
+    @property
+    def cameras(self) -> Mapping[str, CameraIntrinsics]:
+        """The cameras added so far, by id (read-only)."""
+        return MappingProxyType(self._cameras)
 
     def set_rooms(self, rooms: Iterable[Room]) -> None:
         self._tables["rooms"] = to_arrow("rooms", [
@@ -506,18 +563,25 @@ class DatasetWriter:
         self._settle(block=False)
         shutil.rmtree(self.tmp / "images" / scan_id, ignore_errors=True)
         (self.tmp / ARCHIVE_PATH_TEMPLATE.format(scan_id=scan_id)).unlink(missing_ok=True)
-        sw = ScanWriter(self, scan_id, source, split)
+        ctx = _ScanContext(self.tmp, self.color_encoding, self.image_layout, self._cameras, self._pool,
+                           self._threads, self._scan_closed, self._open.discard)
+        sw = ScanWriter(ctx, scan_id, source, split)
         self._open.add(sw)
         return sw
+
+    def _scan_closed(self, sw: ScanWriter) -> None:
+        self._open.discard(sw)
+        self._pending.append(sw)
+        self._settle(block=False)
 
     def _settle(self, block: bool) -> None:
         """Register the closed scans whose archives are complete (all of them if ``block``)."""
         while self._pending:
             sw = self._pending[0]
-            if not block and sw._archive is not None and not sw._archive.done:
+            if not block and not sw.archive_done:
                 return
             self._pending.pop(0)
-            sw._complete()
+            self._register(sw.record())
 
     def completed_scans(self) -> dict[str, dict[str, Any]]:
         """Scans of an interrupted write that are complete and whose images match their checksums.
@@ -560,42 +624,22 @@ class DatasetWriter:
         self._frames[scan_id] = to_arrow("frames", record["frames"])
         self._scan_files[scan_id] = files
 
-    def _finish_scan(self, sw: ScanWriter) -> None:
-        stamps = sw._cols.stamp_ns
-        scan = {"scan_id": sw.scan_id, "start_stamp_ns": min(stamps), "end_stamp_ns": max(stamps),
-                "source": sw.source, "split": sw.split}
-        frames = sw.frames_table()
-        self._scans[sw.scan_id] = scan
-        self._frames[sw.scan_id] = frames
-        self._scan_files[sw.scan_id] = dict(sw._files)
-        # the record of a finished scan, for resuming: its frames, then the JSON that commits them
+    def _register(self, record: dict[str, Any]) -> None:
+        """Keep a scan this writer finished, and store its record for resuming: its frames, then
+        the JSON that commits them."""
+        scan, frames, files = record["scan"], record["frames"], record["files"]
+        self._scans[scan["scan_id"]] = scan
+        self._frames[scan["scan_id"]] = frames
+        self._scan_files[scan["scan_id"]] = files
         markers = self.tmp / _SCANS_DIR
         markers.mkdir(exist_ok=True)
         import pyarrow.feather as feather
 
-        feather.write_feather(frames, markers / f"{sw.scan_id}.arrow", compression="uncompressed")
-        tmp = markers / f".{sw.scan_id}.json.tmp"
+        feather.write_feather(frames, markers / f"{scan['scan_id']}.arrow", compression="uncompressed")
+        tmp = markers / f".{scan['scan_id']}.json.tmp"
         tmp.write_text(json.dumps({"scan": scan, "n_frames": frames.num_rows,
-                                   "files": {k: list(v) for k, v in sw._files.items()}}))
-        os.replace(tmp, markers / f"{sw.scan_id}.json")
-
-    # -- files layout ---------------------------------------------------------------------------
-    def _write_file(self, rel: str, data: Any) -> tuple[int, str]:
-        """Write one image file (``files`` layout); returns (size, sha256) hashed from memory."""
-        path = os.path.join(self._tmp_str, rel)
-        try:
-            fd = os.open(path, _WRITE_FLAGS, 0o666)
-        except FileNotFoundError:
-            os.makedirs(os.path.dirname(path), exist_ok=True)
-            fd = os.open(path, _WRITE_FLAGS, 0o666)
-        view = memoryview(data).cast("B")
-        size = view.nbytes
-        try:
-            while view:
-                view = view[os.write(fd, view):]
-        finally:
-            os.close(fd)
-        return size, hashlib.sha256(data).hexdigest()
+                                   "files": {k: list(v) for k, v in files.items()}}))
+        os.replace(tmp, markers / f"{scan['scan_id']}.json")
 
     # -- finish -------------------------------------------------------------------------------
     def abort(self, keep_partial: bool = False) -> None:
@@ -610,8 +654,7 @@ class DatasetWriter:
         except Exception as exc:  # best effort: that scan is not registered and is redone on resume
             log.warning("%s: a closed scan could not be completed (%s)", self.tmp, exc)
             for sw in self._pending:
-                if sw._archive is not None:
-                    sw._archive.abort()
+                sw.stop_archive()
             self._pending.clear()
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)

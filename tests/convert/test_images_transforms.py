@@ -23,7 +23,6 @@ from psg_data.loaders.raw import (
     make_compressed_depth,
     make_transform,
     matrix_to_quat_xyzw,
-    slerp,
 )
 
 RNG = np.random.default_rng(0)
@@ -143,17 +142,6 @@ def test_quaternion_matrix_roundtrip(q: list[float]) -> None:
     np.testing.assert_allclose(R, Rotation.from_quat(q).as_matrix(), atol=1e-12)
     q2 = matrix_to_quat_xyzw(R)
     np.testing.assert_allclose(abs(np.dot(q, q2)), 1.0, atol=1e-9)
-
-
-@settings(max_examples=40, deadline=None)
-@given(quats, quats, st.floats(0, 1))
-def test_slerp_matches_scipy(a: list[float], b: list[float], t: float) -> None:
-    from scipy.spatial.transform import Slerp
-
-    qa, qb = np.array(a) / np.linalg.norm(a), np.array(b) / np.linalg.norm(b)
-    ours = Rotation.from_quat(slerp(qa, qb, t)).as_matrix()
-    ref = Slerp([0, 1], Rotation.from_quat([qa, qb]))(t).as_matrix()
-    np.testing.assert_allclose(ours, ref, atol=1e-7)
 
 
 def test_tf_tree_composition_and_no_path() -> None:
