@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from psg_data.loaders._frame_view import FrameView
 
-__all__ = ["open_dataset", "Dataset", "Scan"]
+__all__ = ["open_dataset", "Dataset", "Scan", "backproject"]
 
 log = logging.getLogger(__name__)
 

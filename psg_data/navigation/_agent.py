@@ -49,7 +49,7 @@ from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query
 from psg_data.navigation._sources import ObservationModel
 
-__all__ = ["AgentConfig", "Episode", "run_episode", "SETTINGS", "OUTCOMES"]
+__all__ = ["AgentConfig", "Episode", "run_episode", "episode_record", "SETTINGS", "OUTCOMES"]
 
 log = logging.getLogger(__name__)
 

@@ -46,7 +46,8 @@ from psg_data.schemas._tables import (
 from psg_data.writers._safe_output import check_output, commit_tree, make_staging
 from psg_data.writers._tar_archive import TarArchiveWriter
 
-__all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "encode_color", "encode_depth", "PNG_LEVEL", "JPEG_QUALITY"]
+__all__ = ["DatasetWriter", "ScanWriter", "sha256_file", "to_arrow", "encode_color", "encode_depth", "PNG_LEVEL",
+           "JPEG_QUALITY"]
 
 log = logging.getLogger(__name__)
 
