@@ -10,14 +10,17 @@ import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 from psg_data.errors import FormatError, PsgDataError
 from psg_data.schemas._camera_checks import intrinsics_problems
 from psg_data.schemas._image_headers import parse_image_header, read_image_header
-from psg_data.schemas._manifest import FORMAT_VERSION, manifest_from_dict, parse_format_version
+from psg_data.schemas._manifest import FORMAT_VERSION, DatasetInfo, manifest_from_dict, parse_format_version
 from psg_data.schemas._tables import (
     DOOR_STATES,
     LABEL_CODES,
@@ -97,17 +100,39 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
         decode: also check every image whole (PNG chunk CRCs, JPEG markers through EOI) and decode
             it with OpenCV (``False``: headers only, ``psg-data validate --quick``).
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from psg_data.schemas._checksum import sha256_file
-
     root = Path(path)
     c = _Collector()
     if not root.is_dir():
         return [Problem(str(root), "path", "not a directory, expected a psg-dataset directory")]
+    info = _read_manifest(c, root)
+    if info is None:
+        return c.problems
+    if parse_format_version(info.format_version) > parse_format_version(FORMAT_VERSION):
+        c.add(MANIFEST_NAME, "format_version", f"{info.format_version} is newer than this psg-data validates "
+                                               f"({FORMAT_VERSION}); upgrade psg-data to validate it")
+        return c.problems
+    tables = _read_tables(c, root, info.major)
+    _check_files(c, root, info, tables, checksums)
+    cols: dict[str, dict[str, list[Any]]] = {n: t.to_pydict() for n, t in tables.items() if n != "files"}
+    _check_keys(c, cols)
+    cams = _check_cameras(c, cols)
+    _check_boxes(c, tables)
+    _check_door_states(c, cols)
+    scan_bounds = _check_scans(c, cols)
+    if "frames" in tables and tables["frames"].num_rows:
+        _check_frames(c, tables["frames"], scan_bounds)
+        if images:
+            _check_images(c, root, cols["frames"], cams, info.color_encoding, decode)
+    _check_label_tables(c, cols, scan_bounds)
+    _check_process_file(c, root, info.extra, cols)
+    for name, t in tables.items():
+        if name in info.counts and info.counts[name] != t.num_rows:
+            c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
+    return c.problems
 
-    # -- manifest --------------------------------------------------------------------------
+
+def _read_manifest(c: _Collector, root: Path) -> DatasetInfo | None:
+    """The manifest, or None (with the problem) when it is missing or malformed."""
     info = None
     mpath = root / MANIFEST_NAME
     if not mpath.is_file():
@@ -124,16 +149,15 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
             rest = msg[len(prefix):] if msg.startswith(prefix) else msg
             field, _, what = rest.partition(": ")
             c.add(MANIFEST_NAME, field or "manifest", what or rest)
-    if info is None:
-        return c.problems
-    if parse_format_version(info.format_version) > parse_format_version(FORMAT_VERSION):
-        c.add(MANIFEST_NAME, "format_version", f"{info.format_version} is newer than this psg-data validates "
-                                               f"({FORMAT_VERSION}); upgrade psg-data to validate it")
-        return c.problems
+    return info
 
-    # -- tables: presence, readability, schema -------------------------------------------------
+
+def _read_tables(c: _Collector, root: Path, major: int) -> dict[str, pa.Table]:
+    """Every table of the format that is present, readable and of its schema."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     tables: dict[str, pa.Table] = {}
-    major = info.major
     for name, spec in TABLES.items():
         rel = table_path(name)
         p = root / rel
@@ -169,8 +193,14 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
             c.add(rel, n, f"unknown column, expected only {schema.names} (format {major}.x)")
         if ok:
             tables[name] = t
+    return tables
 
-    # -- checksums -------------------------------------------------------------------------------
+
+def _check_files(c: _Collector, root: Path, info: DatasetInfo, tables: dict[str, pa.Table], checksums: bool) -> None:
+    """``files.parquet`` against the manifest, and every file against ``files.parquet`` (sizes; with
+    ``checksums`` also SHA-256); files on disk it does not list."""
+    from psg_data.schemas._checksum import sha256_file
+
     files_rel = table_path("files")
     if (root / files_rel).is_file() and info.files_sha256:
         actual = sha256_file(root / files_rel)
@@ -197,8 +227,9 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
         for rel in sorted(on_disk - listed - {MANIFEST_NAME, files_rel}):
             c.add(rel, "file", "not listed in tables/files.parquet (stray file; rewrite the dataset to register it)")
 
-    # -- keys and referential integrity ------------------------------------------------------------
-    cols: dict[str, dict[str, list]] = {n: t.to_pydict() for n, t in tables.items() if n != "files"}
+
+def _check_keys(c: _Collector, cols: dict[str, dict[str, list[Any]]]) -> None:
+    """Unique keys and no dangling references, in every table."""
     for name, spec in TABLES.items():
         if name not in cols:
             continue
@@ -219,7 +250,9 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                 if v is not None and v not in valid:
                     c.add(rel, col, f"dangling id {v!r}: not in {table_path(ref_table)} column {ref_col}", i)
 
-    # -- value ranges -----------------------------------------------------------------------------
+
+def _check_cameras(c: _Collector, cols: dict[str, dict[str, list[Any]]]) -> dict[str, dict[str, Any]]:
+    """Intrinsics, depth scale and distortion model of every camera; returns each camera's image size."""
     cams: dict[str, dict] = {}
     if "cameras" in cols:
         rel = table_path("cameras")
@@ -234,7 +267,11 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
                 c.add(rel, "distortion_model", f"unknown model {cam['distortion_model'][i]!r}, expected none, "
                                                "plumb_bob, rational_polynomial or equidistant", i)
             cams[cid] = {"width": w, "height": h}
+    return cams
 
+
+def _check_boxes(c: _Collector, tables: dict[str, pa.Table]) -> None:
+    """Extents, centres and rotations of the receptacle and door boxes."""
     for name in ("receptacles", "doors"):
         if name not in tables:
             continue
@@ -251,12 +288,18 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
             c.add(rel, "center_m", f"{ctr[i].tolist()}, expected finite coordinates", i)
         _check_rotations(c, rel, "rotation", rot)
 
+
+def _check_door_states(c: _Collector, cols: dict[str, dict[str, list[Any]]]) -> None:
+    """Door states are one of :data:`DOOR_STATES`."""
     if "door_states" in cols:
         rel = table_path("door_states")
         for i, s in enumerate(cols["door_states"]["state"]):
             if s not in DOOR_STATES:
                 c.add(rel, "state", f"{s!r}, expected one of {', '.join(DOOR_STATES)}", i)
 
+
+def _check_scans(c: _Collector, cols: dict[str, dict[str, list[Any]]]) -> dict[str, tuple[int, int]]:
+    """Scan time spans and splits; returns each scan's (start, end) stamps."""
     scan_bounds: dict[str, tuple[int, int]] = {}
     if "scans" in cols:
         rel = table_path("scans")
@@ -268,57 +311,47 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
             if sc["split"][i] not in (None, "train", "val", "test"):
                 c.add(rel, "split", f"{sc['split'][i]!r}, expected train, val, test or null", i)
             scan_bounds[sid] = (a, b)
+    return scan_bounds
 
-    if "frames" in tables and tables["frames"].num_rows:
-        rel = table_path("frames")
-        t = tables["frames"]
-        scan = np.asarray(t.column("scan_id").to_numpy(zero_copy_only=False)).astype(str)
-        fidx = t.column("frame_index").to_numpy()
-        stamp = t.column("stamp_ns").to_numpy()
-        T = np.asarray(t.column("T_world_camera").combine_chunks().flatten().to_numpy(), float).reshape(-1, 4, 4)
-        bad_T = ~np.all(np.isfinite(T), axis=(1, 2))
-        for i in _rows_where(bad_T):
-            c.add(rel, "T_world_camera", "contains NaN or infinite values, expected a finite 4x4 pose", i)
-        good = np.flatnonzero(~bad_T)
-        _check_rotations(c, rel, "T_world_camera", T[good, :3, :3], rows=good)
-        bottom = np.abs(T[good, 3, :] - np.array([0, 0, 0, 1.0])).max(axis=1) if good.size else np.zeros(0)
-        for j in _rows_where(bottom > 1e-9):
-            c.add(rel, "T_world_camera", "last row is not [0, 0, 0, 1], expected a homogeneous rigid transform",
-                  int(good[j]))
-        order = np.lexsort((fidx, scan))
-        s_o, f_o, t_o = scan[order], fidx[order], stamp[order]
-        same = s_o[1:] == s_o[:-1]
-        for j in _rows_where(same & (t_o[1:] <= t_o[:-1])):
-            c.add(rel, "stamp_ns", f"must increase within scan {str(s_o[j + 1])!r}, got {t_o[j + 1]} after {t_o[j]}",
-                  int(order[j + 1]))
-        starts = np.concatenate([[True], ~same])
-        expect = np.zeros_like(f_o)
-        run_start = 0
-        for j in range(f_o.size):  # frame_index must be 0..N-1 per scan
-            if starts[j]:
-                run_start = j
-            expect[j] = j - run_start
-        for j in _rows_where(f_o != expect):
-            c.add(rel, "frame_index", f"{f_o[j]} in scan {str(s_o[j])!r}, expected consecutive indices from 0 "
-                                      f"(here {expect[j]})", int(order[j]))
-        for j, sid in enumerate(scan):
-            if sid in scan_bounds:
-                a, b = scan_bounds[sid]
-                if not a <= stamp[j] <= b:
-                    c.add(rel, "stamp_ns", f"{stamp[j]} outside its scan's [start_stamp_ns, end_stamp_ns] = "
-                                           f"[{a}, {b}]", j)
 
-        if images:
-            _check_images(c, root, cols["frames"], cams, info.color_encoding, decode)
-
-    _check_label_tables(c, cols, scan_bounds)
-    _check_process_file(c, root, info.extra, cols)
-
-    # -- manifest counts ------------------------------------------------------------------------
-    for name, t in tables.items():
-        if name in info.counts and info.counts[name] != t.num_rows:
-            c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
-    return c.problems
+def _check_frames(c: _Collector, t: pa.Table, scan_bounds: dict[str, tuple[int, int]]) -> None:
+    """Poses, stamps and frame indices of the ``frames`` table."""
+    rel = table_path("frames")
+    scan = np.asarray(t.column("scan_id").to_numpy(zero_copy_only=False)).astype(str)
+    fidx = t.column("frame_index").to_numpy()
+    stamp = t.column("stamp_ns").to_numpy()
+    T = np.asarray(t.column("T_world_camera").combine_chunks().flatten().to_numpy(), float).reshape(-1, 4, 4)
+    bad_T = ~np.all(np.isfinite(T), axis=(1, 2))
+    for i in _rows_where(bad_T):
+        c.add(rel, "T_world_camera", "contains NaN or infinite values, expected a finite 4x4 pose", i)
+    good = np.flatnonzero(~bad_T)
+    _check_rotations(c, rel, "T_world_camera", T[good, :3, :3], rows=good)
+    bottom = np.abs(T[good, 3, :] - np.array([0, 0, 0, 1.0])).max(axis=1) if good.size else np.zeros(0)
+    for j in _rows_where(bottom > 1e-9):
+        c.add(rel, "T_world_camera", "last row is not [0, 0, 0, 1], expected a homogeneous rigid transform",
+              int(good[j]))
+    order = np.lexsort((fidx, scan))
+    s_o, f_o, t_o = scan[order], fidx[order], stamp[order]
+    same = s_o[1:] == s_o[:-1]
+    for j in _rows_where(same & (t_o[1:] <= t_o[:-1])):
+        c.add(rel, "stamp_ns", f"must increase within scan {str(s_o[j + 1])!r}, got {t_o[j + 1]} after {t_o[j]}",
+              int(order[j + 1]))
+    starts = np.concatenate([[True], ~same])
+    expect = np.zeros_like(f_o)
+    run_start = 0
+    for j in range(f_o.size):  # frame_index must be 0..N-1 per scan
+        if starts[j]:
+            run_start = j
+        expect[j] = j - run_start
+    for j in _rows_where(f_o != expect):
+        c.add(rel, "frame_index", f"{f_o[j]} in scan {str(s_o[j])!r}, expected consecutive indices from 0 "
+                                  f"(here {expect[j]})", int(order[j]))
+    for j, sid in enumerate(scan):
+        if sid in scan_bounds:
+            a, b = scan_bounds[sid]
+            if not a <= stamp[j] <= b:
+                c.add(rel, "stamp_ns", f"{stamp[j]} outside its scan's [start_stamp_ns, end_stamp_ns] = "
+                                       f"[{a}, {b}]", j)
 
 
 def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str, dict], color_encoding: str,
