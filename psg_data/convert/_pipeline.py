@@ -11,9 +11,9 @@ import shutil
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from psg_data._cpus import available_cpus
 from psg_data.convert._config import ConvertConfig
@@ -33,6 +33,9 @@ from psg_data.loaders.raw._folders import _list_file, folder_format
 from psg_data.loaders.raw._images import inspect_encoded
 from psg_data.loaders.raw._side import SideData, read_side_files
 from psg_data.writers._safe_output import check_output
+
+if TYPE_CHECKING:
+    from psg_data.writers import DatasetWriter
 
 __all__ = ["convert", "ConversionReport", "plan_sources", "plan_parallelism"]
 
@@ -300,120 +303,39 @@ def convert(
 def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | None, overwrite: bool, jobs: int,
              threads: int | None, progress: Callable[..., Any] | None,
              scheduler: str | None = None) -> ConversionReport:
-    from psg_data.writers import DatasetWriter
-
     t_start = time.perf_counter()
     cfg = config or ConvertConfig()
-    src = Path(input_path)
-    out = Path(out)
+    src, out = Path(input_path), Path(out)
     inputs = _input_paths(src, cfg)
     check_output(out, overwrite=overwrite, kind="dataset", inputs=inputs)
     sources = plan_sources(src, cfg)
     side, side_dir = _resolve_side(src, cfg)
     color_encoding = _auto_color_encoding(sources[0][0], sources[0][1], cfg)
-    cfg_dict = cfg.to_dict()
     tmp = out.with_name(out.name + ".partial")
-    state = {"input": str(src.resolve()), "config": cfg_dict, "color_encoding": color_encoding}
-    resume = False
-    state_path = tmp / STATE_DIR / _STATE_FILE
-    if state_path.is_file():
-        try:
-            resume = json.loads(state_path.read_text()) == state
-        except (OSError, json.JSONDecodeError):
-            resume = False
-        if not resume:
-            log.warning("%s: found a partial conversion with another input or config; starting over", tmp)
-    name = cfg.name or side.name or (src.stem if src.is_file() else src.name)
-    timezone = cfg.timezone or side.timezone or "UTC"
-    try:
-        writer = DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding,
-                               overwrite=overwrite, resume=resume, threads=0, image_layout=cfg.image_layout,
-                               inputs=inputs)
-    except PsgDataError:
-        raise
-    except Exception as exc:
-        raise ConversionError(f"{out}: cannot create the output ({exc})") from exc
+    state = {"input": str(src.resolve()), "config": cfg.to_dict(), "color_encoding": color_encoding}
+    resume = _can_resume(tmp, state)
+    writer = _open_writer(out, cfg.name or side.name or (src.stem if src.is_file() else src.name),
+                          cfg.timezone or side.timezone or "UTC", color_encoding, overwrite, resume, cfg, inputs)
     report = ConversionReport(output=str(out))
     try:
         (tmp / STATE_DIR).mkdir(exist_ok=True)
-        state_path.write_text(json.dumps(state))
+        (tmp / STATE_DIR / _STATE_FILE).write_text(json.dumps(state))
         completed = writer.completed_scans() if resume else {}
-        scan_rows = side.scan_rows()
-        tasks: list[ScanTask] = []
-        seen_ids: dict[str, Path] = {}
-        for path, kind in sources:
-            row = scan_rows.get(path.name) or scan_rows.get(path.stem)
-            scan_id = str(row["scan_id"]) if row else path.stem if path.is_file() else path.name
-            split_label = (row.get("split") or None) if row else None
-            if scan_id in seen_ids:
-                raise ConversionError(f"{path}: scan id {scan_id!r} also used by {seen_ids[scan_id]}; expected unique "
-                                      f"recording names (or scan ids in scans.csv)")
-            seen_ids[scan_id] = path
-            if cfg.split is None and scan_id in completed:
-                continue
-            tasks.append(ScanTask(str(path), kind, scan_id, split_label, cfg_dict, str(out), color_encoding,
-                                  dict(side.cameras), sorted(completed)))
+        tasks = _plan_tasks(sources, side, cfg, str(out), color_encoding, completed)
         procs, worker_threads = plan_parallelism(jobs, len(tasks), threads)
         for t in tasks:
             t.threads, t.image_layout = worker_threads, cfg.image_layout
         if tasks and (procs > 1 or scheduler is not None):
             results = _run_parallel(tasks, procs, progress, scheduler)
-        elif tasks:
-            results = _run_here(tasks, progress)
         else:
-            results = []
-        # scans written now (their records come with the results, checksummed from memory while
-        # writing) and scans of an interrupted run (verified above; cameras from their state files)
-        new_ids = {r.scan_id for r in results}
-        by_scan: dict[str, ScanResult] = {}
-        for f in (tmp / STATE_DIR).glob("*.json"):
-            if f.name != _STATE_FILE and f.stem in completed and f.stem not in new_ids:
-                by_scan[f.stem] = ScanResult(**json.loads(f.read_text()))
-        for r in results:
-            by_scan[r.scan_id] = r
-            if r.record is not None:
-                completed[r.scan_id] = r.record
-        cameras: dict[str, dict[str, Any]] = {}
-        skipped: Counter[str] = Counter()
-        passthrough: Counter[str] = Counter()
-        import pyarrow as pa
-
-        from psg_data.schemas._records import CameraIntrinsics
-
-        for scan_id, rec in sorted(completed.items()):
-            res = by_scan.get(scan_id)
-            if res is None:
-                continue
-            cam = dict(res.camera)
-            cam["distortion_coeffs"] = tuple(cam["distortion_coeffs"])
-            cid, k = cam["camera_id"], 1
-            while cid in cameras and cameras[cid] != {**cam, "camera_id": cid}:
-                cid = f"{cam['camera_id']}_{k}"
-                k += 1
-            cam["camera_id"] = cid
-            if cid not in cameras:
-                cameras[cid] = cam
-                writer.add_camera(CameraIntrinsics(**cam))
-            frames = rec["frames"]  # the camera id this dataset gives that camera
-            frames = frames.set_column(frames.schema.get_field_index("camera_id"), frames.schema.field("camera_id"),
-                                       pa.array([cid] * frames.num_rows, pa.string()))
-            writer.adopt_scan({**rec, "frames": frames})
-            report.scans.append(scan_id)
-            report.frames += frames.num_rows
-            if scan_id not in new_ids:
-                report.resumed.append(scan_id)
-            skipped.update(res.skipped)
-            passthrough.update(res.passthrough)
-            report.keyframe_dropped += res.keyframe_dropped
-            report.bytes_in += res.bytes_in if scan_id in new_ids else 0
+            results = _run_here(tasks, progress) if tasks else []
+        by_scan = _adopt_scans(writer, report, results, completed, tmp)
         if not report.scans:
             raise ConversionError(f"{src}: no scan could be converted")
         _set_side_tables(writer, side, side_dir, set(report.scans))
-        report.skipped = {k: v for k, v in sorted(skipped.items()) if v}
-        report.passthrough = dict(passthrough)
         report.seconds = time.perf_counter() - t_start
         writer.extra["convert"] = {
-            "input": str(src), "config": cfg_dict, "side_files": side.files,
+            "input": str(src), "config": state["config"], "side_files": side.files,
             "report": {"frames": report.frames, "skipped": report.skipped,
                        "keyframe_dropped": report.keyframe_dropped, "passthrough": report.passthrough},
         }
@@ -431,6 +353,123 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
         writer.abort(keep_partial=False)
         raise
     report.seconds = time.perf_counter() - t_start
+    _log_warnings(src, report, by_scan)
+    return report
+
+
+def _can_resume(tmp: Path, state: dict[str, Any]) -> bool:
+    """Whether ``tmp`` holds a partial conversion of the same input with the same config."""
+    path = tmp / STATE_DIR / _STATE_FILE
+    if not path.is_file():
+        return False
+    try:
+        same = bool(json.loads(path.read_text()) == state)
+    except (OSError, json.JSONDecodeError):
+        same = False
+    if not same:
+        log.warning("%s: found a partial conversion with another input or config; starting over", tmp)
+    return same
+
+
+def _open_writer(out: Path, name: str, timezone: str, color_encoding: str, overwrite: bool, resume: bool,
+                 cfg: ConvertConfig, inputs: list[Path]) -> DatasetWriter:
+    """The writer of the whole dataset (its scans are written by the tasks' writers and adopted)."""
+    from psg_data.writers import DatasetWriter
+
+    try:
+        return DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding, overwrite=overwrite,
+                             resume=resume, threads=0, image_layout=cfg.image_layout, inputs=inputs)
+    except PsgDataError:
+        raise
+    except Exception as exc:
+        raise ConversionError(f"{out}: cannot create the output ({exc})") from exc
+
+
+def _plan_tasks(sources: list[tuple[Path, str]], side: SideData, cfg: ConvertConfig, out: str, color_encoding: str,
+                completed: dict[str, dict[str, Any]]) -> list[ScanTask]:
+    """One task per source not already complete; scan ids from ``scans.csv`` or the source names.
+
+    Raises:
+        ConversionError: two sources would get the same scan id.
+    """
+    scan_rows = side.scan_rows()
+    cfg_dict = cfg.to_dict()
+    tasks: list[ScanTask] = []
+    seen_ids: dict[str, Path] = {}
+    for path, kind in sources:
+        row = scan_rows.get(path.name) or scan_rows.get(path.stem)
+        scan_id = str(row["scan_id"]) if row else path.stem if path.is_file() else path.name
+        split_label = (row.get("split") or None) if row else None
+        if scan_id in seen_ids:
+            raise ConversionError(f"{path}: scan id {scan_id!r} also used by {seen_ids[scan_id]}; expected unique "
+                                  f"recording names (or scan ids in scans.csv)")
+        seen_ids[scan_id] = path
+        if cfg.split is None and scan_id in completed:
+            continue
+        tasks.append(ScanTask(str(path), kind, scan_id, split_label, cfg_dict, out, color_encoding,
+                              dict(side.cameras), sorted(completed)))
+    return tasks
+
+
+def _adopt_scans(writer: DatasetWriter, report: ConversionReport, results: list[ScanResult],
+                 completed: dict[str, dict[str, Any]], tmp: Path) -> dict[str, ScanResult]:
+    """Adopt the scans written now (their records come with the results, checksummed from memory
+    while writing) and those of an interrupted run (verified; their results from the state files),
+    giving each distinct camera an id of its own; fills in ``report``. Returns the results by scan."""
+    import pyarrow as pa
+
+    from psg_data.schemas._records import CameraIntrinsics
+
+    new_ids = {r.scan_id for r in results}
+    by_scan: dict[str, ScanResult] = {}
+    for f in (tmp / STATE_DIR).glob("*.json"):
+        if f.name != _STATE_FILE and f.stem in completed and f.stem not in new_ids:
+            by_scan[f.stem] = ScanResult(**json.loads(f.read_text()))
+    for r in results:
+        by_scan[r.scan_id] = r
+        if r.record is not None:
+            completed[r.scan_id] = r.record
+    cameras: dict[str, dict[str, Any]] = {}
+    skipped: Counter[str] = Counter()
+    passthrough: Counter[str] = Counter()
+    for scan_id, rec in sorted(completed.items()):
+        res = by_scan.get(scan_id)
+        if res is None:
+            continue
+        cid = _camera_id(cameras, dict(res.camera))
+        if cid not in writer.cameras:
+            writer.add_camera(CameraIntrinsics(**cameras[cid]))
+        frames = rec["frames"]  # the camera id this dataset gives that camera
+        frames = frames.set_column(frames.schema.get_field_index("camera_id"), frames.schema.field("camera_id"),
+                                   pa.array([cid] * frames.num_rows, pa.string()))
+        writer.adopt_scan({**rec, "frames": frames})
+        report.scans.append(scan_id)
+        report.frames += frames.num_rows
+        if scan_id not in new_ids:
+            report.resumed.append(scan_id)
+        skipped.update(res.skipped)
+        passthrough.update(res.passthrough)
+        report.keyframe_dropped += res.keyframe_dropped
+        report.bytes_in += res.bytes_in if scan_id in new_ids else 0
+    report.skipped = {k: v for k, v in sorted(skipped.items()) if v}
+    report.passthrough = dict(passthrough)
+    return by_scan
+
+
+def _camera_id(cameras: dict[str, dict[str, Any]], cam: dict[str, Any]) -> str:
+    """The id of camera ``cam`` among ``cameras`` (added there if new): its own id, or ``ID_1``, ``ID_2``, ...
+    when another camera already has it."""
+    cam["distortion_coeffs"] = tuple(cam["distortion_coeffs"])
+    cid, k = cam["camera_id"], 1
+    while cid in cameras and cameras[cid] != {**cam, "camera_id": cid}:
+        cid = f"{cam['camera_id']}_{k}"
+        k += 1
+    cameras.setdefault(cid, {**cam, "camera_id": cid})
+    return cid
+
+
+def _log_warnings(src: Path, report: ConversionReport, by_scan: dict[str, ScanResult]) -> None:
+    """The scans' warnings and the skipped counts, once the conversion is done."""
     for scan_id in report.scans:
         for w in by_scan[scan_id].warnings:
             log.warning("%s", w)
@@ -438,10 +477,9 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     for kind, reasons in report.skipped_by_kind.items():
         for reason, n in reasons.items():
             log.warning("%s: %d %s skipped: %s (%s)", src, n, units[kind], reason, SKIP_REASONS[reason])
-    return report
 
 
-def _set_side_tables(writer: Any, side: SideData, side_dir: Path | None, scan_ids: set[str]) -> None:
+def _set_side_tables(writer: DatasetWriter, side: SideData, side_dir: Path | None, scan_ids: set[str]) -> None:
     from psg_data.errors import FormatError
 
     for name in ("rooms", "receptacles", "doors", "objects", "door_states", "schedule"):
@@ -459,5 +497,3 @@ def _set_side_tables(writer: Any, side: SideData, side_dir: Path | None, scan_id
         except FormatError as exc:
             raise ConversionError(f"{where}: {exc}") from exc
 
-
-_ = asdict

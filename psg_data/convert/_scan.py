@@ -765,85 +765,15 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
     where = str(rec.path)
     with rec:
         topics = discover_topics(rec.topics, cfg, where)
-        tf = TfBuffer(int(cfg.max_pose_gap_s * 1e9), int(cfg.pose_tolerance_s * 1e9))
-        for st in cfg.static_transforms:
-            tf.add(str(st["parent"]), str(st["child"]), 0, st["translation"], st["rotation_xyzw"], static=True)
-        poses = _PoseSource(cfg, tf, topics, where)
-        if cfg.poses and poses.kind == "tf" and not topics["tf"] and not topics["tf_static"] and not cfg.static_transforms:
-            raise ConversionError(f"{where}: /tf: no tf2_msgs/TFMessage topic for --poses {cfg.poses}")
+        tf, poses = _bag_poses(cfg, topics, where)
         asm = _Assembler(int(cfg.sync_tolerance_s * 1e9))
         fw = _FrameWriter(task.color_encoding, cfg.depth_scale_m or 0.001, where, cfg.image_check)
+        sink = _ScanSink(task, cfg, writer, fw, (topics["color"], topics["depth"]), progress)
         try:
-            sink = _ScanSink(task, cfg, writer, fw, (topics["color"], topics["depth"]), progress)
-            wanted = {topics["color"], topics["depth"], topics["camera_info"], *topics["tf"], *topics["tf_static"]}
-            if poses.odom_topic:
-                wanted.add(poses.odom_topic)
-            color_t, depth_t, info_t = topics["color"], topics["depth"], topics["camera_info"]
-            static_t = set(topics["tf_static"])
-            pending_bytes = 0
-            colors = asm.colors
-            due = _release_rule(asm, poses, cfg)
-
-            def emit(final: bool = False) -> None:
-                """Write the held colour frames whose partners can no longer arrive (all if ``final``)."""
-                nonlocal pending_bytes
-                if sink.camera is None:
-                    if not final:
-                        return
-                    raise ConversionError(f"{where}: {info_t}: no CameraInfo message; expected the colour camera's "
-                                          f"intrinsics")
-                while colors and (final or due()):
-                    item = asm.pop()
-                    if item is not None:
-                        stamp, cp, dp = item
-                        sink.frame(stamp, poses.at(stamp), cp, dp, pending_bytes)
-                        pending_bytes = 0
-
-            # intrinsics come from the first CameraInfo: read it first, then leave the topic out
-            for conn, _, raw in rec.raw_messages({info_t}):
-                msg = rec.deserialize(raw, conn.msgtype, info_t)
-                frame_id = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
-                cid = task.camera_ids.get(frame_id) or cfg.camera_id or "camera"
-                sink.camera = _camera_from_info(msg, cid, frame_id, f"{where}: {info_t}")
-                poses.optical = frame_id
-                break
-            if info_t != color_t and info_t != depth_t and info_t != poses.odom_topic:
-                wanted.discard(info_t)
-            read_bytes = 0
-            for conn, _, raw in rec.raw_messages(wanted):
-                topic = conn.topic
-                n_raw = len(raw)
-                pending_bytes += n_raw
-                read_bytes += n_raw
-                if topic == color_t or topic == depth_t:
-                    if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
-                        ci = rec.compressed_image(raw, topic)
-                        stamp, frame_id = ci.stamp_ns, ci.frame_id
-                        payload = _Payload("bytes", ci.data, ci.format)
-                    else:
-                        msg = rec.deserialize(raw, conn.msgtype, topic)
-                        stamp, frame_id, payload = _stamp(msg.header), str(msg.header.frame_id), _Payload("msg", msg)
-                    if topic == color_t:
-                        asm.add_color(stamp, payload)
-                        if not poses.optical:
-                            poses.optical = cfg.camera_frame or frame_id.lstrip("/")
-                    else:
-                        asm.add_depth(stamp, payload)
-                    if colors:
-                        emit()
-                    continue
-                if conn.msgtype == _TF:
-                    static = topic in static_t
-                    for smp in rec.tf_transforms(raw, topic):  # header, frames and 7 floats: no full message
-                        tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
-                    if colors:
-                        emit()
-                    continue
-                if topic == poses.odom_topic:
-                    poses.add_odom(rec.deserialize(raw, conn.msgtype, topic))
-                if colors:
-                    emit()
-            emit(final=True)
+            _read_camera_info(rec, topics["camera_info"], task, cfg, sink, poses, where)
+            release = _Release(asm, poses, sink, cfg, f"{where}: {topics['camera_info']}")
+            read_bytes = _stream_messages(rec, topics, tf, poses, asm, release, cfg)
+            release(final=True)
             asm.skipped.update(Counter(no_color=len(asm.depth_stamps)))
             sink.diagnosis.update(nearest_miss_ns=asm.nearest_miss_ns, pose_span=poses.span(),
                                   frame_span=sink.stamp_span)
@@ -853,6 +783,102 @@ def _run_bag(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | 
         except BaseException:
             sink.abort_scan()
             raise
+
+
+def _bag_poses(cfg: ConvertConfig, topics: dict[str, Any], where: str) -> tuple[TfBuffer, _PoseSource]:
+    """The TF buffer (with the configured static transforms) and the pose source of a recording.
+
+    Raises:
+        ConversionError: ``--poses tf:...`` for a recording without TF.
+    """
+    tf = TfBuffer(int(cfg.max_pose_gap_s * 1e9), int(cfg.pose_tolerance_s * 1e9))
+    for st in cfg.static_transforms:
+        tf.add(str(st["parent"]), str(st["child"]), 0, st["translation"], st["rotation_xyzw"], static=True)
+    poses = _PoseSource(cfg, tf, topics, where)
+    if cfg.poses and poses.kind == "tf" and not topics["tf"] and not topics["tf_static"] and not cfg.static_transforms:
+        raise ConversionError(f"{where}: /tf: no tf2_msgs/TFMessage topic for --poses {cfg.poses}")
+    return tf, poses
+
+
+def _read_camera_info(rec: Any, info_t: str, task: ScanTask, cfg: ConvertConfig, sink: _ScanSink,
+                      poses: _PoseSource, where: str) -> None:
+    """The intrinsics from the first CameraInfo message (the topic is not read again)."""
+    for conn, _, raw in rec.raw_messages({info_t}):
+        msg = rec.deserialize(raw, conn.msgtype, info_t)
+        frame_id = cfg.camera_frame or str(msg.header.frame_id).lstrip("/")
+        cid = task.camera_ids.get(frame_id) or cfg.camera_id or "camera"
+        sink.camera = _camera_from_info(msg, cid, frame_id, f"{where}: {info_t}")
+        poses.optical = frame_id
+        break
+
+
+class _Release:
+    """Writes the held colour frames whose partners can no longer arrive (see :func:`_release_rule`)."""
+
+    def __init__(self, asm: _Assembler, poses: _PoseSource, sink: _ScanSink, cfg: ConvertConfig,
+                 info_where: str) -> None:
+        self.asm, self.poses, self.sink, self.info_where = asm, poses, sink, info_where
+        self.due = _release_rule(asm, poses, cfg)
+        self.pending_bytes = 0
+        """Bytes read since the last frame written (counted with the next one)."""
+
+    def __call__(self, final: bool = False) -> None:
+        """Write the due frames (all of them if ``final``)."""
+        asm, sink = self.asm, self.sink
+        if sink.camera is None:
+            if not final:
+                return
+            raise ConversionError(f"{self.info_where}: no CameraInfo message; expected the colour camera's intrinsics")
+        colors, due = asm.colors, self.due
+        while colors and (final or due()):
+            item = asm.pop()
+            if item is not None:
+                stamp, cp, dp = item
+                sink.frame(stamp, self.poses.at(stamp), cp, dp, self.pending_bytes)
+                self.pending_bytes = 0
+
+
+def _stream_messages(rec: Any, topics: dict[str, Any], tf: TfBuffer, poses: _PoseSource, asm: _Assembler,
+                     release: _Release, cfg: ConvertConfig) -> int:
+    """Read the wanted topics in log-time order into the assembler, TF and pose source, releasing
+    frames as they become due; returns the bytes read."""
+    color_t, depth_t, info_t = topics["color"], topics["depth"], topics["camera_info"]
+    wanted = {color_t, depth_t, *topics["tf"], *topics["tf_static"]}
+    if poses.odom_topic:
+        wanted.add(poses.odom_topic)
+    if info_t in (color_t, depth_t, poses.odom_topic):
+        wanted.add(info_t)
+    static_t = set(topics["tf_static"])
+    colors = asm.colors
+    read_bytes = 0
+    for conn, _, raw in rec.raw_messages(wanted):
+        topic = conn.topic
+        n_raw = len(raw)
+        release.pending_bytes += n_raw
+        read_bytes += n_raw
+        if topic == color_t or topic == depth_t:
+            if conn.msgtype == _COMPRESSED:  # only header, format and data: no full deserialisation
+                ci = rec.compressed_image(raw, topic)
+                stamp, frame_id = ci.stamp_ns, ci.frame_id
+                payload = _Payload("bytes", ci.data, ci.format)
+            else:
+                msg = rec.deserialize(raw, conn.msgtype, topic)
+                stamp, frame_id, payload = _stamp(msg.header), str(msg.header.frame_id), _Payload("msg", msg)
+            if topic == color_t:
+                asm.add_color(stamp, payload)
+                if not poses.optical:
+                    poses.optical = cfg.camera_frame or frame_id.lstrip("/")
+            else:
+                asm.add_depth(stamp, payload)
+        elif conn.msgtype == _TF:
+            static = topic in static_t
+            for smp in rec.tf_transforms(raw, topic):  # header, frames and 7 floats: no full message
+                tf.add(smp.parent, smp.child, smp.stamp_ns, smp.translation, smp.rotation_xyzw, static=static)
+        elif topic == poses.odom_topic:
+            poses.add_odom(rec.deserialize(raw, conn.msgtype, topic))
+        if colors:
+            release()
+    return read_bytes
 
 
 def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None, writer: Any
