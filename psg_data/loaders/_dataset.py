@@ -259,6 +259,11 @@ class Scan:
         """(N, 4, 4) camera-to-world poses."""
         return self._f["T"] if self._f else np.zeros((0, 4, 4))
 
+    @property
+    def camera_ids(self) -> NDArray[np.str_]:
+        """(N,) id of the camera of each frame."""
+        return np.asarray(self._f["camera_id"], dtype=str) if self._f else np.zeros(0, dtype=str)
+
     def _read(self, kind: str, i: int) -> bytes:
         f = self._f
         path, off = str(f[f"{kind}_path"][i]), int(f[f"{kind}_offset"][i])

@@ -109,7 +109,7 @@ def rerender_frame(dataset: Any, scan_id: str, frame_index: int, *, noise: bool 
     state = SceneState({r["object_id"]: r["receptacle_id"] for r in sched if r["scan_id"] == scan_id},
                        {r["door_id"]: r["state"] == "open" for r in doors if r["scan_id"] == scan_id})
     scan = dataset.scan(scan_id)
-    cam = dataset.cameras[str(scan._f["camera_id"][frame_index])]
+    cam = dataset.cameras[str(scan.camera_ids[frame_index])]
     scan_index = dataset.scan_ids.index(scan_id)
     rng = lab.noise_rng(scan_index, frame_index)
     return lab.renderer(state).render(np.asarray(scan.poses[frame_index]), cam,

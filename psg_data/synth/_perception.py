@@ -93,7 +93,7 @@ def _scans(source: Any) -> tuple[LabModel, Iterator[tuple[int, str, SceneState, 
             st = SceneState({r["object_id"]: r["receptacle_id"] for r in sched if r["scan_id"] == sid},
                             {r["door_id"]: r["state"] == "open" for r in doors if r["scan_id"] == sid})
             scan = ds.scan(sid)
-            cam = ds.cameras[str(scan._f["camera_id"][0])] if len(scan) else lab.camera
+            cam = ds.cameras[str(scan.camera_ids[0])] if len(scan) else lab.camera
             yield k, sid, st, scan.poses, cam
     return lab, it_ds()
 

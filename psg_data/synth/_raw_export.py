@@ -30,6 +30,7 @@ import math
 import os
 import shutil
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import DatasetExistsError, FormatError
+from psg_data.schemas._records import CameraIntrinsics
 from psg_data.loaders.raw._images import make_compressed_depth
 from psg_data.loaders.raw._transforms import invert, make_transform, matrix_to_quat_xyzw
 
@@ -259,8 +261,6 @@ def export_raw(
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
         FormatError: bad ``fmt`` / ``images``, or a scan mixing cameras.
     """
-    import cv2
-
     from psg_data.loaders import open_dataset
 
     if fmt not in RAW_EXPORT_FORMATS:
@@ -274,91 +274,22 @@ def export_raw(
     tmp = out.with_name(out.name + ".partial")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    want_raw, want_comp = images in ("both", "raw"), images in ("both", "compressed")
-    ros1 = fmt == "ros1"
+    topics = _Topics(images in ("both", "raw"), images in ("both", "compressed"))
     rng = np.random.default_rng(seed)
     optical = {cid: (cam.frame_id or DEFAULT_OPTICAL_FRAME) for cid, cam in ds.cameras.items()}
     recordings: dict[str, str] = {}
-    T_base_opt = STATIC_BASE_CAMERA_LINK.copy()
-    cl_opt = np.eye(4)
-    cl_opt[:3, :3] = R_CAMERA_LINK_OPTICAL
-    T_base_opt = STATIC_BASE_CAMERA_LINK @ cl_opt
     try:
         for scan in ds.scans:
-            cams = set(scan._f["camera_id"].tolist()) if len(scan) else set()
+            cams = set(scan.camera_ids.tolist())
             if len(cams) > 1:
                 raise FormatError(f"scan {scan.scan_id}: frames from cameras {sorted(cams)}; raw export writes one "
                                   f"camera per recording")
             if not cams:
                 continue
             cam = ds.cameras[cams.pop()]
-            frame_id = optical[cam.camera_id]
-            name = f"{scan.scan_id}.bag" if ros1 else scan.scan_id
-            recordings[scan.scan_id] = name
-            msgs = _Msgs(ros1)
-            bw = _BagWriter(tmp / name, fmt, msgs)
-            try:
-                if want_raw:
-                    bw.connection(TOPICS["color"], "sensor_msgs/msg/Image")
-                    bw.connection(TOPICS["depth"], "sensor_msgs/msg/Image")
-                if want_comp:
-                    bw.connection(TOPICS["color_compressed"], "sensor_msgs/msg/CompressedImage")
-                    bw.connection(TOPICS["depth_compressed"], "sensor_msgs/msg/CompressedImage")
-                bw.connection(TOPICS["camera_info"], "sensor_msgs/msg/CameraInfo")
-                bw.connection(TOPICS["tf"], "tf2_msgs/msg/TFMessage")
-                bw.connection(TOPICS["tf_static"], "tf2_msgs/msg/TFMessage", latching=True)
-                bw.connection(TOPICS["odom"], "nav_msgs/msg/Odometry")
-                t0 = int(scan.stamps_ns[0])
-                bw.push(TOPICS["tf_static"], t0 - 50_000_000, msgs.tf_message(t0, [
-                    ("base_link", "camera_link", STATIC_BASE_CAMERA_LINK), ("camera_link", frame_id, cl_opt)]))
-                root = ds.root
-                for i in range(len(scan)):
-                    t = int(scan.stamps_ns[i])
-                    T_wc = scan.poses[i]
-                    color_bytes, depth_png = scan.image_bytes(i)
-                    rgb = None
-                    depth_mm = None
-                    if want_raw or ds.info.color_encoding != "jpeg":
-                        bgr = cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
-                        if bgr is None:
-                            raise FormatError(f"{root}: scan {scan.scan_id} frame {i}: unreadable colour image")
-                        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-                    if want_raw or abs(cam.depth_scale_m - 0.001) > 1e-12:
-                        raw = cv2.imdecode(np.frombuffer(depth_png, np.uint8), cv2.IMREAD_UNCHANGED)
-                        if raw is None:
-                            raise FormatError(f"{root}: scan {scan.scan_id} frame {i}: unreadable depth image")
-                        if abs(cam.depth_scale_m - 0.001) > 1e-12:
-                            mm = np.rint(raw.astype(np.float64) * cam.depth_scale_m * 1000.0)
-                            raw = np.where((mm > 0) & (mm <= 65535), mm, 0).astype(np.uint16)
-                            depth_png = cv2.imencode(".png", raw, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
-                        depth_mm = raw
-                    delays = rng.integers(5_000_000, 30_000_001, size=6)
-                    nbytes = 0
-                    if want_raw:
-                        nbytes += bw.push(TOPICS["color"], t + delays[0], msgs.image(t, frame_id, rgb, "rgb8"))
-                        nbytes += bw.push(TOPICS["depth"], t + delays[1], msgs.image(t, frame_id, depth_mm, "16UC1"))
-                    if want_comp:
-                        if ds.info.color_encoding == "jpeg":
-                            jpg = color_bytes
-                        else:
-                            jpg = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
-                                               [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1].tobytes()
-                        nbytes += bw.push(TOPICS["color_compressed"], t + delays[2],
-                                          msgs.compressed(t, frame_id, "rgb8; jpeg compressed bgr8", jpg))
-                        nbytes += bw.push(TOPICS["depth_compressed"], t + delays[3],
-                                          msgs.compressed(t, frame_id, "16UC1; compressedDepth png",
-                                                          make_compressed_depth(depth_png)))
-                    nbytes += bw.push(TOPICS["camera_info"], t + delays[4], msgs.camera_info(t, frame_id, cam))
-                    T_mo = _map_odom((t - t0) / 1e9)
-                    T_ob = invert(T_mo) @ T_wc @ invert(T_base_opt)
-                    nbytes += bw.push(TOPICS["tf"], t + delays[5], msgs.tf_message(
-                        t, [("map", "odom", T_mo), ("odom", "base_link", T_ob)]))
-                    nbytes += bw.push(TOPICS["odom"], t + delays[5] // 2, msgs.odometry(t, T_ob))
-                    bw.flush(before_ns=t)
-                    if progress is not None:
-                        progress(1, nbytes)
-            finally:
-                bw.close()
+            recordings[scan.scan_id] = name = f"{scan.scan_id}.bag" if fmt == "ros1" else scan.scan_id
+            _export_scan(ds, scan, cam, optical[cam.camera_id], _BagWriter(tmp / name, fmt, _Msgs(fmt == "ros1")),
+                         topics, rng, progress)
         _write_side_files(ds, tmp, recordings, optical)
         if out.exists():
             shutil.rmtree(out)
@@ -368,3 +299,94 @@ def export_raw(
         raise
     log.info("exported %d recordings (%s) to %s", len(recordings), fmt, out)
     return out
+
+
+@dataclass(frozen=True)
+class _Topics:
+    """Which image topics an export writes."""
+
+    raw: bool
+    compressed: bool
+
+
+def _export_scan(ds: Any, scan: Any, cam: CameraIntrinsics, frame_id: str, bw: _BagWriter, topics: _Topics,
+                 rng: np.random.Generator, progress: Callable[..., Any] | None) -> None:
+    """Write one scan as one recording (closes ``bw``)."""
+    msgs = bw.msgs
+    cl_opt = np.eye(4)
+    cl_opt[:3, :3] = R_CAMERA_LINK_OPTICAL
+    T_base_opt = STATIC_BASE_CAMERA_LINK @ cl_opt
+    try:
+        if topics.raw:
+            bw.connection(TOPICS["color"], "sensor_msgs/msg/Image")
+            bw.connection(TOPICS["depth"], "sensor_msgs/msg/Image")
+        if topics.compressed:
+            bw.connection(TOPICS["color_compressed"], "sensor_msgs/msg/CompressedImage")
+            bw.connection(TOPICS["depth_compressed"], "sensor_msgs/msg/CompressedImage")
+        bw.connection(TOPICS["camera_info"], "sensor_msgs/msg/CameraInfo")
+        bw.connection(TOPICS["tf"], "tf2_msgs/msg/TFMessage")
+        bw.connection(TOPICS["tf_static"], "tf2_msgs/msg/TFMessage", latching=True)
+        bw.connection(TOPICS["odom"], "nav_msgs/msg/Odometry")
+        t0 = int(scan.stamps_ns[0])
+        bw.push(TOPICS["tf_static"], t0 - 50_000_000, msgs.tf_message(t0, [
+            ("base_link", "camera_link", STATIC_BASE_CAMERA_LINK), ("camera_link", frame_id, cl_opt)]))
+        jpeg_in = ds.info.color_encoding == "jpeg"
+        for i in range(len(scan)):
+            t = int(scan.stamps_ns[i])
+            color_bytes, depth_png, rgb, depth_mm = _frame_images(ds, scan, cam, i, topics.raw)
+            delays = rng.integers(5_000_000, 30_000_001, size=6)
+            nbytes = 0
+            if topics.raw:
+                nbytes += bw.push(TOPICS["color"], t + delays[0], msgs.image(t, frame_id, rgb, "rgb8"))
+                nbytes += bw.push(TOPICS["depth"], t + delays[1], msgs.image(t, frame_id, depth_mm, "16UC1"))
+            if topics.compressed:
+                jpg = color_bytes if jpeg_in else _encode_jpeg(rgb)
+                nbytes += bw.push(TOPICS["color_compressed"], t + delays[2],
+                                  msgs.compressed(t, frame_id, "rgb8; jpeg compressed bgr8", jpg))
+                nbytes += bw.push(TOPICS["depth_compressed"], t + delays[3],
+                                  msgs.compressed(t, frame_id, "16UC1; compressedDepth png",
+                                                  make_compressed_depth(depth_png)))
+            nbytes += bw.push(TOPICS["camera_info"], t + delays[4], msgs.camera_info(t, frame_id, cam))
+            T_mo = _map_odom((t - t0) / 1e9)
+            T_ob = invert(T_mo) @ scan.poses[i] @ invert(T_base_opt)
+            nbytes += bw.push(TOPICS["tf"], t + delays[5], msgs.tf_message(
+                t, [("map", "odom", T_mo), ("odom", "base_link", T_ob)]))
+            nbytes += bw.push(TOPICS["odom"], t + delays[5] // 2, msgs.odometry(t, T_ob))
+            bw.flush(before_ns=t)
+            if progress is not None:
+                progress(1, nbytes)
+    finally:
+        bw.close()
+
+
+def _encode_jpeg(rgb: NDArray[np.uint8]) -> bytes:
+    """JPEG bytes (quality :data:`JPEG_QUALITY`) of an RGB image."""
+    import cv2
+
+    return bytes(cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1])
+
+
+def _frame_images(ds: Any, scan: Any, cam: CameraIntrinsics, i: int, want_raw: bool
+                  ) -> tuple[bytes, bytes, NDArray[np.uint8] | None, NDArray[np.uint16] | None]:
+    """(colour bytes, depth PNG in millimetres, RGB array, depth array) of frame ``i``; the arrays are
+    decoded only when needed (raw topics, PNG colour to turn into JPEG, depth not in millimetres)."""
+    import cv2
+
+    color_bytes, depth_png = scan.image_bytes(i)
+    rgb = depth_mm = None
+    if want_raw or ds.info.color_encoding != "jpeg":
+        bgr = cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise FormatError(f"{ds.root}: scan {scan.scan_id} frame {i}: unreadable colour image")
+        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    rescale = abs(cam.depth_scale_m - 0.001) > 1e-12
+    if want_raw or rescale:
+        raw = cv2.imdecode(np.frombuffer(depth_png, np.uint8), cv2.IMREAD_UNCHANGED)
+        if raw is None:
+            raise FormatError(f"{ds.root}: scan {scan.scan_id} frame {i}: unreadable depth image")
+        if rescale:
+            mm = np.rint(raw.astype(np.float64) * cam.depth_scale_m * 1000.0)
+            raw = np.where((mm > 0) & (mm <= 65535), mm, 0).astype(np.uint16)
+            depth_png = cv2.imencode(".png", raw, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
+        depth_mm = raw
+    return color_bytes, depth_png, rgb, depth_mm
