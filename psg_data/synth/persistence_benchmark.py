@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import datetime as _dt
 from dataclasses import dataclass, field
+from typing import Any
 from zoneinfo import ZoneInfo
 
 import numpy as np
@@ -121,18 +122,10 @@ def make_persistence_benchmark(*, seed: int = 0, train_weeks: int = 4, shift: st
         start_date: a Monday (ISO date) starting the validation week, local time.
         timezone: IANA zone of the schedule.
     """
-    if shift not in (None, "long-weekend"):
-        raise PsgDataError(f"make_persistence_benchmark: shift must be 'long-weekend' or None, got {shift!r}")
-    if train_weeks < 1:
-        raise PsgDataError(f"make_persistence_benchmark: train_weeks must be >= 1, got {train_weeks}")
-    if not (0 <= p_m < 0.5 and 0 <= p_f < 0.5):
-        raise PsgDataError("make_persistence_benchmark: p_m and p_f must be in [0, 0.5)")
+    _check_arguments(shift, train_weeks, p_m, p_f, start_date)
     zi = ZoneInfo(timezone)
     d0 = _dt.date.fromisoformat(start_date)
-    if d0.weekday() != 0:
-        raise PsgDataError(f"make_persistence_benchmark: start_date {start_date} is not a Monday")
-    n_weeks = train_weeks + 2
-    n_days = 7 * n_weeks
+    n_days = 7 * (train_weeks + 2)
     midnights = np.array([_dt.datetime.combine(d0 + _dt.timedelta(days=i), _dt.time(0), tzinfo=zi).timestamp()
                           for i in range(n_days + 1)])
     rng = np.random.default_rng(seed)
@@ -140,36 +133,83 @@ def make_persistence_benchmark(*, seed: int = 0, train_weeks: int = 4, shift: st
     jit = np.clip(rng.normal(0.0, jitter_min / 60.0, size=(n_days, len(edges), _MAX_BOUNDS)), -3 * jitter_min / 60,
                   3 * jitter_min / 60)
     test_day0 = 7 * (train_weeks + 1)
-
-    def local_to_unix(day: int, hour: float) -> float:
-        return float(midnights[day] + hour / 24.0 * (midnights[day + 1] - midnights[day]))
-
-    intervals: dict[EdgeKey, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+    intervals = {e: _presence_intervals(BENCHMARK_FEATURES[e], jit[:, ei], midnights, test_day0, shift)
+                 for ei, e in enumerate(edges)}
+    obs_t = _observation_times(rng, midnights, obs_period_s, gap_prob)
+    u = rng.random((len(edges), obs_t.size))
+    grid = np.arange(float(midnights[0]), float(midnights[-1]), grid_s)
+    bounds = {"val": (float(midnights[0]), float(midnights[7])),
+              "train": (float(midnights[7]), float(midnights[test_day0])),
+              "test": (float(midnights[test_day0]), float(midnights[-1]))}
+    streams: dict[str, list[EdgeStream]] = {k: [] for k in bounds}
+    truth: dict[str, dict[EdgeKey, tuple[NDArray[np.float64], NDArray[np.int8]]]] = {k: {} for k in bounds}
     for ei, e in enumerate(edges):
-        spec = BENCHMARK_FEATURES[e]
-        starts, ends = [], []
-        for day in range(n_days):
-            wd = day % 7
-            weekend = wd >= 5 or (shift == "long-weekend" and day >= test_day0 and wd in (0, 4))
-            if spec is None:
-                pattern = [(0.0, 24.0)]
-            else:
-                pattern = spec[1] if weekend else spec[0]
-            for j, (a, b) in enumerate(pattern):
-                ja = 0.0 if a in (0.0, 24.0) else jit[day, ei, 2 * j]
-                jb = 0.0 if b in (0.0, 24.0) else jit[day, ei, 2 * j + 1]
-                starts.append(local_to_unix(day, a + ja))
-                ends.append(local_to_unix(day, b + jb))
-        intervals[e] = (np.array(starts), np.array(ends))
+        x = _state_at(intervals[e], obs_t)
+        flip = np.where(x == 1, u[ei] < p_m, u[ei] < p_f)
+        y = np.where(flip, 1 - x, x).astype(np.int8)
+        gx = _state_at(intervals[e], grid)
+        for k, (a, b) in bounds.items():
+            m = (obs_t >= a) & (obs_t < b)
+            gm = (grid >= a) & (grid < b)
+            truth[k][e] = (grid[gm].copy(), gx[gm].copy())
+            meta = {"split": k, "gt_t_s": grid[gm].copy(), "gt_state": gx[gm].copy()} if k == "train" else {"split": k}
+            streams[k].append(EdgeStream(e, obs_t[m].copy(), y[m].copy(), meta))
+    schedules = {e: _llm_schedule([(0.0, 24.0)], [(0.0, 24.0)]) if spec is None else _llm_schedule(spec[0], spec[1])
+                 for e, spec in BENCHMARK_FEATURES.items()}
+    return PersistenceBenchmark(
+        train_streams=streams["train"], val_streams=streams["val"], test_streams=streams["test"],
+        train_truth=truth["train"], val_truth=truth["val"], test_truth=truth["test"], timezone=timezone,
+        start_s=bounds["val"][0], train_start_s=bounds["train"][0], test_start_s=bounds["test"][0],
+        test_end_s=bounds["test"][1], p_m=p_m, p_f=p_f, schedules=schedules, shift=shift)
 
-    def state_at(e: EdgeKey, t: NDArray[np.float64]) -> NDArray[np.int8]:
-        s, en = intervals[e]
-        if s.size == 0:
-            return np.zeros(t.shape, dtype=np.int8)
-        i = np.searchsorted(s, t, side="right") - 1
-        return ((i >= 0) & (t < en[np.maximum(i, 0)])).astype(np.int8)
 
-    # observation times: uniform gaps plus random multi-hour gaps
+def _check_arguments(shift: str | None, train_weeks: int, p_m: float, p_f: float, start_date: str) -> None:
+    if shift not in (None, "long-weekend"):
+        raise PsgDataError(f"make_persistence_benchmark: shift must be 'long-weekend' or None, got {shift!r}")
+    if train_weeks < 1:
+        raise PsgDataError(f"make_persistence_benchmark: train_weeks must be >= 1, got {train_weeks}")
+    if not (0 <= p_m < 0.5 and 0 <= p_f < 0.5):
+        raise PsgDataError("make_persistence_benchmark: p_m and p_f must be in [0, 0.5)")
+    if _dt.date.fromisoformat(start_date).weekday() != 0:
+        raise PsgDataError(f"make_persistence_benchmark: start_date {start_date} is not a Monday")
+
+
+def _local_to_unix(midnights: NDArray[np.float64], day: int, hour: float) -> float:
+    """Unix time of local ``hour`` (0-24, fractional) of day ``day`` (DST days stretch or shrink)."""
+    return float(midnights[day] + hour / 24.0 * (midnights[day + 1] - midnights[day]))
+
+
+def _presence_intervals(spec: Any, jit: NDArray[np.float64], midnights: NDArray[np.float64], test_day0: int,
+                        shift: str | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(starts, ends) Unix seconds of one feature's presence intervals, day by day, their bounds
+    jittered by ``jit`` (n_days, _MAX_BOUNDS) hours (midnight bounds stay put)."""
+    starts, ends = [], []
+    for day in range(len(midnights) - 1):
+        wd = day % 7
+        weekend = wd >= 5 or (shift == "long-weekend" and day >= test_day0 and wd in (0, 4))
+        pattern = [(0.0, 24.0)] if spec is None else spec[1] if weekend else spec[0]
+        for j, (a, b) in enumerate(pattern):
+            ja = 0.0 if a in (0.0, 24.0) else jit[day, 2 * j]
+            jb = 0.0 if b in (0.0, 24.0) else jit[day, 2 * j + 1]
+            starts.append(_local_to_unix(midnights, day, a + ja))
+            ends.append(_local_to_unix(midnights, day, b + jb))
+    return np.array(starts), np.array(ends)
+
+
+def _state_at(interval: tuple[NDArray[np.float64], NDArray[np.float64]], t: NDArray[np.float64]) -> NDArray[np.int8]:
+    """1 where ``t`` lies in one of the (sorted, disjoint) intervals, else 0."""
+    s, en = interval
+    if s.size == 0:
+        return np.zeros(t.shape, dtype=np.int8)
+    i = np.searchsorted(s, t, side="right") - 1
+    return ((i >= 0) & (t < en[np.maximum(i, 0)])).astype(np.int8)
+
+
+def _observation_times(rng: np.random.Generator, midnights: NDArray[np.float64], obs_period_s: tuple[float, float],
+                       gap_prob: float) -> NDArray[np.float64]:
+    """Observation times: uniform steps in ``obs_period_s`` plus, on a day with probability ``gap_prob``,
+    a 2-6 h gap without observations."""
+    n_days = len(midnights) - 1
     t_start, t_end = float(midnights[0]), float(midnights[-1])
     n_max = int((t_end - t_start) / obs_period_s[0]) + 2
     steps = rng.uniform(obs_period_s[0], obs_period_s[1], size=n_max)
@@ -180,36 +220,6 @@ def make_persistence_benchmark(*, seed: int = 0, train_weeks: int = 4, shift: st
     gap_len = rng.uniform(2.0, 6.0, n_days)
     keep = np.ones(obs_t.size, dtype=bool)
     for day in np.flatnonzero(has_gap):
-        a = local_to_unix(int(day), float(gap_start[day]))
+        a = _local_to_unix(midnights, int(day), float(gap_start[day]))
         keep &= ~((obs_t >= a) & (obs_t < a + gap_len[day] * 3600.0))
-    obs_t = obs_t[keep]
-    u = rng.random((len(edges), obs_t.size))
-
-    val_start = float(midnights[0])
-    train_start = float(midnights[7])
-    test_start = float(midnights[test_day0])
-    test_end = float(midnights[-1])
-    grid = np.arange(t_start, t_end, grid_s)
-    splits = {"val": (val_start, train_start), "train": (train_start, test_start), "test": (test_start, test_end)}
-    streams: dict[str, list[EdgeStream]] = {k: [] for k in splits}
-    truth: dict[str, dict[EdgeKey, tuple[NDArray[np.float64], NDArray[np.int8]]]] = {k: {} for k in splits}
-    for ei, e in enumerate(edges):
-        x = state_at(e, obs_t)
-        flip = np.where(x == 1, u[ei] < p_m, u[ei] < p_f)
-        y = np.where(flip, 1 - x, x).astype(np.int8)
-        gx = state_at(e, grid)
-        for k, (a, b) in splits.items():
-            m = (obs_t >= a) & (obs_t < b)
-            gm = (grid >= a) & (grid < b)
-            truth[k][e] = (grid[gm].copy(), gx[gm].copy())
-            meta = {"split": k, "gt_t_s": grid[gm].copy(), "gt_state": gx[gm].copy()} if k == "train" else {"split": k}
-            streams[k].append(EdgeStream(e, obs_t[m].copy(), y[m].copy(), meta))
-
-    schedules = {}
-    for e, spec in BENCHMARK_FEATURES.items():
-        schedules[e] = _llm_schedule([(0.0, 24.0)], [(0.0, 24.0)]) if spec is None else _llm_schedule(spec[0], spec[1])
-    return PersistenceBenchmark(
-        train_streams=streams["train"], val_streams=streams["val"], test_streams=streams["test"],
-        train_truth=truth["train"], val_truth=truth["val"], test_truth=truth["test"], timezone=timezone,
-        start_s=val_start, train_start_s=train_start, test_start_s=test_start, test_end_s=test_end, p_m=p_m, p_f=p_f,
-        schedules=schedules, shift=shift)
+    return obs_t[keep]
