@@ -189,28 +189,14 @@ def perception_labels(ds: Any, detections: Detections, params: AssociationParams
     obj_ids, rec_ids = list(ds.objects), list(ds.receptacles)
     S, O, R = len(scan_ids), len(obj_ids), len(rec_ids)
     si = {s: i for i, s in enumerate(scan_ids)}
-    unknown_scans = sorted(set(detections.scan_id.tolist()) - set(si))
-    if unknown_scans:
-        i = int(np.flatnonzero(detections.scan_id == unknown_scans[0])[0])
-        raise LabelingError(f"{detections.path}:{int(detections.row[i])}: scan_id: unknown scan {unknown_scans[0]!r}, "
-                            "expected a scan_id of tables/scans.parquet")
-    if p.observed != "matched" and receptacle_visible is None:
-        raise LabelingError(f"observed={p.observed!r} needs receptacle visibility (compute it first)")
+    _check_detections(detections, si, p, receptacle_visible)
     det = detections.subset(detections.score >= p.min_score) if p.min_score > 0 else detections
     rec_boxes = [ds.receptacles[r].box for r in rec_ids]
-    name_to_id: dict[str, str] = {}
-    names: dict[str, list[str]] = {}
-    for oid, info in ds.objects.items():
-        names.setdefault(info.name, []).append(oid)
-    name_to_id.update({n: ids[0] for n, ids in names.items() if len(ids) == 1})
-    name_to_id.update({o: o for o in obj_ids})
+    name_to_id = _object_ids_by_name(ds, obj_ids)
     oi = {o: i for i, o in enumerate(obj_ids)}
-
     matched = np.zeros((S, R), bool)
     assoc = np.zeros((S, O, R), bool)
-    ious: list[float] = []
-    n_unknown = n_unassoc = n_unmatched = 0
-    unknown: set[str] = set()
+    tally = _Tally()
     scan_of = np.array([si[s] for s in det.scan_id], np.int64) if len(det) else np.zeros(0, np.int64)
     is_rec = det.kind == "receptacle"
     for s in range(S):
@@ -220,43 +206,81 @@ def perception_labels(ds: Any, detections: Detections, params: AssociationParams
             pairs, iou = match_boxes([det.box(i) for i in ridx], rec_boxes, p.min_iou)
             for a, b in pairs:
                 matched[s, b] = True
-                ious.append(float(iou[a, b]))
-            n_unmatched += ridx.size - len(pairs)
-        obs = matched[s].copy()
-        if p.observed == "visibility":
-            obs = np.asarray(receptacle_visible, bool)[s].copy()
-        elif p.observed == "either":
-            obs |= np.asarray(receptacle_visible, bool)[s]
-        oidx = np.flatnonzero(in_scan & ~is_rec)
-        if oidx.size == 0:
-            continue
-        labels = [name_to_id.get(str(lb)) for lb in det.label[oidx]]
-        keep = np.array([lb is not None for lb in labels], bool)
-        n_unknown += int((~keep).sum())
-        unknown.update(str(lb) for lb, k in zip(det.label[oidx], keep) if not k)
-        if not keep.any():
-            continue
-        oidx = oidx[keep]
-        obj_index = np.array([oi[lb] for lb in labels if lb is not None], np.int64)
-        k = associate_objects(det.centroid_m[oidx], rec_boxes, obs, p)
-        n_unassoc += int((k < 0).sum())
-        assoc[s, obj_index[k >= 0], k[k >= 0]] = True
-
-    observed = matched.copy()
-    if p.observed == "visibility":
-        observed = np.asarray(receptacle_visible, bool).copy()
-    elif p.observed == "either":
-        observed |= np.asarray(receptacle_visible, bool)
+                tally.ious.append(float(iou[a, b]))
+            tally.unmatched += ridx.size - len(pairs)
+        obs = _observed(matched[s], p, None if receptacle_visible is None else receptacle_visible[s])
+        _associate_scan(det, np.flatnonzero(in_scan & ~is_rec), name_to_id, oi, rec_boxes, obs, p, assoc[s], tally)
+    observed = _observed(matched, p, receptacle_visible)
     history = assoc.any(axis=0)
     codes = np.full((S, O, R), CODE_MISSING, np.int8)
     codes[observed[:, None, :] & ~assoc] = CODE_ABSENT
     codes[assoc] = CODE_PRESENT
     codes[:, ~history] = CODE_INVALID
-    if n_unknown:
+    if tally.unknown:
         log.info("%s: ignored %d object detections with labels that are not dataset objects (%s)", detections.path,
-                 n_unknown, ", ".join(sorted(unknown)[:5]))
+                 tally.unknown, ", ".join(sorted(tally.unknown_labels)[:5]))
     stamps = np.array([ds.scan(s).start_stamp_ns for s in scan_ids], np.int64)
     grid = LabelGrid(scan_ids, obj_ids, rec_ids, stamps, codes, source, {"association": p.to_dict()})
-    info = PerceptionInfo(matched, observed, assoc, n_unknown, n_unassoc, n_unmatched,
-                          float(np.mean(ious)) if ious else float("nan"), sorted(unknown))
+    info = PerceptionInfo(matched, observed, assoc, tally.unknown, tally.unassociated, tally.unmatched,
+                          float(np.mean(tally.ious)) if tally.ious else float("nan"), sorted(tally.unknown_labels))
     return grid, info
+
+
+@dataclass
+class _Tally:
+    """Counts of detections that did not become labels."""
+
+    unknown: int = 0
+    unassociated: int = 0
+    unmatched: int = 0
+    ious: list[float] = field(default_factory=list)
+    unknown_labels: set[str] = field(default_factory=set)
+
+
+def _check_detections(detections: Detections, scan_index: dict[str, int], p: AssociationParams,
+                      receptacle_visible: NDArray[np.bool_] | None) -> None:
+    unknown_scans = sorted(set(detections.scan_id.tolist()) - set(scan_index))
+    if unknown_scans:
+        i = int(np.flatnonzero(detections.scan_id == unknown_scans[0])[0])
+        raise LabelingError(f"{detections.path}:{int(detections.row[i])}: scan_id: unknown scan {unknown_scans[0]!r}, "
+                            "expected a scan_id of tables/scans.parquet")
+    if p.observed != "matched" and receptacle_visible is None:
+        raise LabelingError(f"observed={p.observed!r} needs receptacle visibility (compute it first)")
+
+
+def _object_ids_by_name(ds: Any, obj_ids: list[str]) -> dict[str, str]:
+    """Detection label -> object id: every object id, and every object name that only one object has."""
+    names: dict[str, list[str]] = {}
+    for oid, info in ds.objects.items():
+        names.setdefault(info.name, []).append(oid)
+    out = {n: ids[0] for n, ids in names.items() if len(ids) == 1}
+    out.update({o: o for o in obj_ids})
+    return out
+
+
+def _observed(matched: NDArray[np.bool_], p: AssociationParams, visible: NDArray[np.bool_] | None
+              ) -> NDArray[np.bool_]:
+    """Receptacles counted as observed: matched by a detection, visible, or either (``p.observed``)."""
+    if p.observed == "visibility":
+        return np.asarray(visible, bool).copy()
+    if p.observed == "either":
+        return matched | np.asarray(visible, bool)
+    return matched.copy()
+
+
+def _associate_scan(det: Detections, oidx: NDArray[np.int64], name_to_id: dict[str, str], oi: dict[str, int],
+                    rec_boxes: list[Any], obs: NDArray[np.bool_], p: AssociationParams, assoc: NDArray[np.bool_],
+                    tally: _Tally) -> None:
+    """Associate one scan's object detections ``oidx`` with observed receptacles, into ``assoc`` (O, R)."""
+    if oidx.size == 0:
+        return
+    labels = [name_to_id.get(str(lb)) for lb in det.label[oidx]]
+    keep = np.array([lb is not None for lb in labels], bool)
+    tally.unknown += int((~keep).sum())
+    tally.unknown_labels.update(str(lb) for lb, k in zip(det.label[oidx], keep) if not k)
+    if not keep.any():
+        return
+    obj_index = np.array([oi[lb] for lb in labels if lb is not None], np.int64)
+    k = associate_objects(det.centroid_m[oidx[keep]], rec_boxes, obs, p)
+    tally.unassociated += int((k < 0).sum())
+    assoc[obj_index[k >= 0], k[k >= 0]] = True
