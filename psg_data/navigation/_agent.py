@@ -171,15 +171,7 @@ def run_episode(
         The :class:`Episode`.
     """
     grid = cache.grid
-    W = grid.shape[1]
-    cfg_true = cache.key(query.doors_open)
-    bel_doors = dict(query.doors_open if door_belief is None else door_belief)
-    cfg_bel = cache.key(bel_doors)
-    free_true = cache.free_flat(cfg_true)
-    gt = query.gt_receptacle
-    approach_true = cache.approach(gt, cfg_true).ravel() if gt is not None and gt in grid.receptacle_cells else None
-    reachable, l_star = true_shortest_path(cache, query)
-
+    walk = _Walk(cache, query, config, door_belief, observation)
     adaptive = config.setting == "adaptive"
     if adaptive:
         filters = {r: copy.deepcopy(f) for r, f in filters.items()}
@@ -190,108 +182,128 @@ def run_episode(
     bel = {r: b for r, b in bel.items() if r in grid.receptacle_cells}
     initial = dict(bel)
     pred_rec = min(bel, key=lambda r: (-bel[r], r)) if bel else None
-    best = bel[pred_rec] if pred_rec is not None else 0.0
-
-    model = observation or ObservationModel()
-    rec_index = {r: k for k, r in enumerate(sorted(grid.receptacle_cells))}
-    looks: dict[str, int] = {}
-
-    def sees(rec: str, there: bool) -> bool:
-        k = looks.get(rec, 0)
-        looks[rec] = k + 1
-        return model.sees(there, (query.seed, query.query_id, rec_index.get(rec, -1), k))
-
-    n_missed = 0
-    cur = query.start_cell[0] * W + query.start_cell[1]
-    trail: list[NDArray[np.int64]] = [np.array([cur], dtype=np.int64)]
-    walked = 0.0
-    tried: list[str] = []
-    visited: list[str] = []
-    discovered: list[str] = []
-    attempts = 0
     outcome = ""
-    found = False
-
     while not outcome:
-        cands = sorted((r for r in bel if r not in tried and bel[r] >= config.delta), key=lambda r: (-bel[r], r))
-        if not cands:
-            outcome = "abort"
-            break
-        if attempts >= config.max_attempts:
-            outcome = "exhausted"
-            break
-        target = None
-        for r in cands:
-            if math.isfinite(cache.distance(r, cfg_bel, cur)):
-                target = r
-                break
-            tried.append(r)  # unreachable under the believed doors: skipped, no attempt spent
+        target, outcome = walk.next_target(bel)
         if target is None:
-            outcome = "no_path"
             break
-        attempts += 1
-        tried.append(target)
-        arrived = False
-        for _ in range(len(grid.door_ids) + 1):  # at most one replan per door
-            path = cache.path(target, cfg_bel, cur)
-            if path is None:
-                break
-            stop, event = path.size - 1, "arrived"
-            blocked = np.flatnonzero(~free_true[path])
-            kb = int(blocked[0]) if blocked.size else -1
-            if kb >= 0:
-                stop, event = kb - 1, "blocked"
-            if config.detect_en_route and approach_true is not None and gt is not None:
-                hits = np.flatnonzero(approach_true[path[: stop + 1]])
-                if hits.size:
-                    if sees(gt, True):
-                        stop, event = int(hits[0]), "found"
-                    else:
-                        n_missed += 1
-            seg = path[: stop + 1]
-            walked += float(cache.step_lengths(seg)[-1])
-            trail.append(seg[1:])
-            cur = int(seg[-1])
-            if event == "found":
-                found = True
-                break
-            if event == "blocked":
-                for d in _closed_doors_at(cache, bel_doors, query, int(path[kb])):
-                    bel_doors[d] = False
-                    discovered.append(d)
-                cfg_bel = cache.key(bel_doors)
-                continue
-            arrived = True
-            break
-        if found:
+        event = walk.go_to(target)
+        if event == "found":
             outcome = "found"
             break
-        if not arrived:
+        if event == "unreachable":
             continue  # the target became unreachable once a closed door was seen: next candidate
-        visited.append(target)
-        there = bool(gt == target and approach_true is not None and approach_true[cur])
-        if sees(target, there):
-            found = True
+        walk.visited.append(target)
+        there = bool(walk.gt == target and walk.at_target())
+        if walk.sees(target, there):
             outcome = "found"
             break
-        n_missed += int(there)
+        walk.n_missed += int(there)
         if adaptive:
-            t_now = query.t_s + walked / config.speed_mps
+            t_now = query.t_s + walk.walked / config.speed_mps
             f = filters.get(target)
             if f is not None:
                 f.update(t_now, 0)
             bel = {r: _predict(fl, t_now) for r, fl in filters.items() if r in grid.receptacle_cells}
-
-    success = bool(found and gt is not None and approach_true is not None and approach_true[cur])
-    if found and not success:
+    success = bool(outcome == "found" and walk.gt is not None and walk.at_target())
+    if outcome == "found" and not success:
         outcome = "false_positive"
-    xy = grid.cell_to_world((cur // W, cur % W))
+    reachable, l_star = true_shortest_path(cache, query)
+    xy = grid.cell_to_world(divmod(walk.cur, grid.shape[1]))
     return Episode(
         query_id=query.query_id, object_id=query.object_id, category=query.category, outcome=outcome,
-        success=success, aborted=outcome == "abort", path_m=walked,
-        shortest_path_m=l_star if reachable else float("nan"), reachable=reachable, n_attempts=attempts,
-        visited=visited, predicted_receptacle=pred_rec, best_belief=float(best), final_xy=(float(xy[0]), float(xy[1])),
-        doors_discovered=discovered, beliefs=initial, trail=np.concatenate(trail), n_missed=n_missed)
+        success=success, aborted=outcome == "abort", path_m=walk.walked,
+        shortest_path_m=l_star if reachable else float("nan"), reachable=reachable, n_attempts=walk.attempts,
+        visited=walk.visited, predicted_receptacle=pred_rec, best_belief=float(initial[pred_rec]) if pred_rec is not None else 0.0,
+        final_xy=(float(xy[0]), float(xy[1])), doors_discovered=walk.discovered, beliefs=initial,
+        trail=np.concatenate(walk.trail), n_missed=walk.n_missed)
+
+
+class _Walk:
+    """One episode's agent: where it is, what it walked, tried and saw, and the doors it believes in."""
+
+    def __init__(self, cache: PlanningCache, query: Query, config: AgentConfig,
+                 door_belief: Mapping[str, bool] | None, observation: ObservationModel | None) -> None:
+        grid = cache.grid
+        self.cache, self.query, self.config = cache, query, config
+        self.bel_doors = dict(query.doors_open if door_belief is None else door_belief)
+        self.cfg_bel = cache.key(self.bel_doors)
+        cfg_true = cache.key(query.doors_open)
+        self.free_true = cache.free_flat(cfg_true)
+        self.gt = query.gt_receptacle
+        self.approach_true = (cache.approach(self.gt, cfg_true).ravel()
+                              if self.gt is not None and self.gt in grid.receptacle_cells else None)
+        self.model = observation or ObservationModel()
+        self.rec_index = {r: k for k, r in enumerate(sorted(grid.receptacle_cells))}
+        self.looks: dict[str, int] = {}
+        self.cur = query.start_cell[0] * grid.shape[1] + query.start_cell[1]
+        self.trail: list[NDArray[np.int64]] = [np.array([self.cur], dtype=np.int64)]
+        self.walked = 0.0
+        self.tried: list[str] = []
+        self.visited: list[str] = []
+        self.discovered: list[str] = []
+        self.attempts = 0
+        self.n_missed = 0
+
+    def at_target(self) -> bool:
+        """Whether the agent stands where the true receptacle can be seen."""
+        return self.approach_true is not None and bool(self.approach_true[self.cur])
+
+    def sees(self, rec: str, there: bool) -> bool:
+        """The sighting model's answer at ``rec`` (its k-th look there)."""
+        k = self.looks.get(rec, 0)
+        self.looks[rec] = k + 1
+        q = self.query
+        return self.model.sees(there, (q.seed, q.query_id, self.rec_index.get(rec, -1), k))
+
+    def next_target(self, bel: Mapping[str, float]) -> tuple[str | None, str]:
+        """The most believed receptacle not tried yet that is reachable under the believed doors
+        (one attempt spent), or None and why the episode ends."""
+        delta = self.config.delta
+        cands = sorted((r for r in bel if r not in self.tried and bel[r] >= delta), key=lambda r: (-bel[r], r))
+        if not cands:
+            return None, "abort"
+        if self.attempts >= self.config.max_attempts:
+            return None, "exhausted"
+        for r in cands:
+            self.tried.append(r)
+            if math.isfinite(self.cache.distance(r, self.cfg_bel, self.cur)):
+                self.attempts += 1
+                return r, ""
+            # unreachable under the believed doors: skipped, no attempt spent
+        return None, "no_path"
+
+    def go_to(self, target: str) -> str:
+        """Walk to ``target``, replanning at each closed door found (at most one replan per door);
+        returns ``found`` (seen on the way), ``arrived`` or ``unreachable``."""
+        cache, config = self.cache, self.config
+        for _ in range(len(cache.grid.door_ids) + 1):
+            path = cache.path(target, self.cfg_bel, self.cur)
+            if path is None:
+                break
+            stop, event = path.size - 1, "arrived"
+            blocked = np.flatnonzero(~self.free_true[path])
+            kb = int(blocked[0]) if blocked.size else -1
+            if kb >= 0:
+                stop, event = kb - 1, "blocked"
+            if config.detect_en_route and self.approach_true is not None and self.gt is not None:
+                hits = np.flatnonzero(self.approach_true[path[: stop + 1]])
+                if hits.size:
+                    if self.sees(self.gt, True):
+                        stop, event = int(hits[0]), "found"
+                    else:
+                        self.n_missed += 1
+            seg = path[: stop + 1]
+            self.walked += float(cache.step_lengths(seg)[-1])
+            self.trail.append(seg[1:])
+            self.cur = int(seg[-1])
+            if event != "blocked":
+                return event
+            for d in _closed_doors_at(cache, self.bel_doors, self.query, int(path[kb])):
+                self.bel_doors[d] = False
+                self.discovered.append(d)
+            self.cfg_bel = cache.key(self.bel_doors)
+        return "unreachable"
 
 
 def episode_record(ep: Episode, **extra: Any) -> dict[str, Any]:
