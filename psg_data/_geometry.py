@@ -29,7 +29,8 @@ def yaw_rotation(yaw_rad: float) -> NDArray[np.float64]:
 
 def convex_hull(points: ArrayLike) -> NDArray[np.float64]:
     """Convex hull of (N, 2) points: its (V, 2) vertices counter-clockwise (the distinct points if fewer than 3
-    or all on one line)."""
+    or all on one line).
+    """
     P = np.unique(np.round(np.asarray(points, float).reshape(-1, 2), 12), axis=0)
     if len(P) < 3:
         return P

@@ -39,7 +39,8 @@ def _noop() -> None:
 def _start_all(pool: ProcessPoolExecutor, n: int) -> None:
     """Start all ``n`` workers now, with SIGINT blocked: a started process inherits the mask, so a
     Ctrl-C while one is still importing cannot print its traceback (it ignores SIGINT once its
-    initializer ran). The parent gets a Ctrl-C of that moment right after."""
+    initializer ran). The parent gets a Ctrl-C of that moment right after.
+    """
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if _MASKS else None
     try:
         for _ in range(n):  # submitted before any finishes: each starts a worker
@@ -67,6 +68,7 @@ def process_pool(max_workers: int, initializer: Callable[..., Any] | None = None
     Args:
         max_workers: worker processes.
         initializer: run once in each worker (after SIGINT is set to be ignored there).
+        initargs: arguments of ``initializer``.
     """
     pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init, initargs=(initializer, tuple(initargs)))

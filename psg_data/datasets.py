@@ -18,7 +18,10 @@ DEMO_VERSION = "synth2-steps-seed0-d21-f8-160x120-fmt2"
 
 
 def cache_dir() -> Path:
-    """psg-data's cache directory: ``$PSG_DATA_CACHE``, else ``$XDG_CACHE_HOME/psg-data``, else ``~/.cache/psg-data``."""
+    """psg-data's cache directory.
+
+    ``$PSG_DATA_CACHE``, else ``$XDG_CACHE_HOME/psg-data``, else ``~/.cache/psg-data``.
+    """
     if os.environ.get("PSG_DATA_CACHE"):
         return Path(os.environ["PSG_DATA_CACHE"])
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
@@ -28,9 +31,9 @@ def cache_dir() -> Path:
 def _is_complete(root: Path) -> bool:
     """Manifest readable, checksum of the files table as recorded, every listed file present with its size."""
     from psg_data.errors import FormatError
+    from psg_data.schemas._checksum import sha256_file
     from psg_data.schemas._manifest import read_manifest
     from psg_data.schemas._tables import table_path
-    from psg_data.schemas._checksum import sha256_file
 
     try:
         info = read_manifest(root)

@@ -38,6 +38,11 @@ class ValidationError(FormatError):
     """A dataset failed validation; ``problems`` holds every problem line found."""
 
     def __init__(self, problems: list[str]) -> None:
+        """Keep every problem line; the first one becomes the message.
+
+        Args:
+            problems: the problem lines.
+        """
         self.problems = list(problems)
         head = problems[0] if problems else "dataset is invalid"
         more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""

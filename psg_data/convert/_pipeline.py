@@ -181,7 +181,8 @@ def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None
 
 def _init_worker() -> None:
     """Worker set-up: one OpenCV thread per worker (the workers already use the cores; OpenCV's own
-    thread pool on top would oversubscribe them), and the heavy imports done once, up front."""
+    thread pool on top would oversubscribe them), and the heavy imports done once, up front.
+    """
     import cv2
 
     cv2.setNumThreads(1)
@@ -192,7 +193,8 @@ def _init_worker() -> None:
 def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None,
                   scheduler: str | None = None) -> list[ScanResult]:
     """Convert each source in a worker: the local spawn pool of ``procs`` processes, or Dask
-    (``scheduler``, see :func:`psg_data._executors.open_executor`)."""
+    (``scheduler``, see :func:`psg_data._executors.open_executor`).
+    """
     from concurrent.futures import FIRST_EXCEPTION, wait
 
     from psg_data._executors import open_executor
@@ -415,7 +417,8 @@ def _adopt_scans(writer: DatasetWriter, report: ConversionReport, results: list[
                  completed: dict[str, dict[str, Any]], tmp: Path) -> dict[str, ScanResult]:
     """Adopt the scans written now (their records come with the results, checksummed from memory
     while writing) and those of an interrupted run (verified; their results from the state files),
-    giving each distinct camera an id of its own; fills in ``report``. Returns the results by scan."""
+    giving each distinct camera an id of its own; fills in ``report``. Returns the results by scan.
+    """
     import pyarrow as pa
 
     from psg_data.schemas._records import CameraIntrinsics
@@ -458,7 +461,8 @@ def _adopt_scans(writer: DatasetWriter, report: ConversionReport, results: list[
 
 def _camera_id(cameras: dict[str, dict[str, Any]], cam: dict[str, Any]) -> str:
     """The id of camera ``cam`` among ``cameras`` (added there if new): its own id, or ``ID_1``, ``ID_2``, ...
-    when another camera already has it."""
+    when another camera already has it.
+    """
     cam["distortion_coeffs"] = tuple(cam["distortion_coeffs"])
     cid, k = cam["camera_id"], 1
     while cid in cameras and cameras[cid] != {**cam, "camera_id": cid}:

@@ -13,7 +13,6 @@ import bisect
 import json
 import logging
 import math
-import os
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -38,8 +37,7 @@ from psg_data.loaders.raw._images import (
 )
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer
 from psg_data.schemas._camera_checks import intrinsics_problems
-from psg_data.schemas._image_check import DamagedImage
-from psg_data.schemas._image_check import check_image, looks_like_image
+from psg_data.schemas._image_check import DamagedImage, check_image, looks_like_image
 from psg_data.schemas._image_headers import parse_image_header_end
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.writers._dataset_writer import encode_color, encode_depth
@@ -168,7 +166,8 @@ def discover_topics(topics: dict[str, str], cfg: ConvertConfig, where: str) -> d
     tf = [t for t, m in topics.items() if m == _TF]
     odom = sorted(t for t, m in topics.items() if m == _ODOM)
     return {"color": color, "depth": depth, "camera_info": info,
-            "tf": [t for t in tf if not t.endswith("tf_static")], "tf_static": [t for t in tf if t.endswith("tf_static")],
+            "tf": [t for t in tf if not t.endswith("tf_static")],
+            "tf_static": [t for t in tf if t.endswith("tf_static")],
             "odom": odom, "color_type": topics[color], "depth_type": topics[depth]}
 
 
@@ -186,9 +185,9 @@ def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> Ca
     D = np.asarray(getattr(msg, "D", None) if hasattr(msg, "D") else msg.d, dtype=float)
     if K.size != 9 or not np.all(np.isfinite(K)) or K[0] <= 0 or K[4] <= 0:
         raise ConversionError(f"{where}: CameraInfo K: expected a finite 3x3 matrix with fx, fy > 0, got {K.tolist()}")
-    for field, what in intrinsics_problems(int(msg.width), int(msg.height), float(K[0]), float(K[4]), float(K[2]),
-                                           float(K[5]))[:1]:
-        raise ConversionError(f"{where}: CameraInfo {field}: {what}")
+    for name, what in intrinsics_problems(int(msg.width), int(msg.height), float(K[0]), float(K[4]), float(K[2]),
+                                          float(K[5]))[:1]:
+        raise ConversionError(f"{where}: CameraInfo {name}: {what}")
     if not np.all(np.isfinite(D)):
         raise ConversionError(f"{where}: CameraInfo D: expected finite distortion coefficients, got {D.tolist()}")
     model = str(msg.distortion_model or "")
@@ -358,7 +357,8 @@ class _PoseSource:
 
     def ready(self, stamp: int) -> bool:
         """Whether every pose sample a lookup at ``stamp`` (header time) may use has arrived: each
-        dynamic edge of the path has a sample at or after ``stamp`` (static paths and pose files: always)."""
+        dynamic edge of the path has a sample at or after ``stamp`` (static paths and pose files: always).
+        """
         if self.kind == "tum":
             return True
         if self.kind == "odom":
@@ -640,7 +640,8 @@ class _ScanSink:
             csize = dsize
         if csize != dsize:
             raise ConversionError(f"{self.task.source}: {self.names[1]}: depth is {dsize[0]}x{dsize[1]} but colour is "
-                                  f"{csize[0]}x{csize[1]}; expected depth registered to colour (aligned_depth_to_color)")
+                                  f"{csize[0]}x{csize[1]}; expected depth registered to colour "
+                                  f"(aligned_depth_to_color)")
         if csize != (cam.width, cam.height):
             raise ConversionError(f"{self.task.source}: {self.names[0]}: images are {csize[0]}x{csize[1]} but "
                                   f"CameraInfo says {cam.width}x{cam.height}; expected the colour camera's camera_info")
@@ -841,7 +842,8 @@ class _Release:
 def _stream_messages(rec: Any, topics: dict[str, Any], tf: TfBuffer, poses: _PoseSource, asm: _Assembler,
                      release: _Release, cfg: ConvertConfig) -> int:
     """Read the wanted topics in log-time order into the assembler, TF and pose source, releasing
-    frames as they become due; returns the bytes read."""
+    frames as they become due; returns the bytes read.
+    """
     color_t, depth_t, info_t = topics["color"], topics["depth"], topics["camera_info"]
     wanted = {color_t, depth_t, *topics["tf"], *topics["tf_static"]}
     if poses.odom_topic:
@@ -925,6 +927,8 @@ def run_task(task: ScanTask, progress: Callable[..., Any] | None = None, writer:
     """Convert one source into one or more scans inside ``OUT.partial`` (see module docstring).
 
     Args:
+        task: the source and its settings.
+        progress: called as ``progress(n_frames, nbytes)``.
         writer: a dataset writer on ``OUT.partial`` shared by the tasks of this process; its scans
             may still be completing when this returns and their results carry no record (the
             caller takes them from the writer). Default: a writer of the task's own, finished

@@ -34,8 +34,8 @@ from psg_data.errors import LabelingError
 from psg_data.labeling._codes import LabelGrid
 from psg_data.labeling._detections import Detections
 from psg_data.labeling._geometry import box_iou_matrix
-from psg_data.schemas._tables import CODE_ABSENT, CODE_INVALID, CODE_MISSING, CODE_PRESENT
 from psg_data.schemas._records import Box
+from psg_data.schemas._tables import CODE_ABSENT, CODE_INVALID, CODE_MISSING, CODE_PRESENT
 
 __all__ = ["AssociationParams", "match_boxes", "max_weight_matching", "associate_objects", "perception_labels",
            "PerceptionInfo"]

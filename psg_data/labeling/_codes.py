@@ -197,7 +197,8 @@ def valid_mask(ds: Any, valid: Mapping[str, Sequence[str]] | None = None) -> NDA
     out = np.zeros((len(obj_ids), len(rec_ids)), bool)
     for o, recs in valid.items():
         if o not in ds.objects:
-            raise LabelingError(f"valid receptacles: unknown object {o!r}, expected an object_id of tables/objects.parquet")
+            raise LabelingError(f"valid receptacles: unknown object {o!r}, expected an object_id of "
+                                f"tables/objects.parquet")
         for r in recs:
             if r not in ds.receptacles:
                 raise LabelingError(f"valid receptacles: object {o!r}: unknown receptacle {r!r}, expected a "
@@ -272,6 +273,9 @@ def binomial_interval(k: int, n: int, confidence: float = 0.95, method: str = "w
     """Confidence interval of a binomial proportion ``k / n``.
 
     Args:
+        k: successes.
+        n: trials.
+        confidence: coverage of the interval, in (0, 1).
         method: ``wilson`` (score interval) or ``clopper-pearson`` (exact, conservative).
 
     Returns:

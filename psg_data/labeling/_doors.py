@@ -346,7 +346,9 @@ def door_label_grid(ds: Any, kind: str, *, source: str | None = None, visible: N
         source: value of the ``source`` column (default: ``kind``).
         visible: (S, D) door visibility (privileged / noisy; default from ``observations``).
         observations: door observations (``observed``; or to get ``visible``).
-        p_m, p_f, seed: noise (``noisy``).
+        p_m: P(observed closed | open) of the ``noisy`` kind.
+        p_f: P(observed open | closed) of the ``noisy`` kind.
+        seed: seed of that noise.
 
     Raises:
         LabelingError: unknown kind or missing inputs.

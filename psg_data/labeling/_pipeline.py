@@ -36,7 +36,6 @@ from typing import Any
 import numpy as np
 
 from psg_data.errors import LabelingError
-from psg_data.schemas._streams import EdgeStream
 from psg_data.labeling._association import AssociationParams, PerceptionInfo, perception_labels
 from psg_data.labeling._codes import ErrorRates, LabelGrid, error_rates, ground_truth, inject_noise, privileged_codes
 from psg_data.labeling._detections import read_detections
@@ -48,9 +47,10 @@ from psg_data.labeling._doors import (
     is_door_row,
     observe_doors,
 )
-from psg_data.schemas._tables import CODE_ABSENT, CODE_PRESENT, TABLES
 from psg_data.labeling._visibility import VisibilityParams, compute_visibility, visibility_matrix
 from psg_data.schemas._records import Box
+from psg_data.schemas._streams import EdgeStream
+from psg_data.schemas._tables import CODE_ABSENT, CODE_PRESENT, TABLES
 
 __all__ = ["SourceSpec", "parse_source", "LabelResult", "LabelSummary", "compute_labels", "label_dataset",
            "label_streams", "load_label_streams", "grid_streams", "summarize"]
@@ -97,7 +97,8 @@ def parse_source(source: str) -> SourceSpec:
         try:
             vals = [float(x) for x in parts]
         except ValueError as exc:
-            raise LabelingError(f"source {s!r}: expected noisy:P or noisy:P_M,P_F with probabilities in [0, 1]") from exc
+            raise LabelingError(f"source {s!r}: expected noisy:P or noisy:P_M,P_F with probabilities in "
+                                f"[0, 1]") from exc
         if len(vals) not in (1, 2) or not all(np.isfinite(v) and 0 <= v <= 1 for v in vals):
             raise LabelingError(f"source {s!r}: expected noisy:P or noisy:P_M,P_F with probabilities in [0, 1]")
         return SourceSpec("noisy", vals[0], vals[-1])
@@ -180,7 +181,8 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
         gt = ground_truth(ds, valid)
     timings["ground_truth"] = time.perf_counter() - t0
     assoc = association or AssociationParams()
-    need_vis = spec.kind in ("privileged", "noisy", "observed") or (spec.kind == "detections" and assoc.observed != "matched")
+    need_vis = (spec.kind in ("privileged", "noisy", "observed")
+                or (spec.kind == "detections" and assoc.observed != "matched"))
     reused = False
     if need_vis and visibility is None:
         if reuse_visibility and object_boxes is None and ds.has_table("visibility"):
@@ -414,7 +416,8 @@ def summarize(res: LabelResult) -> LabelSummary:
         if res.door_gt is not None and dg.source != "gt":
             ref = res.door_gt.aligned(dg)[:, :, 0]
             both = obs & (ref >= 0)
-            line += f", state agrees with door_states in {int((dg.codes[:, :, 0] == ref)[both].sum())} of {int(both.sum())}"
+            agree = int((dg.codes[:, :, 0] == ref)[both].sum())
+            line += f", state agrees with door_states in {agree} of {int(both.sum())}"
         extra["doors"] = line
     if res.perception is not None:
         p = res.perception

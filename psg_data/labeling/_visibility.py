@@ -42,7 +42,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import LabelingError
-from psg_data.labeling._geometry import SurfaceSamples, box_surface_samples, pixel_rays, pixels_in_image, top_face_samples
+from psg_data.labeling._geometry import (
+    SurfaceSamples,
+    box_surface_samples,
+    pixel_rays,
+    pixels_in_image,
+    top_face_samples,
+)
 from psg_data.schemas._records import Box, CameraIntrinsics
 
 __all__ = ["VisibilityParams", "SurfaceVisibility", "surface_visibility", "compute_visibility", "visibility_matrix"]
@@ -53,7 +59,8 @@ log = logging.getLogger(__name__)
 def check_params(p: Any, what: str, *, positive: tuple[str, ...] = (), unit: tuple[str, ...] = (),
                  non_negative: tuple[str, ...] = ()) -> None:
     """Validate a thresholds dataclass: ``positive`` > 0, ``unit`` in [0, 1], ``non_negative`` >= 0,
-    ``frame_stride`` >= 1. Raises :class:`LabelingError` naming ``what`` and the field."""
+    ``frame_stride`` >= 1. Raises :class:`LabelingError` naming ``what`` and the field.
+    """
     checks = [(n, "> 0", lambda x: x > 0) for n in positive] + [(n, "in [0, 1]", lambda x: 0 <= x <= 1) for n in unit]
     checks += [(n, ">= 0", lambda x: x >= 0) for n in non_negative] + [("frame_stride", ">= 1", lambda x: x >= 1)]
     for name, expected, ok in checks:

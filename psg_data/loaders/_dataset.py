@@ -73,7 +73,8 @@ class Dataset:
     # -- interop: pickling and the frame-indexed view ------------------------------------------
     def __getstate__(self) -> dict[str, Any]:
         """Pickled as its directory and manifest: no open file, no cached table travels; a copy in
-        another process (a DataLoader worker, a Dask task) reopens tables and archives on first use."""
+        another process (a DataLoader worker, a Dask task) reopens tables and archives on first use.
+        """
         return {"root": self.root, "info": self.info}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -83,7 +84,8 @@ class Dataset:
 
     def refresh(self) -> None:
         """Forget the tables and records read so far: the next use reads them again from disk
-        (after another writer, e.g. :func:`psg_data.labeling.label_dataset`, changed the dataset)."""
+        (after another writer, e.g. :func:`psg_data.labeling.label_dataset`, changed the dataset).
+        """
         self._arrow = {}
         for name in [k for k, v in type(self).__dict__.items() if isinstance(v, cached_property)]:
             self.__dict__.pop(name, None)
@@ -93,7 +95,8 @@ class Dataset:
         """Every frame of ``scan_ids`` (default: all scans) by one flat index: ``len(view)``, and
         ``view[i]`` a :class:`~psg_data.loaders.FrameRecord` dict of numpy arrays (colour, depth in
         metres, ``T_world_camera``, intrinsics, stamp, scan id). Picklable, so it serves as the
-        dataset of a ``torch.utils.data.DataLoader`` with worker processes."""
+        dataset of a ``torch.utils.data.DataLoader`` with worker processes.
+        """
         from psg_data.loaders._frame_view import FrameView
 
         return FrameView(self, scan_ids, color=color, depth=depth)
@@ -310,7 +313,8 @@ class Scan:
             if raw is None:
                 raise FormatError(f"{where}: missing or unreadable depth image")
             if raw.dtype != np.uint16 or raw.ndim != 2:
-                raise FormatError(f"{where}: depth must be single-channel uint16, got {raw.dtype} with shape {raw.shape}")
+                raise FormatError(f"{where}: depth must be single-channel uint16, got {raw.dtype} with shape "
+                                  f"{raw.shape}")
             dm = np.multiply(raw, np.float32(cam.depth_scale_m), dtype=np.float32)
         return Frame(self.scan_id, int(self._f["frame_index"][i]), int(self._f["stamp_ns"][i]), rgb, dm, cam,
                      self._f["T"][i].copy())
@@ -319,6 +323,9 @@ class Scan:
         """Yield frames lazily in order (every ``stride``-th).
 
         Args:
+            color: decode the colour images.
+            depth: decode the depth images.
+            stride: every ``stride``-th frame.
             prefetch: frames decoded ahead in background threads (OpenCV releases the GIL while
                 decoding); 0 decodes each frame only when it is requested.
         """

@@ -38,7 +38,8 @@ def summarize(ds: Dataset) -> dict[str, Any]:
         "color_encoding": ds.info.color_encoding,
         "timezone": ds.info.timezone,
         "scans": int(len(scans)),
-        "splits": {str(k): int(v) for k, v in sorted(scans["split"].fillna("-").value_counts().items())} if len(scans) else {},
+        "splits": ({str(k): int(v) for k, v in sorted(scans["split"].fillna("-").value_counts().items())}
+                   if len(scans) else {}),
         "frames": int(frames.num_rows),
         "frames_per_scan_min": int(min(counts)),
         "frames_per_scan_max": int(max(counts)),

@@ -78,6 +78,7 @@ from psg_data.navigation._grid import (
     line_of_sight,
     points_in_polygon,
 )
+from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
 from psg_data.navigation._planner import (
     SQRT2,
     GridPlanner,
@@ -89,19 +90,17 @@ from psg_data.navigation._planner import (
     octile_distance,
     path_length_m,
 )
-from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
 from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query
 from psg_data.navigation._queries import (
     CATEGORIES,
-    start_cells,
     Query,
     load_queries,
     make_queries,
     queries_from_frame,
     queries_to_frame,
     save_queries,
+    start_cells,
 )
-from psg_data.navigation._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
 from psg_data.navigation._runner import (
     ABSENT_RULES,
     METRICS,
@@ -111,6 +110,7 @@ from psg_data.navigation._runner import (
     run_navigation,
     score_records,
 )
+from psg_data.navigation._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
 
 __all__ = [
     "OccupancyGrid",

@@ -122,7 +122,8 @@ def _predict(f: EdgeFilter, t_s: float) -> float:
 
 def true_shortest_path(cache: PlanningCache, query: Query) -> tuple[bool, float]:
     """(reachable, shortest path length in metres) from the start to the target's true receptacle
-    under the true door states; (False, nan) for absent or unreachable targets."""
+    under the true door states; (False, nan) for absent or unreachable targets.
+    """
     if query.gt_receptacle is None:
         return False, float("nan")
     if query.gt_receptacle not in cache.grid.receptacle_cells:
@@ -214,7 +215,8 @@ def run_episode(
         query_id=query.query_id, object_id=query.object_id, category=query.category, outcome=outcome,
         success=success, aborted=outcome == "abort", path_m=walk.walked,
         shortest_path_m=l_star if reachable else float("nan"), reachable=reachable, n_attempts=walk.attempts,
-        visited=walk.visited, predicted_receptacle=pred_rec, best_belief=float(initial[pred_rec]) if pred_rec is not None else 0.0,
+        visited=walk.visited, predicted_receptacle=pred_rec,
+        best_belief=float(initial[pred_rec]) if pred_rec is not None else 0.0,
         final_xy=(float(xy[0]), float(xy[1])), doors_discovered=walk.discovered, beliefs=initial,
         trail=np.concatenate(walk.trail), n_missed=walk.n_missed)
 
@@ -258,7 +260,8 @@ class _Walk:
 
     def next_target(self, bel: Mapping[str, float]) -> tuple[str | None, str]:
         """The most believed receptacle not tried yet that is reachable under the believed doors
-        (one attempt spent), or None and why the episode ends."""
+        (one attempt spent), or None and why the episode ends.
+        """
         delta = self.config.delta
         cands = sorted((r for r in bel if r not in self.tried and bel[r] >= delta), key=lambda r: (-bel[r], r))
         if not cands:
@@ -275,7 +278,8 @@ class _Walk:
 
     def go_to(self, target: str) -> str:
         """Walk to ``target``, replanning at each closed door found (at most one replan per door);
-        returns ``found`` (seen on the way), ``arrived`` or ``unreachable``."""
+        returns ``found`` (seen on the way), ``arrived`` or ``unreachable``.
+        """
         cache, config = self.cache, self.config
         for _ in range(len(cache.grid.door_ids) + 1):
             path = cache.path(target, self.cfg_bel, self.cur)

@@ -50,7 +50,9 @@ def door_world_from_dataset(dataset: Any, *, labels: str = "gt", label_seed: int
         labels: label source of the training door streams (``gt``, ``privileged``, ``noisy:P``,
             ``observed``, ``detections:FILE``).
         label_seed: seed of on-the-fly noise.
-        grid_source, resolution_m, robot_radius_m: the occupancy grid.
+        grid_source: where the occupancy grid comes from (see :meth:`NavigationEnv.from_dataset`).
+        resolution_m: grid cell size, metres.
+        robot_radius_m: robot radius the obstacles are inflated by, metres.
         map_scans: training scans (default: split 'train', else the first two thirds).
         reach_m: success radius of the goals' approach sets, metres.
 
@@ -250,7 +252,8 @@ DOOR_MODE_LABELS = {"all_open": "doors all open", "predicted": "doors predicted"
 def walk_summary(objects: Any) -> Any:
     """Per method of the objects run: found targets, metres walked (all queries, and towards targets
     no route reaches at the query time, which the SR / SPL table leaves out), and the queries it
-    lost / won against the same estimator with all doors open."""
+    lost / won against the same estimator with all doors open.
+    """
     import pandas as pd
 
     rec = objects.records
@@ -259,7 +262,8 @@ def walk_summary(objects: Any) -> Any:
         d = df.set_index(["seed", "query_id"])
         row = {"method": name, "queries": len(d), "found": int(d["success"].sum()),
                "walked_m": float(d["path_m"].mean()),
-               "walked_unreachable_m": float(d.loc[~d["reachable"], "path_m"].mean()) if (~d["reachable"]).any() else 0.0}
+               "walked_unreachable_m": (float(d.loc[~d["reachable"], "path_m"].mean()) if (~d["reachable"]).any()
+                                        else 0.0)}
         base = name.rsplit(" [", 1)[0] + f" [{DOOR_MODE_LABELS['all_open']}]"
         if name != base and base in set(rec["method"]):
             b = rec[rec["method"] == base].set_index(["seed", "query_id"])["success"].reindex(d.index)

@@ -204,7 +204,8 @@ def fit_door_filters(estimator: Any, streams: Sequence[EdgeStream], door_ids: Se
 def door_open_probabilities(filters: Mapping[str, EdgeFilter], t_s: float, door_ids: Sequence[str], *,
                             prior: float = 0.5) -> dict[str, float]:
     """P(open) per door at ``t_s`` (clipped to [0, 1]); doors without a filter or with a non-finite
-    prediction get ``prior`` (a warning is logged for the latter)."""
+    prediction get ``prior`` (a warning is logged for the latter).
+    """
     out = {}
     for d in door_ids:
         f = filters.get(d)
@@ -431,8 +432,9 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
     Args:
         world: the world (grid, true door states, training streams).
         estimators: registry names (or ``(label, estimator)`` pairs) predicting P(open) per door.
-        n_queries, seed, hours: query sampling (:func:`make_door_queries`; hours default to the
-            world's).
+        n_queries: queries to sample (:func:`make_door_queries`).
+        seed: seed of the sampling.
+        hours: local hours the queries fall in (default: the world's).
         threshold: doors with predicted ``P(open) < threshold`` are planned closed.
         baselines: any of ``all_open`` (every door assumed open) and ``oracle`` (true states).
         queries: fixed queries (overrides the sampling).
@@ -490,9 +492,11 @@ def door_loop_world(door_ab_open: Callable[[float], bool], train_streams: Sequen
     Args:
         door_ab_open: whether ``door_ab`` is open at a time (seconds since the epoch, UTC).
         train_streams: the doors' training observations (edges ``(door_id, "open")``).
-        t_train_end_s / t_end_s: end of training and of the world's time span, seconds since the epoch.
+        t_train_end_s: end of training, seconds since the epoch.
+        t_end_s: end of the world's time span, seconds since the epoch.
         timezone: IANA timezone of the world's clock.
-        resolution_m / robot_radius_m: occupancy grid cell size and robot radius, metres.
+        resolution_m: occupancy grid cell size, metres.
+        robot_radius_m: robot radius the obstacles are inflated by, metres.
         name: a label for reports.
     """
     from psg_data.schemas._records import Box, Door, Receptacle, Room
@@ -505,8 +509,9 @@ def door_loop_world(door_ab_open: Callable[[float], bool], train_streams: Sequen
     doors = [Door("door_ab", "door A-B", "room_a", "room_b", Box(np.array([6.0, 7.0, 1.025]), ext_x)),
              Door("door_a_hall", "door A-hall", "room_a", "hall", Box(np.array([1.0, 0.0, 1.025]), ext_y)),
              Door("door_b_hall", "door B-hall", "room_b", "hall", Box(np.array([11.0, 0.0, 1.025]), ext_y))]
-    recs = [Receptacle("a_desk", "desk A", "room_a", Box(np.array([0.5, 2.5, 0.37]), np.array([0.6, 0.8, 0.74])), "desk"),
-            Receptacle("b_desk", "desk B", "room_b", Box(np.array([11.5, 2.5, 0.37]), np.array([0.6, 0.8, 0.74])), "desk")]
+    desk = np.array([0.6, 0.8, 0.74])
+    recs = [Receptacle("a_desk", "desk A", "room_a", Box(np.array([0.5, 2.5, 0.37]), desk), "desk"),
+            Receptacle("b_desk", "desk B", "room_b", Box(np.array([11.5, 2.5, 0.37]), desk.copy()), "desk")]
     grid = grid_from_geometry(rooms, recs, doors, resolution_m=resolution_m, robot_radius_m=robot_radius_m)
 
     def doors_at(t_s: float) -> dict[str, bool]:

@@ -235,9 +235,13 @@ class NavigationEnv:
             grid: a prebuilt grid (default: :func:`grid_from_dataset` with ``grid_source``).
             map_scans: scans forming the map (default: split 'train'; if no scan has a split, the
                 first two thirds of the scans).
-            gt_at, doors_at: dense ground truth; default: the ``schedule`` / ``door_states`` row of
-                the latest scan starting at or before ``t`` (door state 'unknown' counts as open).
-            resolution_m, robot_radius_m: grid parameters.
+            grid_source: ``geometry`` (rooms, receptacles, doors) or ``scans`` (fused point clouds).
+            gt_at: dense ground truth of the objects, ``gt_at(object_id, t_s)`` -> receptacle or None;
+                default: the ``schedule`` row of the latest scan starting at or before ``t``.
+            doors_at: dense ground truth of the doors, ``doors_at(t_s)`` -> {door_id: open};
+                default: the ``door_states`` of that scan (state 'unknown' counts as open).
+            resolution_m: grid cell size, metres.
+            robot_radius_m: robot radius the obstacles are inflated by, metres.
             name: environment name (default: the dataset name).
             labels: label source of the map and door observations (``gt``, ``privileged``,
                 ``noisy:P[,P_F]``, ``detections:FILE``; :mod:`psg_data.navigation._sources`).
@@ -293,7 +297,8 @@ class NavigationEnv:
     def from_lab(cls, lab: Any, *, grid: OccupancyGrid | None = None, resolution_m: float = 0.05,
                  robot_radius_m: float = 0.25, name: str | None = None) -> NavigationEnv:
         """Environment of a synthetic lab (:class:`psg_data.synth.LabModel`), with its continuous-time
-        ground truth (``lab.schedule.objects_at`` / ``doors_at``) and its training scans as the map."""
+        ground truth (``lab.schedule.objects_at`` / ``doors_at``) and its training scans as the map.
+        """
         L = lab.layout
         if grid is None:
             grid = grid_from_geometry(L.rooms, L.receptacles, L.doors, resolution_m=resolution_m,
@@ -335,7 +340,8 @@ class NavigationEnv:
 
     def start_cell(self) -> tuple[int, int]:
         """The fixed start cell: the free cell (with every door closed, in the main free component)
-        nearest to :attr:`start_xy` (the grid centre when there is no recorded pose)."""
+        nearest to :attr:`start_xy` (the grid centre when there is no recorded pose).
+        """
         from psg_data.navigation._queries import start_cells
 
         cells = start_cells(self.grid, self.name)

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data._geometry import box_footprint, points_in_polygon
 from psg_data.errors import EvaluationError
-from psg_data.schemas._records import Box, Door, Receptacle, Room
+from psg_data.schemas._records import Door, Receptacle, Room
 
 __all__ = [
     "OccupancyGrid",
@@ -105,7 +105,8 @@ def line_of_sight(blocked: NDArray[np.bool_], p0: ArrayLike, p1: ArrayLike) -> N
 
     Args:
         blocked: (H, W) bool, True = blocks sight.
-        p0, p1: (N, 2) or (2,) cells (row, col).
+        p0: (N, 2) or (2,) start cells (row, col).
+        p1: (N, 2) or (2,) end cells (row, col).
 
     Returns:
         (N,) bool.
@@ -285,7 +286,9 @@ def grid_from_geometry(
     box of the receptacles and doors grown by 1 m is taken as free space, without walls.
 
     Args:
-        rooms, receptacles, doors: dataset records (world frame, metres).
+        rooms: the rooms (floor polygons, world frame, metres).
+        receptacles: the receptacles (their footprints are obstacles).
+        doors: the doors (their doorways are kept per door).
         resolution_m: cell size, metres.
         robot_radius_m: inflation radius, metres.
         wall_thickness_m: thickness of the walls drawn on the polygon outlines, metres.
@@ -357,8 +360,11 @@ def grid_from_points(
 
     Args:
         points_m: (N, 3) world points (z up, floor at z = 0), metres.
-        receptacles, doors: dataset records.
-        resolution_m, robot_radius_m, pad_m: as :func:`grid_from_geometry`.
+        receptacles: the receptacles (their footprints are obstacles).
+        doors: the doors (their doorways are kept per door).
+        resolution_m: cell size, metres.
+        robot_radius_m: inflation radius, metres.
+        pad_m: margin around the points, metres.
         floor_band_m: (zmin, zmax) of floor points, metres.
         obstacle_band_m: (zmin, zmax) of obstacle points (up to the robot height), metres.
         min_points: points needed to mark a cell.

@@ -83,7 +83,8 @@ def astar_reference(free: NDArray[np.bool_], start: tuple[int, int], goal: tuple
 
     Args:
         free: (H, W) bool, True = traversable.
-        start, goal: (row, col) cells.
+        start: (row, col) start cell.
+        goal: (row, col) goal cell.
         resolution_m: cell size, metres.
 
     Returns:
@@ -164,7 +165,8 @@ def grid_graph(free: NDArray[np.bool_], resolution_m: float) -> Any:
 
 def _octile_cells(start: tuple[int, int], goal: tuple[int, int], diagonal_first: bool) -> NDArray[np.int64]:
     """Cells of the monotone 8-connected path with ``min(|di|, |dj|)`` diagonal steps and the rest
-    straight (the octile-length path), diagonal steps first or last; (n + 1, 2)."""
+    straight (the octile-length path), diagonal steps first or last; (n + 1, 2).
+    """
     di, dj = goal[0] - start[0], goal[1] - start[1]
     si, sj = int(np.sign(di)), int(np.sign(dj))
     m, M = min(abs(di), abs(dj)), max(abs(di), abs(dj))
@@ -180,7 +182,8 @@ def _octile_cells(start: tuple[int, int], goal: tuple[int, int], diagonal_first:
 
 def _direct_path(free: NDArray[np.bool_], start: tuple[int, int], goal: tuple[int, int]) -> NDArray[np.int64] | None:
     """An obstacle-free path of octile length (the lower bound, so a shortest path), if one of the
-    two monotone octile paths is free without corner cutting; else None."""
+    two monotone octile paths is free without corner cutting; else None.
+    """
     for diagonal_first in (True, False):
         c = _octile_cells(start, goal, diagonal_first)
         if not free[c[:, 0], c[:, 1]].all():
@@ -247,7 +250,8 @@ class GridPlanner:
 
     def path(self, start: tuple[int, int], goal: tuple[int, int]) -> PathResult:
         """Shortest path from ``start`` to ``goal`` (row, col); ``length_m = inf`` if there is none
-        or an end is not a free cell."""
+        or an end is not a free cell.
+        """
         H, W = self.free.shape
         s, g = (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1]))
         empty = PathResult(math.inf, np.zeros((0, 2), dtype=np.int64))
@@ -315,7 +319,8 @@ def astar(free: NDArray[np.bool_], start: tuple[int, int], goal: tuple[int, int]
 
     Args:
         free: (H, W) bool, True = traversable.
-        start, goal: (row, col) cells.
+        start: (row, col) start cell.
+        goal: (row, col) goal cell.
         resolution_m: cell size, metres.
 
     Returns:
@@ -418,7 +423,8 @@ class PlanningCache:
     # -- distance fields -----------------------------------------------------------------------
     def field(self, rec: str, cfg: DoorConfig) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
         """Distance (metres, inf = unreachable) from every cell to ``rec``'s approach set, and the
-        predecessor array (next cell towards the set; -9999 at the set and unreachable cells)."""
+        predecessor array (next cell towards the set; -9999 at the set and unreachable cells).
+        """
         k = (rec, cfg)
         if k not in self._fields:
             from scipy.sparse.csgraph import dijkstra

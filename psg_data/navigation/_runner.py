@@ -168,7 +168,8 @@ class NavigationResult:
 
     def plot(self, method: str, query_id: int, out_path: str | Path | None = None, *, seed: int | None = None) -> Any:
         """Top-down map of one episode, a ``matplotlib.figure.Figure`` written as a PNG at
-        ``out_path`` if given (see :func:`psg_data.navigation.plot_query`)."""
+        ``out_path`` if given (see :func:`psg_data.navigation.plot_query`).
+        """
         from psg_data.navigation._plots import plot_query
 
         if self.env is None or self.cache is None:

@@ -23,9 +23,12 @@ def intrinsics_problems(width: object, height: object, fx: object, fy: object, c
     """``(field, what is wrong and what was expected)`` for every implausible value (empty: plausible).
 
     Args:
-        width, height: image size, pixels.
-        fx, fy: focal lengths, pixels.
-        cx, cy: principal point, pixels (OpenCV convention: pixel centres at integers).
+        width: image width, pixels.
+        height: image height, pixels.
+        fx: focal length along x, pixels.
+        fy: focal length along y, pixels.
+        cx: principal point x, pixels (OpenCV convention: pixel centres at integers).
+        cy: principal point y, pixels.
     """
     out: list[tuple[str, str]] = []
     if not (isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0):

@@ -337,6 +337,8 @@ def check_image(data: Any, level: str = "structure", kind: str | None = None,
     """Header of an encoded PNG or JPEG, checked at ``level`` (see the module docstring).
 
     Args:
+        data: the encoded image (any bytes-like object).
+        level: ``none``, ``structure`` or ``full``.
         kind: ``png`` or ``jpeg`` if known (else from the signature).
         header: the image's header if already parsed.
 

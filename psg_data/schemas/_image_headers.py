@@ -77,7 +77,8 @@ def parse_image_header(data: Any) -> ImageHeader:
 
 def parse_image_header_end(data: Any) -> tuple[ImageHeader, int]:
     """:func:`parse_image_header` and the number of leading bytes it depends on: images whose first
-    that many bytes are equal have the same header (a stream of frames can skip the parse)."""
+    that many bytes are equal have the same header (a stream of frames can skip the parse).
+    """
     mv = memoryview(data).cast("B") if not isinstance(data, bytes) else data
     head = bytes(mv[:1024])
     if head.startswith(_PNG_SIG):

@@ -99,7 +99,8 @@ def manifest_from_dict(data: Any, where: str, *, warn_newer_minor: bool = True) 
     """Build a :class:`DatasetInfo` from parsed JSON, checking format, version and fields.
 
     A newer minor version is read with a logged warning (``warn_newer_minor``; the validator reports
-    it as a problem instead)."""
+    it as a problem instead).
+    """
     if not isinstance(data, dict):
         raise FormatError(f"{where}: expected a JSON object, got {type(data).__name__}")
     if data.get("format") != FORMAT_NAME:

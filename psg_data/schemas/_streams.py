@@ -44,7 +44,8 @@ class EdgeStream:
             raise EstimatorError(f"edge {self.edge}: t_s contains non-finite times")
         if t.size > 1 and np.any(np.diff(t) < 0):
             i = int(np.argmax(np.diff(t) < 0)) + 1
-            raise EstimatorError(f"edge {self.edge}: t_s must be non-decreasing, got {t[i]} after {t[i - 1]} at index {i}")
+            raise EstimatorError(f"edge {self.edge}: t_s must be non-decreasing, got {t[i]} after {t[i - 1]} at "
+                                 f"index {i}")
         if y.size and not np.all((y == 0) | (y == 1)):
             raise EstimatorError(f"edge {self.edge}: y must be 0 or 1")
         object.__setattr__(self, "t_s", t)

@@ -49,6 +49,7 @@ class Problem:
     row: int | None = None
 
     def __str__(self) -> str:
+        """``file[:row]: field: message``."""
         where = self.file if self.row is None else f"{self.file}:{self.row}"
         return f"{where}: {self.field}: {self.message}"
 
@@ -94,6 +95,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
     """Validate the dataset at ``path``; returns every problem found (empty list = valid).
 
     Args:
+        path: the dataset directory.
         checksums: verify the SHA-256 of every file (reads every byte; sizes are always checked).
         images: check that every image exists and that its header matches the camera
             (colour: 8-bit 3-channel; depth: 16-bit single-channel PNG; size = camera size).
@@ -198,7 +200,8 @@ def _read_tables(c: _Collector, root: Path, major: int) -> dict[str, pa.Table]:
 
 def _check_files(c: _Collector, root: Path, info: DatasetInfo, tables: dict[str, pa.Table], checksums: bool) -> None:
     """``files.parquet`` against the manifest, and every file against ``files.parquet`` (sizes; with
-    ``checksums`` also SHA-256); files on disk it does not list."""
+    ``checksums`` also SHA-256); files on disk it does not list.
+    """
     from psg_data.schemas._checksum import sha256_file
 
     files_rel = table_path("files")
@@ -212,7 +215,7 @@ def _check_files(c: _Collector, root: Path, info: DatasetInfo, tables: dict[str,
     listed: set[str] = set()
     if "files" in tables:
         ft = tables["files"].to_pydict()
-        for i, (rel, size, digest) in enumerate(zip(ft["path"], ft["size_bytes"], ft["sha256"])):
+        for rel, size, digest in zip(ft["path"], ft["size_bytes"], ft["sha256"]):
             listed.add(rel)
             p = root / rel
             if not p.is_file():
@@ -357,7 +360,8 @@ def _check_frames(c: _Collector, t: pa.Table, scan_bounds: dict[str, tuple[int, 
 def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str, dict], color_encoding: str,
                   decode: bool = True) -> None:
     """Every image exists (whole file or byte range of a tar member), its header fits its camera and
-    (``decode``) it is complete and decodes."""
+    (``decode``) it is complete and decodes.
+    """
     rel = table_path("frames")
     n = len(d["scan_id"])
     sizes: dict[str, int | None] = {}
@@ -463,7 +467,8 @@ def _tar_member(block: bytes) -> tuple[str, int] | None:
     return (info.name, info.size) if info.isreg() else None
 
 
-def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bounds: dict[str, tuple[int, int]]) -> None:
+def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list[Any]]],
+                        scan_bounds: dict[str, tuple[int, int]]) -> None:
     """Value checks of the optional ``labels`` and ``visibility`` tables."""
     objects = set(cols.get("objects", {}).get("object_id", []))
     receptacles = set(cols.get("receptacles", {}).get("receptacle_id", []))
@@ -483,7 +488,8 @@ def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bo
                 if rid not in door_edge_states:
                     c.add(rel, "receptacle_id", f"{rid!r} for door {oid!r}, expected 'open' or 'closed'", i)
             elif oid not in objects:
-                c.add(rel, "object_id", f"dangling id {oid!r}: not in tables/objects.parquet nor tables/doors.parquet", i)
+                c.add(rel, "object_id", f"dangling id {oid!r}: not in tables/objects.parquet nor "
+                                        f"tables/doors.parquet", i)
             elif rid not in receptacles:
                 c.add(rel, "receptacle_id", f"dangling id {rid!r}: not in tables/receptacles.parquet column "
                                             "receptacle_id", i)
@@ -511,7 +517,8 @@ def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list]], scan_bo
 def _check_process_file(c: _Collector, root: Path, extra: dict[str, Any], cols: dict[str, dict[str, list]]) -> None:
     """A synthetic dataset's generator model (manifest ``extra.process_file``): present, readable,
     well formed (shapes, stochastic rows, ranges) and naming objects, doors and receptacles of the
-    dataset (docs/FORMAT.md, "Generator model")."""
+    dataset (docs/FORMAT.md, "Generator model").
+    """
     rel = extra.get("process_file") if isinstance(extra, dict) else None
     if not rel:
         return

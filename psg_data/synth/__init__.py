@@ -27,6 +27,7 @@ from psg_data.synth._layout import (
     make_layout,
 )
 from psg_data.synth._model import GENERATORS, SYNTH_VERSION, LabConfig, LabModel, ScanPlan, camera_pose
+from psg_data.synth._perception import DETECTIONS_SCHEMA, detect, write_detections
 from psg_data.synth._process import (
     PROCESS_FILE,
     EntityProcess,
@@ -36,11 +37,10 @@ from psg_data.synth._process import (
     load_process,
     sample_entity,
 )
-from psg_data.synth._perception import DETECTIONS_SCHEMA, detect, write_detections
 from psg_data.synth._raw_export import RAW_EXPORT_FORMATS, export_raw
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
-from psg_data.synth.persistence_benchmark import BENCHMARK_FEATURES, PersistenceBenchmark, make_persistence_benchmark
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, DenseSchedule, EntityModel, HourPattern, Timeline, WeekPattern
+from psg_data.synth.persistence_benchmark import BENCHMARK_FEATURES, PersistenceBenchmark, make_persistence_benchmark
 
 __all__ = [
     "LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION", "GENERATORS",

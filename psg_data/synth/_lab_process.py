@@ -70,7 +70,8 @@ class ProcessParams:
 def _day_level(rng: np.random.Generator, params: ProcessParams, n_work: int, n_weekend: int
                ) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
     """Calendar mask (7, D) and the day-level matrix: ``day_persistence`` on the diagonal, the
-    rest spread by a Dirichlet(2) draw over the other patterns."""
+    rest spread by a Dirichlet(2) draw over the other patterns.
+    """
     D = n_work + n_weekend
     allowed = np.zeros((7, D), bool)
     if n_weekend == 0:
@@ -90,7 +91,8 @@ def _day_level(rng: np.random.Generator, params: ProcessParams, n_work: int, n_w
 
 def _block_routine(rng: np.random.Generator, w: NDArray[np.float64], K: int, first: int) -> list[int]:
     """K slots of blocks: each slot repeats the previous one with probability 1/2, else an
-    affinity-weighted other state."""
+    affinity-weighted other state.
+    """
     seq = [first]
     for _ in range(1, K):
         cur = seq[-1]

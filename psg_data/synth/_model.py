@@ -165,7 +165,8 @@ class LabConfig:
     @staticmethod
     def from_extra(extra: dict[str, Any]) -> LabConfig:
         """Inverse of :meth:`to_extra`; datasets of synth version 1 (no ``schedule_generator``)
-        rebuild with ``continuous-v1``."""
+        rebuild with ``continuous-v1``.
+        """
         if extra.get("generator") != "psg_data.synth":
             raise PsgDataError("manifest extra: not a psg_data.synth dataset (no generator 'psg_data.synth')")
         keys = {"seed", "days", "train_days", "frames_per_scan", "width", "height", "shift", "start_date",
@@ -209,7 +210,8 @@ class ScanPlan:
 def camera_pose(x_m: float, y_m: float, yaw_rad: float, *, height_m: float = CAMERA_HEIGHT_M,
                 pitch_deg: float = CAMERA_PITCH_DEG, roll_deg: float = 0.0) -> NDArray[np.float64]:
     """Camera-to-world pose (OpenCV axes) of a camera at (x, y, height) whose optical axis points
-    along ``yaw_rad`` (from +x towards +y), pitched down by ``pitch_deg`` and rolled by ``roll_deg``."""
+    along ``yaw_rad`` (from +x towards +y), pitched down by ``pitch_deg`` and rolled by ``roll_deg``.
+    """
     fwd = np.array([np.cos(yaw_rad), np.sin(yaw_rad), 0.0])
     up = np.array([0.0, 0.0, 1.0])
     p, r = np.deg2rad(pitch_deg), np.deg2rad(roll_deg)

@@ -281,7 +281,8 @@ class StepProcess:
 
     def day_matrix(self, entity: EntityProcess, day: int) -> NDArray[np.float64]:
         """(D, D) pattern transition into ``day`` (mask applied, rows renormalised; a row with no
-        allowed mass becomes uniform over the allowed patterns)."""
+        allowed mass becomes uniform over the allowed patterns).
+        """
         a = self.allowed(entity, day).astype(np.float64)
         m = entity.pattern_transition * a[None, :]
         empty = m.sum(axis=1) <= 0
@@ -306,11 +307,13 @@ class StepProcess:
     @staticmethod
     def from_dict(d: Mapping[str, Any], where: str = "process", *, check: bool = True) -> StepProcess:
         """Parse (and with ``check``, check) a process dict; raise :class:`PsgDataError` naming the
-        first problem (:meth:`problems` lists them all)."""
+        first problem (:meth:`problems` lists them all).
+        """
         if not isinstance(d, Mapping) or d.get("format") != PROCESS_FORMAT:
             raise PsgDataError(f"{where}: format: expected {PROCESS_FORMAT!r}")
         if int(d.get("version", 0)) > PROCESS_VERSION:
-            raise PsgDataError(f"{where}: version {d.get('version')} is newer than this psg-data reads ({PROCESS_VERSION})")
+            raise PsgDataError(f"{where}: version {d.get('version')} is newer than this psg-data reads "
+                               f"({PROCESS_VERSION})")
         try:
             ents = {}
             for e in d["entities"]:
@@ -396,7 +399,8 @@ def _pick(p: NDArray[np.float64], u: float) -> int:
 
 def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng: np.random.Generator) -> EntityPath:
     """Sample an entity's path over ``n_steps`` steps (four uniforms per step, so paths of two
-    models that differ in one parameter share their random numbers)."""
+    models that differ in one parameter share their random numbers).
+    """
     K = process.n_slots
     s = _pick(entity.state_initial, float(rng.random()))
     u = rng.random((n_steps, 4))  # drawn after the initial state: a longer path extends a shorter one

@@ -38,9 +38,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import DatasetExistsError, FormatError
-from psg_data.schemas._records import CameraIntrinsics
 from psg_data.loaders.raw._images import make_compressed_depth
 from psg_data.loaders.raw._transforms import invert, make_transform, matrix_to_quat_xyzw
+from psg_data.schemas._records import CameraIntrinsics
 
 __all__ = ["export_raw", "RAW_EXPORT_FORMATS", "TOPICS", "STATIC_BASE_CAMERA_LINK", "R_CAMERA_LINK_OPTICAL"]
 
@@ -99,7 +99,8 @@ class _Msgs:
         return bytes(self.ts.serialize_cdr(msg, msg.__msgtype__))
 
     def header(self, stamp_ns: int, frame_id: str) -> Any:
-        t = self.T["builtin_interfaces/msg/Time"](sec=int(stamp_ns // 1_000_000_000), nanosec=int(stamp_ns % 1_000_000_000))
+        t = self.T["builtin_interfaces/msg/Time"](sec=int(stamp_ns // 1_000_000_000),
+                                                  nanosec=int(stamp_ns % 1_000_000_000))
         H = self.T["std_msgs/msg/Header"]
         if self.ros1:
             self._seq += 1
@@ -363,13 +364,15 @@ def _encode_jpeg(rgb: NDArray[np.uint8]) -> bytes:
     """JPEG bytes (quality :data:`JPEG_QUALITY`) of an RGB image."""
     import cv2
 
-    return bytes(cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1])
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    return bytes(cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])[1])
 
 
 def _frame_images(ds: Any, scan: Any, cam: CameraIntrinsics, i: int, want_raw: bool
                   ) -> tuple[bytes, bytes, NDArray[np.uint8] | None, NDArray[np.uint16] | None]:
     """(colour bytes, depth PNG in millimetres, RGB array, depth array) of frame ``i``; the arrays are
-    decoded only when needed (raw topics, PNG colour to turn into JPEG, depth not in millimetres)."""
+    decoded only when needed (raw topics, PNG colour to turn into JPEG, depth not in millimetres).
+    """
     import cv2
 
     color_bytes, depth_png = scan.image_bytes(i)

@@ -88,6 +88,7 @@ class PersistenceBenchmark:
 
     @property
     def edges(self) -> list[EdgeKey]:
+        """The benchmark's edges (features), in a fixed order."""
         return list(BENCHMARK_FEATURES)
 
 
@@ -107,14 +108,16 @@ def _llm_schedule(weekday: list[tuple[float, float]], weekend: list[tuple[float,
 def make_persistence_benchmark(*, seed: int = 0, train_weeks: int = 4, shift: str | None = "long-weekend",
                                p_m: float = 0.1, p_f: float = 0.1, obs_period_s: tuple[float, float] = (600.0, 1800.0),
                                gap_prob: float = 0.3, jitter_min: float = 10.0, grid_s: float = 60.0,
-                               start_date: str = "2024-01-01", timezone: str = "America/Toronto") -> PersistenceBenchmark:
+                               start_date: str = "2024-01-01", timezone: str = "America/Toronto"
+                               ) -> PersistenceBenchmark:
     """Generate the Sec. V-A style benchmark (see the module docstring for layout and cadence).
 
     Args:
         seed: random seed (jitter, observation times, gaps, noise).
         train_weeks: number of training weeks (4 = one month).
         shift: "long-weekend" (test Monday and Friday follow the weekend) or None.
-        p_m, p_f: P(y=0 | present), P(y=1 | absent).
+        p_m: P(y=0 | present), the missed-detection rate.
+        p_f: P(y=1 | absent), the false-positive rate.
         obs_period_s: (min, max) seconds between observations.
         gap_prob: per-day probability of a 2-6 h observation gap.
         jitter_min: sigma of the per-day switching-time jitter, minutes.
@@ -182,7 +185,8 @@ def _local_to_unix(midnights: NDArray[np.float64], day: int, hour: float) -> flo
 def _presence_intervals(spec: Any, jit: NDArray[np.float64], midnights: NDArray[np.float64], test_day0: int,
                         shift: str | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(starts, ends) Unix seconds of one feature's presence intervals, day by day, their bounds
-    jittered by ``jit`` (n_days, _MAX_BOUNDS) hours (midnight bounds stay put)."""
+    jittered by ``jit`` (n_days, _MAX_BOUNDS) hours (midnight bounds stay put).
+    """
     starts, ends = [], []
     for day in range(len(midnights) - 1):
         wd = day % 7
@@ -208,7 +212,8 @@ def _state_at(interval: tuple[NDArray[np.float64], NDArray[np.float64]], t: NDAr
 def _observation_times(rng: np.random.Generator, midnights: NDArray[np.float64], obs_period_s: tuple[float, float],
                        gap_prob: float) -> NDArray[np.float64]:
     """Observation times: uniform steps in ``obs_period_s`` plus, on a day with probability ``gap_prob``,
-    a 2-6 h gap without observations."""
+    a 2-6 h gap without observations.
+    """
     n_days = len(midnights) - 1
     t_start, t_end = float(midnights[0]), float(midnights[-1])
     n_max = int((t_end - t_start) / obs_period_s[0]) + 2

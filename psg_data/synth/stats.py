@@ -102,7 +102,8 @@ def schedule_statistics(config: Any = None, *, sim_weeks: int = 52) -> dict[str,
 
 def visibility_statistics(dataset: Any) -> dict[str, Any]:
     """What the privileged labels of a lab dataset see: share of visits of moving objects with at
-    least one code 1, and share of scans in which a present moving object is seen."""
+    least one code 1, and share of scans in which a present moving object is seen.
+    """
     from psg_data.labeling import compute_labels
     from psg_data.loaders import open_dataset
 
@@ -111,7 +112,8 @@ def visibility_statistics(dataset: Any) -> dict[str, Any]:
     gt, codes = res.gt.codes, res.labels.codes
     present = gt == 1
     obj_present = present.any(axis=2)
-    moving = [o for o in range(gt.shape[1]) if len({tuple(np.flatnonzero(present[s, o])) for s in range(gt.shape[0])}) > 1]
+    moving = [o for o in range(gt.shape[1])
+              if len({tuple(np.flatnonzero(present[s, o])) for s in range(gt.shape[0])}) > 1]
     visits = seen = 0
     for o in moving:
         rec = np.where(obj_present[:, o], present[:, o].argmax(axis=1), -1)

@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from psg_data.errors import FormatError, UnsafeOutputError
+from psg_data.schemas._checksum import sha256_file
 from psg_data.schemas._manifest import read_manifest
 from psg_data.schemas._tables import MANIFEST_NAME, TABLES, table_path
-from psg_data.schemas._checksum import sha256_file
 from psg_data.writers._safe_output import replace_file
 
 if TYPE_CHECKING:
@@ -135,7 +135,8 @@ def _listed_files(root: Path, files_path: Path, cast: Mapping[str, pa.Table]) ->
 def _stage_tables(root: Path, cast: Mapping[str, pa.Table], entries: dict[str, dict[str, Any]],
                   temps: list[tuple[Path, Path]]) -> None:
     """Write each table beside its final path (listed in ``temps`` first, to be removed on failure);
-    ``entries`` get their sizes and checksums."""
+    ``entries`` get their sizes and checksums.
+    """
     import pyarrow.parquet as pq
 
     for name, t in cast.items():

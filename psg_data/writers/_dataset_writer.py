@@ -610,7 +610,8 @@ class DatasetWriter:
 
     def scan_record(self, scan_id: str) -> dict[str, Any]:
         """A scan this writer finished: ``{"scan": row, "frames": Arrow table, "files": {path: [size,
-        sha256]}}`` (what :meth:`adopt_scan` takes, e.g. in the process merging its workers' scans)."""
+        sha256]}}`` (what :meth:`adopt_scan` takes, e.g. in the process merging its workers' scans).
+        """
         if scan_id not in self._scans:
             self._settle(block=True)
         files = self._scan_files[scan_id]
@@ -627,7 +628,8 @@ class DatasetWriter:
 
     def _register(self, record: dict[str, Any]) -> None:
         """Keep a scan this writer finished, and store its record for resuming: its frames, then
-        the JSON that commits them."""
+        the JSON that commits them.
+        """
         scan, frames, files = record["scan"], record["frames"], record["files"]
         self._scans[scan["scan_id"]] = scan
         self._frames[scan["scan_id"]] = frames

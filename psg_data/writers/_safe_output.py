@@ -246,7 +246,7 @@ def _fsync_path(path: str, directory: bool) -> None:
 
 
 def fsync_tree(root: str | Path) -> None:
-    """fsync every regular file and folder under ``root`` (so a rename publishes complete data)."""
+    """Fsync every regular file and folder under ``root`` (so a rename publishes complete data)."""
     for dirpath, _, filenames in os.walk(root):
         for n in filenames:
             p = os.path.join(dirpath, n)

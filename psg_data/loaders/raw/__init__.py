@@ -1,5 +1,6 @@
 """Readers of raw recordings: ROS 1 / ROS 2 bags and MCAP files (rosbags), frame folders (TUM RGB-D,
-ScanNet), side files, image decoding and the TF tree."""
+ScanNet), side files, image decoding and the TF tree.
+"""
 
 from psg_data.loaders.raw._bag import RECORDING_FORMATS, RosRecording, find_recordings, recording_format
 from psg_data.loaders.raw._folders import (

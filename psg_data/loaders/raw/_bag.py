@@ -10,13 +10,12 @@ from __future__ import annotations
 import functools
 import logging
 import mmap
-import os
 import sqlite3
 import struct
 import zlib
-from collections.abc import Collection, Iterator
+from collections.abc import Callable, Collection, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from psg_data.errors import ConversionError, NotOpenError
 from psg_data.loaders.raw._wire import (
@@ -84,7 +83,7 @@ def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Typestore:
 
     Built only for the types a conversion deserialises; checked against the connection's MD5 sum.
     """
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.EMPTY)
     ts.register(get_types_from_msg(msgdef, msgtype))
@@ -93,6 +92,9 @@ def _ros1_typestore(msgtype: str, digest: str, msgdef: str) -> Typestore:
         raise ValueError(f"message definition of {msgtype} has MD5 {have}, the connection says {digest}")
     return ts
 
+
+_Message = tuple["Connection", int, "memoryview | bytes"]
+"""(connection, log time in nanoseconds, serialized message)."""
 
 _U32 = struct.Struct("<I")
 _RELEASE_BYTES = 8 << 20
@@ -204,7 +206,7 @@ class _Ros1Reader:
         entries.sort()  # (time, connection order, index order): rosbags' merge order, ties included
         return entries, internals.identity
 
-    def messages(self, connections: Collection[Connection] = ()) -> Iterator[tuple[Connection, int, memoryview | bytes]]:
+    def messages(self, connections: Collection[Connection] = ()) -> Iterator[_Message]:
         """``(connection, time_ns, view)`` in log-time order."""
         conns = list(connections) or self.connections
         fast = self._index(conns)
@@ -315,7 +317,7 @@ class _Ros2Reader:
     def close(self) -> None:
         self._bag.close()
 
-    def messages(self, connections: Collection[Connection] = ()) -> Iterator[tuple[Connection, int, memoryview | bytes]]:
+    def messages(self, connections: Collection[Connection] = ()) -> Iterator[_Message]:
         yield from self._bag.messages(connections=list(connections) or self.connections)
 
     def deserialize(self, raw: memoryview | bytes, msgtype: str) -> object:

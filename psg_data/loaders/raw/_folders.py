@@ -195,7 +195,8 @@ def read_tum_folder(path: str | Path, intrinsics: list[float] | None, depth_scal
 
 def _pose_values(f: Path) -> NDArray[np.float64]:
     """The numbers of a ScanNet pose file (non-finite ones kept: SensReader writes -inf for a frame
-    without a pose, and such frames are skipped as ``nonfinite_pose``)."""
+    without a pose, and such frames are skipped as ``nonfinite_pose``).
+    """
     text = _read_text(f, "a 4x4 camera-to-world matrix")
     try:
         return np.array([float(t) for t in text.replace(",", " ").split()], dtype=float)

@@ -43,7 +43,8 @@ _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 class ImageDataError(ConversionError):
     """The data of one image is damaged or does not fit its description (``where``: recording and
-    topic or file; ``reason``: what is wrong). Unlike other ConversionErrors it concerns one frame."""
+    topic or file; ``reason``: what is wrong). Unlike other ConversionErrors it concerns one frame.
+    """
 
     def __init__(self, where: str, reason: str) -> None:
         super().__init__(f"{where}: {reason}")

@@ -160,7 +160,7 @@ def read_side_files(directory: str | Path | None) -> SideData:
             side.tables[name] = _read_table_file(path)
             sources[name] = path
             side.files.append(path.name)
-    for name, rows in side.tables.items():
+    for rows in side.tables.values():
         for r in rows:
             if "extent_m" in r and "rotation" not in r:
                 r["rotation"] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]

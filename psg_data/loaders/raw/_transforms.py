@@ -309,7 +309,8 @@ class TfBuffer:
 
     def horizon(self, source: str, target: str) -> int | None:
         """Newest stamp up to which every dynamic edge on the path ``source`` -> ``target`` has samples
-        (the smallest of their newest stamps; a static path has no limit), or None without a path."""
+        (the smallest of their newest stamps; a static path has no limit), or None without a path.
+        """
         key = (source, target)
         plan = self._plans.get(key)
         if plan is None:

@@ -124,7 +124,8 @@ def _string(b: memoryview | bytes, o: int, n: int, cdr: bool) -> tuple[str, int]
 
 class _TfLayout:
     """Where the numbers of one TF message shape are: for the next message of the same length whose
-    other bytes (counts, frame names, padding) are equal, a single struct unpack reads them all."""
+    other bytes (counts, frame names, padding) are equal, a single struct unpack reads them all.
+    """
 
     __slots__ = ("fixed", "numbers", "frames")
 
