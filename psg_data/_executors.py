@@ -105,7 +105,7 @@ def open_executor(workers: int, scheduler: str | None = None, *,
 def _worker_plugin(distributed: Any, initializer: Callable[[], Any]) -> Any:
     """A Dask worker plugin running ``initializer`` once per worker (also on workers that join later)."""
 
-    class _Init(distributed.WorkerPlugin):  # type: ignore[misc, name-defined]
+    class _Init(distributed.WorkerPlugin):
         def __init__(self, fn: Callable[[], Any]) -> None:
             self.fn = fn
 

@@ -23,7 +23,7 @@ def _preload_libusb() -> None:
     if ctypes.util.find_library("usb-1.0"):
         return
     try:
-        import libusb_package  # type: ignore[import-not-found]
+        import libusb_package
     except ImportError:  # pragma: no cover - only on machines without the wheel
         return
     for path in sorted(glob.glob(os.path.join(os.path.dirname(libusb_package.__file__), "libusb*.so*"))):

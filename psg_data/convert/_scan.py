@@ -18,7 +18,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -191,8 +191,9 @@ def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> Ca
     if not np.all(np.isfinite(D)):
         raise ConversionError(f"{where}: CameraInfo D: expected finite distortion coefficients, got {D.tolist()}")
     model = str(msg.distortion_model or "")
+    coeffs: tuple[float, ...] = ()
     if D.size == 0 or not np.any(D):
-        model, coeffs = "none", ()
+        model = "none"
     elif model in ("plumb_bob", "equidistant"):
         coeffs = tuple(float(v) for v in D)
     else:
@@ -403,6 +404,16 @@ class _PoseSource:
                 return None
             T = T @ E
         return T
+
+
+_A = TypeVar("_A", bound=np.ndarray)
+
+
+def _decoded(image: _A | None) -> _A:
+    """An image the frame writer decoded (it returns the bytes or the array of each image)."""
+    if image is None:
+        raise AssertionError("neither encoded bytes nor a decoded array")
+    return image
 
 
 def _passthrough_ok(info: EncodedInfo, encoding: str) -> bool:
@@ -636,7 +647,7 @@ class _ScanSink:
         if ca is not None and self.task.kind == "scannet" and csize != dsize:
             import cv2
 
-            ca = cv2.resize(ca, dsize, interpolation=cv2.INTER_AREA)
+            ca = np.asarray(cv2.resize(ca, dsize, interpolation=cv2.INTER_AREA), dtype=np.uint8)
             csize = dsize
         if csize != dsize:
             raise ConversionError(f"{self.task.source}: {self.names[1]}: depth is {dsize[0]}x{dsize[1]} but colour is "
@@ -651,9 +662,10 @@ class _ScanSink:
             self.sw.add_encoded_frame(stamp, T, cb, db, cam.camera_id)
         elif ca is not None and da is not None:
             self.sw.add_frame(stamp, T, ca, da, cam.camera_id)
-        else:
-            self.sw.add_encoded_frame(stamp, T, cb if cb is not None else encode_color(ca, self.fw.encoding),
-                                      db if db is not None else encode_depth(da), cam.camera_id)
+        else:  # one image passed through, the other decoded: encode that one
+            color = cb if cb is not None else encode_color(_decoded(ca), self.fw.encoding)
+            self.sw.add_encoded_frame(stamp, T, color, db if db is not None else encode_depth(_decoded(da)),
+                                      cam.camera_id)
         if self.progress is not None:
             self.progress(1, nbytes)
 

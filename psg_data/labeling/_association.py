@@ -203,7 +203,7 @@ def perception_labels(ds: Any, detections: Detections, params: AssociationParams
         in_scan = scan_of == s
         ridx = np.flatnonzero(in_scan & is_rec)
         if ridx.size:
-            pairs, iou = match_boxes([det.box(i) for i in ridx], rec_boxes, p.min_iou)
+            pairs, iou = match_boxes([det.box(int(i)) for i in ridx], rec_boxes, p.min_iou)
             for a, b in pairs:
                 matched[s, b] = True
                 tally.ious.append(float(iou[a, b]))

@@ -180,7 +180,7 @@ def _schedule(ds: Any) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
 def schedule_support(ds: Any) -> NDArray[np.bool_]:
     """(O, R) pairs where the object is on the receptacle in at least one scan of the schedule."""
     present, _ = _schedule(ds)
-    return present.any(axis=0)
+    return np.asarray(present.any(axis=0), dtype=bool)
 
 
 def valid_mask(ds: Any, valid: Mapping[str, Sequence[str]] | None = None) -> NDArray[np.bool_]:

@@ -164,7 +164,7 @@ def project_points(points_cam: NDArray[np.float64], cam: CameraIntrinsics) -> ND
         uv, _ = cv2.fisheye.projectPoints(pts, np.zeros(3), np.zeros(3), cam.K, k[:4].reshape(4, 1))
     else:
         uv, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), cam.K, k)
-    return uv.reshape(-1, 2)
+    return np.asarray(uv, dtype=np.float64).reshape(-1, 2)
 
 
 def pixel_rays(uv: NDArray[np.float64], cam: CameraIntrinsics) -> NDArray[np.float64]:

@@ -171,7 +171,7 @@ class SampleAccumulator:
 
     @staticmethod
     def in_image(pc: NDArray[np.float64], nc: NDArray[np.float64], cand: NDArray[np.bool_], shape: tuple[int, ...],
-                 cam: CameraIntrinsics, border_px: int) -> tuple[NDArray[np.int64], ...]:
+                 cam: CameraIntrinsics, border_px: int) -> tuple[NDArray[Any], ...]:
         """Candidate samples that land in the image: indices, pixel column / row, n . ray of their pixel."""
         idx = np.flatnonzero(cand)
         if idx.size == 0:

@@ -303,9 +303,10 @@ class Scan:
         dm = np.zeros((0, 0), np.float32)
         if color:
             check_image_bytes(cbytes, self._where("color", i), "colour")
-            rgb = _decode_rgb(cv2, cbytes)
-            if rgb is None:
+            decoded = _decode_rgb(cv2, cbytes)
+            if decoded is None:
                 raise FormatError(f"{self._where('color', i)}: missing or unreadable colour image (cannot decode)")
+            rgb = decoded
         if depth:
             check_image_bytes(dbytes, self._where("depth", i), "depth")
             raw = cv2.imdecode(np.frombuffer(dbytes, np.uint8), cv2.IMREAD_UNCHANGED) if dbytes else None
@@ -385,9 +386,11 @@ def _decode_rgb(cv2: Any, data: bytes) -> NDArray[np.uint8] | None:
     buf = np.frombuffer(data, np.uint8)
     flag = getattr(cv2, "IMREAD_COLOR_RGB", None)
     if flag is not None:
-        return cv2.imdecode(buf, flag)
-    bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
-    return None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        rgb = cv2.imdecode(buf, flag)
+    else:
+        bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        rgb = None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return None if rgb is None else np.asarray(rgb, dtype=np.uint8)
 
 
 class _ImageFiles:

@@ -562,8 +562,8 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
         ii, jj = np.nonzero(m)
         xy = grid.cell_to_world(np.array([ii.mean(), jj.mean()]))
         state = "open" if query.doors_open.get(d, True) else "closed"
-        ax.annotate(f"{d}\nP(open)={p:.2f}\n(truly {state})", xy, fontsize=7, ha="center", va="bottom",
-                    xytext=(0, 8), textcoords="offset points")
+        ax.annotate(f"{d}\nP(open)={p:.2f}\n(truly {state})", (float(xy[0]), float(xy[1])), fontsize=7,
+                    ha="center", va="bottom", xytext=(0, 8), textcoords="offset points")
     goal = grid.receptacle_cells[query.goal]
     gi, gj = np.nonzero(goal)
     gxy = grid.cell_to_world(np.stack([gi, gj], 1))

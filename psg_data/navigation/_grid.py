@@ -311,7 +311,7 @@ def grid_from_geometry(
     bounds = (allp[:, 0].min() - grow, allp[:, 0].max() + grow, allp[:, 1].min() - grow, allp[:, 1].max() + grow)
     origin, H, W = _frame(bounds, resolution_m, pad_m + wall_thickness_m)
     grid_shape = (H, W)
-    centers = (np.stack(np.mgrid[0:H, 0:W][::-1], axis=-1).reshape(-1, 2) + 0.5) * resolution_m + origin
+    centers = (np.stack(list(np.mgrid[0:H, 0:W][::-1]), axis=-1).reshape(-1, 2) + 0.5) * resolution_m + origin
     if polys:
         inside = np.zeros(grid_shape, dtype=bool)
         wall = np.zeros(H * W, dtype=bool)
@@ -385,7 +385,7 @@ def grid_from_points(
     obs_n = np.bincount(flat[(z >= obstacle_band_m[0]) & (z <= obstacle_band_m[1])], minlength=H * W)
     obstacle = ~((floor_n >= min_points) & (obs_n < min_points))
     obstacle = obstacle.reshape(H, W)
-    centers = (np.stack(np.mgrid[0:H, 0:W][::-1], axis=-1).reshape(-1, 2) + 0.5) * resolution_m + origin
+    centers = (np.stack(list(np.mgrid[0:H, 0:W][::-1]), axis=-1).reshape(-1, 2) + 0.5) * resolution_m + origin
     door_cells, rec_cells = _door_and_receptacle_masks((H, W), centers, origin, resolution_m, receptacles, doors)
     for m in door_cells.values():
         obstacle &= ~m

@@ -154,13 +154,13 @@ def grid_graph(free: NDArray[np.bool_], resolution_m: float) -> Any:
             m &= pad[1 + di:H + 1 + di, 1:W + 1] & pad[1:H + 1, 1 + dj:W + 1 + dj]
         ok[:, :, k] = m
     flat = np.flatnonzero(ok)  # row-major over (node, move): CSR order
-    rows, k = np.divmod(flat, 8)
+    rows, move = np.divmod(flat, 8)
     offs = np.array([di * W + dj for di, dj in _MOVES], dtype=np.int64)
     wts = np.array([SQRT2 * resolution_m if di and dj else float(resolution_m) for di, dj in _MOVES])
-    indices = (rows + offs[k]).astype(np.int32)
+    indices = (rows + offs[move]).astype(np.int32)
     indptr = np.zeros(n + 1, dtype=np.int32)
     np.cumsum(np.count_nonzero(ok.reshape(n, 8), axis=1), out=indptr[1:])
-    return csr_matrix((wts[k], indices, indptr), shape=(n, n))
+    return csr_matrix((wts[move], indices, indptr), shape=(n, n))
 
 
 def _octile_cells(start: tuple[int, int], goal: tuple[int, int], diagonal_first: bool) -> NDArray[np.int64]:

@@ -105,7 +105,7 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
     if len(head) < 2 or head[0] & 0x0F != 8 or (head[0] << 8 | head[1]) % 31 or head[1] & 0x20:
         raise DamagedImage("image data does not start with a zlib header")
     if inflate:
-        _inflate_png([mv[a:b] for a, b in parts], ihdr)  # type: ignore[arg-type]
+        _inflate_png([mv[a:b] for a, b in parts], ihdr)
 
 
 _CRC_PIECE = 4096

@@ -148,9 +148,9 @@ def object_process(spec: ObjectSpec, j: int, layout: LabLayout, seed: int, K: in
     rec_ids = layout.receptacle_ids
     if spec.role == "static":
         allowed = np.ones((7, 1), bool)
-        return EntityProcess(spec.name, "object", "static", (rec_ids[home],), ("static",), allowed, [1.0], [[1.0]],
-                             [1.0], np.zeros((1, K), np.int64), np.ones((1, K)), np.ones((1, 1, 1)),
-                             np.ones((1, 1, 2), np.int64))
+        return EntityProcess(spec.name, "object", "static", (rec_ids[home],), ("static",), allowed, np.ones(1),
+                             np.ones((1, 1)), np.ones(1), np.zeros((1, K), np.int64), np.ones((1, K)),
+                             np.ones((1, 1, 1)), np.ones((1, 1, 2), np.int64))
     others = _pick(rng, w_all, int(rng.integers(2, 4)), {home})
     recs = [home, *others]
     states: list[Any] = [rec_ids[r] for r in recs]

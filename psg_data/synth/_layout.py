@@ -276,7 +276,8 @@ def make_layout(seed: int) -> LabLayout:
                     Box(np.array([cx, cy, spec.height_m / 2]), np.array([w, d, spec.height_m]), yaw_rotation(yaw)),
                     cat))
                 jitter = rng.uniform(-0.06, 0.06, 3)
-                colors.append(tuple(float(c) for c in np.clip(np.asarray(spec.color) + jitter, 0.05, 0.95)))
+                c0, c1, c2 = (float(c) for c in np.clip(np.asarray(spec.color) + jitter, 0.05, 0.95))
+                colors.append((c0, c1, c2))
                 break
             else:  # pragma: no cover - the room sizes leave ample space
                 raise RuntimeError(f"could not place a {cat} in {rid}")

@@ -338,10 +338,15 @@ def _export_scan(ds: Any, scan: Any, cam: CameraIntrinsics, frame_id: str, bw: _
             delays = rng.integers(5_000_000, 30_000_001, size=6)
             nbytes = 0
             if topics.raw:
+                assert rgb is not None and depth_mm is not None  # decoded for the raw topics
                 nbytes += bw.push(TOPICS["color"], t + delays[0], msgs.image(t, frame_id, rgb, "rgb8"))
                 nbytes += bw.push(TOPICS["depth"], t + delays[1], msgs.image(t, frame_id, depth_mm, "16UC1"))
             if topics.compressed:
-                jpg = color_bytes if jpeg_in else _encode_jpeg(rgb)
+                if jpeg_in:
+                    jpg = color_bytes
+                else:
+                    assert rgb is not None  # decoded to re-encode as JPEG
+                    jpg = _encode_jpeg(rgb)
                 nbytes += bw.push(TOPICS["color_compressed"], t + delays[2],
                                   msgs.compressed(t, frame_id, "rgb8; jpeg compressed bgr8", jpg))
                 nbytes += bw.push(TOPICS["depth_compressed"], t + delays[3],
@@ -381,7 +386,7 @@ def _frame_images(ds: Any, scan: Any, cam: CameraIntrinsics, i: int, want_raw: b
         bgr = cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
         if bgr is None:
             raise FormatError(f"{ds.root}: scan {scan.scan_id} frame {i}: unreadable colour image")
-        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
     rescale = abs(cam.depth_scale_m - 0.001) > 1e-12
     if want_raw or rescale:
         raw = cv2.imdecode(np.frombuffer(depth_png, np.uint8), cv2.IMREAD_UNCHANGED)
@@ -391,5 +396,5 @@ def _frame_images(ds: Any, scan: Any, cam: CameraIntrinsics, i: int, want_raw: b
             mm = np.rint(raw.astype(np.float64) * cam.depth_scale_m * 1000.0)
             raw = np.where((mm > 0) & (mm <= 65535), mm, 0).astype(np.uint16)
             depth_png = cv2.imencode(".png", raw, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])[1].tobytes()
-        depth_mm = raw
+        depth_mm = np.asarray(raw, dtype=np.uint16)
     return color_bytes, depth_png, rgb, depth_mm

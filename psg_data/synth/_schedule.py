@@ -150,7 +150,7 @@ class DenseSchedule:
         out[t, o, self.objects[t, o]] = True
         return out
 
-    def to_frame(self):  # type: ignore[no-untyped-def]
+    def to_frame(self):
         """Long pandas DataFrame: stamp_ns, object_id, receptacle_id (None = absent)."""
         import pandas as pd
 

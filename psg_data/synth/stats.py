@@ -109,6 +109,8 @@ def visibility_statistics(dataset: Any) -> dict[str, Any]:
 
     ds = dataset if hasattr(dataset, "table") else open_dataset(dataset)
     res = compute_labels(ds, "privileged")
+    if res.gt is None:
+        raise ValueError(f"{ds.root}: no schedule table; visibility statistics need the ground truth")
     gt, codes = res.gt.codes, res.labels.codes
     present = gt == 1
     obj_present = present.any(axis=2)

@@ -189,7 +189,7 @@ def read_tum_folder(path: str | Path, intrinsics: list[float] | None, depth_scal
     K = check_intrinsics(K, w, h, str(p / "intrinsics.txt") if K_file else "config: intrinsics")
     gt = p / "groundtruth.txt"
     poses = read_tum_poses(gt) if gt.is_file() else []
-    return FolderRecording(p, "tum", sorted(colors), sorted(depths), w, h, K,  # type: ignore[arg-type]
+    return FolderRecording(p, "tum", sorted(colors), sorted(depths), w, h, K,
                            depth_scale_m or 1.0 / 5000.0, poses_tum=poses)
 
 
@@ -237,10 +237,12 @@ def read_scannet_folder(path: str | Path, fps: float, start_stamp_ns: int, depth
         if K is not None:
             where = str(src)
             break
-    K = K or (tuple(intrinsics) if intrinsics else None)
+    if K is None and intrinsics and len(intrinsics) == 4:
+        fx, fy, cx, cy = (float(v) for v in intrinsics)
+        K = (fx, fy, cx, cy)
     if K is None or len(K) != 4:
         raise ConversionError(f"{p}: no camera intrinsics; expected intrinsic/intrinsic_depth.txt")
     K = check_intrinsics(K, w, h, where)
     return FolderRecording(p, "scannet", [(stamp[i], cols[i]) for i in sorted(cols)],
                            [(int(start_stamp_ns + round(i * period)), deps[i]) for i in sorted(deps)],
-                           w, h, K, depth_scale_m or 0.001, poses_exact=exact)  # type: ignore[arg-type]
+                           w, h, K, depth_scale_m or 0.001, poses_exact=exact)

@@ -147,7 +147,7 @@ def decode_compressed_color(data: Any, fmt: str, where: str) -> NDArray[np.uint8
     if img.ndim == 2:
         return np.repeat(img[:, :, None], 3, axis=2)
     code = cv2.COLOR_BGRA2RGB if img.shape[2] == 4 else cv2.COLOR_BGR2RGB
-    return cv2.cvtColor(img, code)
+    return np.asarray(cv2.cvtColor(img, code), dtype=np.uint8)
 
 
 def compressed_depth_png(data: Any, fmt: str, where: str) -> tuple[memoryview, str, tuple[float, float]]:
@@ -197,7 +197,7 @@ def decode_compressed_depth(data: Any, fmt: str, where: str, depth_scale_m: floa
         with np.errstate(divide="ignore", invalid="ignore"):
             d = np.where(img > 0, qa / (v - qb), 0.0)
         return depth_m_to_mm(d)
-    return _scale_to_mm(img, depth_scale_m)
+    return _scale_to_mm(np.asarray(img, dtype=np.uint16), depth_scale_m)
 
 
 def make_compressed_depth(png_16u: bytes) -> bytes:

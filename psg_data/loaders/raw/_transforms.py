@@ -29,7 +29,7 @@ __all__ = [
 Pose7 = tuple[float, float, float, float, float, float, float]
 """A rigid transform as plain floats ``(tx, ty, tz, qx, qy, qz, qw)`` with a unit quaternion."""
 
-_NAN7: Pose7 = (math.nan,) * 7  # type: ignore[assignment]
+_NAN7: Pose7 = (math.nan,) * 7
 
 
 def _pose7(t: Iterable[float], q: Iterable[float]) -> Pose7:
