@@ -105,6 +105,11 @@ class ConvertConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "config") -> ConvertConfig:
+        """A config from a mapping (a YAML / JSON file's content).
+
+        Raises:
+            ConversionError: an unknown key or a bad value, named with ``where``.
+        """
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:
@@ -113,6 +118,7 @@ class ConvertConfig:
         return cls(**data)
 
     def to_dict(self) -> dict[str, Any]:
+        """The settings as a plain dictionary (what the state file and the manifest store)."""
         return asdict(self)
 
     def merged(self, **overrides: Any) -> ConvertConfig:

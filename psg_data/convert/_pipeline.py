@@ -75,6 +75,7 @@ class ConversionReport:
 
     @property
     def mb_per_s(self) -> float:
+        """Input throughput, MB (1e6 bytes) per second of wall time."""
         return self.bytes_in / 1e6 / max(self.seconds, 1e-9)
 
     @property

@@ -76,6 +76,7 @@ class AssociationParams:
             raise LabelingError(f"min_iou: {self.min_iou}, expected in [0, 1]")
 
     def to_dict(self) -> dict[str, Any]:
+        """The settings as a dictionary (stored with the labels)."""
         return asdict(self)
 
 

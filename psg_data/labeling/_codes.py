@@ -78,12 +78,14 @@ class LabelGrid:
         return (self.codes == CODE_PRESENT) | (self.codes == CODE_ABSENT)
 
     def code_counts(self) -> dict[int, int]:
+        """Cells per code (1, 0, -1, -2), zeros included."""
         vals, n = np.unique(self.codes, return_counts=True)
         out = {c: 0 for c in (CODE_PRESENT, CODE_ABSENT, CODE_MISSING, CODE_INVALID)}
         out.update({int(v): int(k) for v, k in zip(vals, n)})
         return out
 
     def with_codes(self, codes: NDArray[np.int8], source: str, meta: dict[str, Any] | None = None) -> LabelGrid:
+        """The same grid (scans, objects, receptacles, stamps) with other codes."""
         return LabelGrid(list(self.scan_ids), list(self.object_ids), list(self.receptacle_ids), self.stamps_ns.copy(),
                          codes, source, dict(meta or {}))
 

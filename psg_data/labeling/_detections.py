@@ -69,9 +69,11 @@ class Detections:
         return int(self.row.size)
 
     def box(self, i: int) -> Box:
+        """Detection ``i``'s box (world frame, metres)."""
         return Box(self.box_center_m[i], self.box_extent_m[i], self.box_rotation[i])
 
     def subset(self, mask: NDArray[np.bool_]) -> Detections:
+        """The detections where ``mask`` is True."""
         return Detections(self.path, self.scan_id[mask], self.label[mask], self.kind[mask], self.centroid_m[mask],
                           self.box_center_m[mask], self.box_extent_m[mask], self.box_rotation[mask], self.score[mask],
                           self.row[mask])

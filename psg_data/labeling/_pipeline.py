@@ -375,6 +375,7 @@ class LabelSummary:
     edge_kind: str = "object"
 
     def lines(self) -> list[str]:
+        """The summary as readable lines (what ``psg-data label`` prints)."""
         m, lo, hi = self.obs_per_edge
         c = self.codes
         kind = "door-state " if self.edge_kind == "door" else ""

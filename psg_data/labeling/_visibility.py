@@ -118,6 +118,7 @@ class VisibilityParams:
         return depth_tolerance_m(self, z_m)
 
     def to_dict(self) -> dict[str, Any]:
+        """The settings as a dictionary (stored with the labels)."""
         return asdict(self)
 
 

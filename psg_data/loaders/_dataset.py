@@ -103,6 +103,7 @@ class Dataset:
 
     # -- tables -------------------------------------------------------------------------------
     def has_table(self, name: str) -> bool:
+        """Whether the dataset has table ``name``."""
         return (self.root / table_path(name)).is_file()
 
     def table(self, name: str) -> pa.Table:
@@ -127,6 +128,7 @@ class Dataset:
 
     @property
     def table_names(self) -> list[str]:
+        """Tables present: those of the format in their order, then any others by name."""
         return [n for n in TABLES if self.has_table(n)] + sorted(
             p.stem for p in (self.root / "tables").glob("*.parquet") if p.stem not in TABLES)
 

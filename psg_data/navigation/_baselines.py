@@ -57,6 +57,7 @@ class LastSeenFilter(_Clock):
         self.value = 0.0
 
     def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None:
+        """Keep the last observation (times must not decrease)."""
         t = np.asarray(t_s, dtype=np.float64).reshape(-1)
         yy = np.asarray(y).reshape(-1)
         self._advance(t)
@@ -64,9 +65,11 @@ class LastSeenFilter(_Clock):
             self.value = float(yy[-1])
 
     def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """The last observation at every time of ``t_s``."""
         return np.full(np.asarray(t_s, dtype=np.float64).shape, self.value)
 
     def get_state(self) -> dict[str, Any]:
+        """The filter's state as a JSON-ready dictionary."""
         return {"estimator": "last_seen_map", "edge": list(self.edge), "last_t_s": self._last, "value": self.value}
 
 
@@ -78,15 +81,18 @@ class OracleFilter(_Clock):
         self._gt = gt_at
 
     def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None:
+        """Observations are ignored (times must not decrease)."""
         self._advance(np.asarray(t_s, dtype=np.float64).reshape(-1))
 
     def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """1 where the ground truth puts the object on the edge's receptacle at ``t_s``, else 0."""
         t = np.asarray(t_s, dtype=np.float64)
         o, r = self.edge
         flat = [1.0 if self._gt(o, float(x)) == r else 0.0 for x in t.reshape(-1)]
         return np.asarray(flat, dtype=np.float64).reshape(t.shape)
 
     def get_state(self) -> dict[str, Any]:
+        """The filter's state as a JSON-ready dictionary."""
         return {"estimator": "oracle", "edge": list(self.edge), "last_t_s": self._last}
 
 

@@ -147,6 +147,7 @@ class DoorTaskOptions:
         object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
 
     def to_dict(self) -> dict[str, Any]:
+        """The options as a JSON-ready dictionary (stored with the results)."""
         return {**asdict(self), "seeds": list(self.seeds)}
 
 

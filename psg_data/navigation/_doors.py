@@ -100,12 +100,14 @@ class DoorWorld:
 
     @property
     def cache(self) -> PlanningCache:
+        """The planning cache of the world's grid, built on first use."""
         if self._cache is None:
             self._cache = PlanningCache(self.grid)
         return self._cache
 
     @property
     def door_ids(self) -> tuple[str, ...]:
+        """Door ids of the grid."""
         return self.grid.door_ids
 
 
@@ -140,6 +142,7 @@ class DoorEpisode:
 
     @property
     def extra_m(self) -> float:
+        """Metres walked beyond the shortest path of a successful episode (NaN otherwise)."""
         if not (self.success and math.isfinite(self.shortest_m)):
             return float("nan")
         d = self.walked_m - self.shortest_m

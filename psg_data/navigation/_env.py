@@ -146,13 +146,16 @@ class DatasetTimeline:
         return self.ids[max(k, 0)]
 
     def gt_at(self, object_id: str, t_s: float) -> str | None:
+        """Receptacle of ``object_id`` in the latest scan at or before ``t_s``, or None (absent)."""
         return self.by_scan.get(self.scan_before(t_s), {}).get(object_id)
 
     def doors_of(self, scan_id: str) -> dict[str, bool]:
+        """Door states of scan ``scan_id`` (unknown counts as open)."""
         st = self.door_by_scan.get(scan_id, {})
         return {d: bool(st.get(d, True)) for d in self.door_ids}
 
     def doors_at(self, t_s: float) -> dict[str, bool]:
+        """Door states of the latest scan at or before ``t_s``."""
         return self.doors_of(self.scan_before(t_s))
 
 
@@ -209,6 +212,7 @@ class NavigationEnv:
 
     @property
     def edges(self) -> list[EdgeKey]:
+        """The edges (object, receptacle) of the map streams."""
         return [s.edge for s in self.map_streams]
 
     # -- constructors ---------------------------------------------------------------------------

@@ -148,10 +148,12 @@ class OccupancyGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
+        """(H, W) cells."""
         return (int(self.static_obstacle.shape[0]), int(self.static_obstacle.shape[1]))
 
     @property
     def door_ids(self) -> tuple[str, ...]:
+        """Door ids, sorted: the order of a :data:`DoorConfig`."""
         return tuple(sorted(self.door_cells))
 
     @property
@@ -180,6 +182,7 @@ class OccupancyGrid:
         return self.cell_to_world(np.stack([i.ravel(), j.ravel()], axis=1))
 
     def in_bounds(self, ij: ArrayLike) -> NDArray[np.bool_]:
+        """Whether each (row, col) cell of ``ij`` (..., 2) lies in the grid."""
         c = np.asarray(ij)
         H, W = self.shape
         return (c[..., 0] >= 0) & (c[..., 0] < H) & (c[..., 1] >= 0) & (c[..., 1] < W)
@@ -194,6 +197,7 @@ class OccupancyGrid:
         return tuple(bool(door_open.get(d, True)) for d in self.door_ids)
 
     def as_door_open(self, config: DoorConfig) -> dict[str, bool]:
+        """A :data:`DoorConfig` as ``{door_id: open}``."""
         return dict(zip(self.door_ids, config))
 
     def obstacles(self, door_open: Mapping[str, bool] | DoorConfig | None = None) -> NDArray[np.bool_]:

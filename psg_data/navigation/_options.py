@@ -154,6 +154,7 @@ class NavigationOptions:
         return tag
 
     def to_dict(self) -> dict[str, Any]:
+        """The options as a JSON-ready dictionary (stored with the results)."""
         d = asdict(self)
         d["seeds"] = list(self.seeds)
         d["quotas"] = dict(self.quotas) if self.quotas else None

@@ -52,6 +52,7 @@ class PathResult:
 
     @property
     def found(self) -> bool:
+        """Whether a path was found."""
         return math.isfinite(self.length_m)
 
 
@@ -235,6 +236,7 @@ class GridPlanner:
 
     @property
     def graph(self) -> Any:
+        """The 8-connected graph of the free cells (``scipy.sparse`` CSR, edge weights in metres), built once."""
         if self._graph is None:
             self._graph = grid_graph(self.free, self.resolution_m)
         return self._graph
@@ -354,14 +356,17 @@ class PlanningCache:
         self.n_fields_computed = 0
 
     def key(self, door_open: Mapping[str, bool] | DoorConfig | None) -> DoorConfig:
+        """The :data:`DoorConfig` of door states given as a mapping (or already as a config)."""
         return door_open if isinstance(door_open, tuple) else self.grid.door_config(door_open)
 
     def free_flat(self, cfg: DoorConfig) -> NDArray[np.bool_]:
+        """Free cells (flat, row-major) with the doors of ``cfg``, computed once per config."""
         if cfg not in self._free_flat:
             self._free_flat[cfg] = self.grid.free(cfg).ravel()
         return self._free_flat[cfg]
 
     def graph(self, cfg: DoorConfig) -> Any:
+        """The graph of the free cells with the doors of ``cfg``."""
         return self.planner(cfg).graph
 
     def planner(self, cfg: Mapping[str, bool] | DoorConfig | None) -> GridPlanner:

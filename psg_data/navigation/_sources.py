@@ -79,6 +79,7 @@ class ObservationModel:
 
     @property
     def exact(self) -> bool:
+        """Whether every sighting is right (no misses, no false sightings)."""
         return self.p_miss == 0.0 and self.p_false == 0.0
 
     def sees(self, there: bool, key: Sequence[int]) -> bool:

@@ -60,10 +60,12 @@ class DatasetInfo:
     format_version: str = FORMAT_VERSION
 
     def to_json(self) -> str:
+        """The manifest as JSON text (``dataset.json``), with a final newline."""
         return json.dumps(asdict(self), indent=2, sort_keys=False) + "\n"
 
     @property
     def tz(self) -> zoneinfo.ZoneInfo:
+        """The dataset's time zone (IANA ``timezone``)."""
         return zoneinfo.ZoneInfo(self.timezone)
 
     @property

@@ -93,6 +93,7 @@ class TableSpec:
 
     @property
     def path(self) -> str:
+        """Path of the table's Parquet file, relative to the dataset root."""
         return table_path(self.name)
 
 

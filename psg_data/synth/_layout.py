@@ -104,18 +104,22 @@ class LabLayout:
     # -- lookups --------------------------------------------------------------------------------
     @property
     def receptacle_ids(self) -> list[str]:
+        """Receptacle ids in layout order."""
         return [r.receptacle_id for r in self.receptacles]
 
     @property
     def object_ids(self) -> list[str]:
+        """Object ids (names) in layout order."""
         return [o.name for o in self.objects]
 
     @property
     def door_ids(self) -> list[str]:
+        """Door ids in layout order."""
         return [d.door_id for d in self.doors]
 
     @property
     def room_ids(self) -> list[str]:
+        """Room ids in layout order."""
         return [r.room_id for r in self.rooms]
 
     @property

@@ -122,10 +122,12 @@ class LabConfig:
 
     @property
     def n_train_days(self) -> int:
+        """Training days: ``train_days``, else the first two thirds of ``days``."""
         return int(self.train_days) if self.train_days is not None else int(round(self.days * 2 / 3))
 
     @property
     def date(self) -> dt.date:
+        """The first day (``start_date``)."""
         return dt.date.fromisoformat(self.start_date)
 
     def shifted_days(self) -> frozenset[int]:
@@ -137,6 +139,7 @@ class LabConfig:
 
     @property
     def process_params(self) -> ProcessParams:
+        """The process settings of the ``steps-v2`` generator taken from this config."""
         return ProcessParams(float(self.routine_strength), int(self.day_patterns), float(self.day_persistence),
                              int(self.max_dwell_steps))
 
@@ -273,6 +276,11 @@ class LabModel:
         return self._scans
 
     def scan_plan(self, scan: int | str) -> ScanPlan:
+        """The plan of a scan by index or id.
+
+        Raises:
+            KeyError: no such scan.
+        """
         if isinstance(scan, str):
             for p in self.scans:
                 if p.scan_id == scan:

@@ -111,14 +111,17 @@ class EntityProcess:
 
     @property
     def n_states(self) -> int:
+        """Number of states."""
         return len(self.states)
 
     @property
     def n_patterns(self) -> int:
+        """Number of day patterns."""
         return len(self.patterns)
 
     @property
     def max_dwell(self) -> int:
+        """Longest dwell, in steps."""
         return int(self.dwell[..., 1].max())
 
     def state_index(self, label: str | None) -> int:
@@ -137,6 +140,7 @@ class EntityProcess:
         return inside / (hi - lo + 1)
 
     def to_dict(self) -> dict[str, Any]:
+        """The entity as a JSON-ready dictionary."""
         return {
             "entity_id": self.entity_id, "kind": self.kind, "role": self.role, "states": list(self.states),
             "patterns": list(self.patterns), "pattern_allowed": self.pattern_allowed.astype(int).tolist(),
@@ -148,6 +152,7 @@ class EntityProcess:
 
     @staticmethod
     def from_dict(d: Mapping[str, Any]) -> EntityProcess:
+        """An entity from :meth:`to_dict`'s dictionary."""
         return EntityProcess(
             str(d["entity_id"]), str(d["kind"]), str(d.get("role", "")), tuple(d["states"]), tuple(d["patterns"]),
             np.asarray(d["pattern_allowed"], bool), d["pattern_initial"], d["pattern_transition"],
@@ -268,10 +273,12 @@ class StepProcess:
 
     @property
     def n_slots(self) -> int:
+        """Steps per day."""
         return len(self.step_hours)
 
     @property
     def n_steps(self) -> int:
+        """Steps of the whole process."""
         return self.days * self.n_slots
 
     def allowed(self, entity: EntityProcess, day: int) -> NDArray[np.bool_]:
@@ -290,18 +297,21 @@ class StepProcess:
         return _norm(m)
 
     def day_initial(self, entity: EntityProcess) -> NDArray[np.float64]:
+        """The entity's day-pattern distribution on day 0 (its initial one, restricted to the allowed patterns)."""
         a = self.allowed(entity, 0).astype(np.float64)
         p = entity.pattern_initial * a
         return _norm(p if p.sum() > 0 else a)
 
     # -- serialisation ------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        """The process as the JSON document of the generator-model format (docs/FORMAT.md)."""
         return {"format": PROCESS_FORMAT, "version": PROCESS_VERSION, "timezone": self.timezone,
                 "start_date": self.start_date.isoformat(), "days": self.days, "step_hours": list(self.step_hours),
                 "shifted_days": list(self.shifted_days), "parameters": dict(self.parameters),
                 "entities": [e.to_dict() for e in self.entities.values()]}
 
     def to_json(self) -> str:
+        """The process as compact JSON text."""
         return json.dumps(self.to_dict(), separators=(",", ":"), allow_nan=False) + "\n"
 
     @staticmethod
@@ -343,6 +353,7 @@ class StepProcess:
         return out
 
     def save(self, path: str | Path) -> None:
+        """Write the process as JSON to ``path``."""
         Path(path).write_text(self.to_json(), encoding="utf-8")
 
 
@@ -448,6 +459,7 @@ class ForwardBelief:
         self.log_evidence = 0.0
 
     def copy(self) -> ForwardBelief:
+        """An independent copy of the belief (same process, own state)."""
         out = ForwardBelief.__new__(ForwardBelief)
         out.process, out.entity, out.U = self.process, self.entity, self.U
         out.n, out.alpha, out.log_evidence = self.n, self.alpha.copy(), self.log_evidence
@@ -485,6 +497,11 @@ class ForwardBelief:
         self.n = n
 
     def advance_to(self, n: int) -> None:
+        """Advance the belief to step ``n`` without observations.
+
+        Raises:
+            PsgDataError: ``n`` is before the current step.
+        """
         if n < self.n:
             raise PsgDataError(f"ForwardBelief: cannot go back from step {self.n} to {n}")
         while self.n < n:
@@ -509,6 +526,7 @@ class ForwardBelief:
         return self.alpha.sum(axis=(0, 2))
 
     def pattern_marginal(self) -> NDArray[np.float64]:
+        """Posterior probability of each day pattern."""
         return self.alpha.sum(axis=(1, 2))
 
     def forecast(self, steps: Sequence[int] | NDArray[np.int64]) -> NDArray[np.float64]:

@@ -199,6 +199,7 @@ class ScanWriter:
 
     @property
     def n_frames(self) -> int:
+        """Frames added so far."""
         return len(self._cols.stamp_ns)
 
     def _record(self, stamp_ns: int, T_world_camera: NDArray[np.float64], camera_id: str) -> int:
@@ -511,22 +512,26 @@ class DatasetWriter:
         return MappingProxyType(self._cameras)
 
     def set_rooms(self, rooms: Iterable[Room]) -> None:
+        """Set the ``rooms`` table."""
         self._tables["rooms"] = to_arrow("rooms", [
             {"room_id": r.room_id, "name": r.name,
              "floor_polygon_m": None if r.floor_polygon_m is None else np.asarray(r.floor_polygon_m, float).tolist()}
             for r in rooms])
 
     def set_receptacles(self, receptacles: Iterable[Receptacle]) -> None:
+        """Set the ``receptacles`` table."""
         self._tables["receptacles"] = to_arrow("receptacles", [
             {"receptacle_id": r.receptacle_id, "name": r.name, "category": r.category, "room_id": r.room_id,
              **_box_cols(r.box)} for r in receptacles])
 
     def set_doors(self, doors: Iterable[Door]) -> None:
+        """Set the ``doors`` table."""
         self._tables["doors"] = to_arrow("doors", [
             {"door_id": d.door_id, "name": d.name, "room_a": d.room_a, "room_b": d.room_b, **_box_cols(d.box)}
             for d in doors])
 
     def set_objects(self, objects: Iterable[ObjectInfo]) -> None:
+        """Set the ``objects`` table."""
         self._tables["objects"] = to_arrow("objects", [_row(o) for o in objects])
 
     def set_table(self, name: str, rows: Any) -> None:

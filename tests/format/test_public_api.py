@@ -64,3 +64,34 @@ def test_module_all_lists_what_the_package_exports_from_it(name: str) -> None:
                 and (pkg.__name__, module) not in KNOWN_DRIFTS):
             drifts.append(f"{module}.{attr}")
     assert not drifts, f"psg_data.{name} exports names their modules' __all__ does not list: {drifts}"
+
+
+DOCUMENTED = ["schemas", "loaders", "loaders.raw", "writers", "convert", "synth", "labeling", "navigation", "viewer"]
+"""Packages whose whole public surface is documented (the estimator and metric packages follow when their
+branches land)."""
+UNDOCUMENTED = {"psg_data.navigation.DoorNavigationResult.format_table"}  # moves with the evaluation harness
+
+
+def _public_members(pkg: types.ModuleType) -> list[tuple[str, object]]:
+    """Every function and class a package exports, and the public methods and properties of those classes."""
+    import inspect
+
+    out: list[tuple[str, object]] = []
+    for attr in pkg.__all__:
+        obj = getattr(pkg, attr)
+        if inspect.isclass(obj) or inspect.isfunction(obj):
+            out.append((f"{pkg.__name__}.{attr}", obj))
+        if inspect.isclass(obj):
+            for k, v in vars(obj).items():
+                f = v.fget if isinstance(v, property) else getattr(v, "__func__", v)
+                if not k.startswith("_") and (inspect.isfunction(f) or isinstance(v, property)):
+                    out.append((f"{pkg.__name__}.{attr}.{k}", f))
+    return out
+
+
+@pytest.mark.parametrize("name", DOCUMENTED)
+def test_public_api_is_documented(name: str) -> None:
+    pkg = importlib.import_module(f"psg_data.{name}")
+    missing = [label for label, obj in _public_members(pkg)
+               if not (getattr(obj, "__doc__", None) or "").strip() and label not in UNDOCUMENTED]
+    assert not missing, f"public names without a docstring: {missing}"

@@ -57,6 +57,7 @@ class FolderRecording:
 
     @property
     def size_bytes(self) -> int:
+        """Bytes of every image file listed, in total."""
         return sum(p.stat().st_size for _, p in (*self.colors, *self.depths))
 
 
@@ -173,6 +174,11 @@ def _intrinsics_file(path: Path) -> tuple[float, float, float, float] | None:
 
 
 def read_tum_folder(path: str | Path, intrinsics: list[float] | None, depth_scale_m: float | None) -> FolderRecording:
+    """A TUM RGB-D folder (``rgb.txt``, ``depth.txt``, ``groundtruth.txt``) with its images and poses.
+
+    Raises:
+        ConversionError: no frames listed, a listed image missing, or no intrinsics.
+    """
     p = Path(path)
     colors = _image_list(p, "rgb.txt")
     depths = _image_list(p, "depth.txt")
@@ -206,6 +212,13 @@ def _pose_values(f: Path) -> NDArray[np.float64]:
 
 def read_scannet_folder(path: str | Path, fps: float, start_stamp_ns: int, depth_scale_m: float | None,
                         intrinsics: list[float] | None) -> FolderRecording:
+    """A ScanNet folder (``color/``, ``depth/``, ``pose/``, ``intrinsic/``).
+
+    Frame N is stamped ``start_stamp_ns + N / fps`` (ScanNet stores no stamps).
+
+    Raises:
+        ConversionError: no frames, no intrinsics, or a malformed pose or intrinsics file.
+    """
     p = Path(path)
 
     def index(d: str, ext: tuple[str, ...]) -> dict[int, Path]:

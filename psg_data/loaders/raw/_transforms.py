@@ -128,9 +128,11 @@ class PoseSeries:
     samples: list[Pose7] = field(default_factory=list)
 
     def add(self, stamp_ns: int, translation: Iterable[float], quat_xyzw: Iterable[float]) -> None:
+        """Add a sample: translation (metres) and quaternion ``(x, y, z, w)`` at ``stamp_ns``."""
         self.add7(int(stamp_ns), _pose7(translation, quat_xyzw))
 
     def add7(self, stamp_ns: int, sample: Pose7) -> None:
+        """Add a sample given as a :data:`Pose7` (kept in stamp order; a repeated stamp replaces the sample)."""
         s = self.stamps
         if not s or stamp_ns > s[-1]:  # the usual case: in order
             s.append(stamp_ns)
@@ -148,6 +150,7 @@ class PoseSeries:
 
     @property
     def last_stamp(self) -> int | None:
+        """Stamp of the newest sample, or None."""
         return self.stamps[-1] if self.stamps else None
 
     def prune_before(self, stamp_ns: int) -> None:
@@ -206,6 +209,7 @@ class TfBuffer:
 
     def add(self, parent: str, child: str, stamp_ns: int, translation: Iterable[float],
             quat_xyzw: Iterable[float], *, static: bool) -> None:
+        """Add transform ``T_parent_child`` at ``stamp_ns`` (static: valid at every time)."""
         if not static:
             series = self.dynamic.get((parent, child))
             if series is not None:  # the usual case: a known dynamic edge with normalised names
@@ -228,6 +232,7 @@ class TfBuffer:
 
     @property
     def frames(self) -> list[str]:
+        """Every frame of the tree, sorted."""
         return sorted({f for k in (*self.static, *self.dynamic) for f in k})
 
     def path(self, source: str, target: str) -> list[tuple[str, str, bool]] | None:
@@ -334,6 +339,7 @@ class TfBuffer:
         return min(last) if last else None
 
     def prune_before(self, stamp_ns: int) -> None:
+        """Drop, on every dynamic edge, the samples older than its last one at or before ``stamp_ns``."""
         for s in self.dynamic.values():
             s.prune_before(stamp_ns)
 
