@@ -123,9 +123,6 @@ class BaseEstimator:
         if not getattr(self, "fitted_", False):
             raise NotFittedError(f"{type(self).__name__} ({self.name}) is not fitted; call fit(train_streams) first")
 
-    def _state_header(self, edge: EdgeKey) -> dict[str, Any]:
-        return {"estimator": self.name, "edge": edge_to_json(edge)}
-
     def _check_state(self, state: dict[str, Any]) -> EdgeKey:
         self._check_fitted()
         if state.get("estimator") != self.name:

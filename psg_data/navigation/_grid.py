@@ -181,12 +181,6 @@ class OccupancyGrid:
         i, j = np.mgrid[0:H, 0:W]
         return self.cell_to_world(np.stack([i.ravel(), j.ravel()], axis=1))
 
-    def in_bounds(self, ij: ArrayLike) -> NDArray[np.bool_]:
-        """Whether each (row, col) cell of ``ij`` (..., 2) lies in the grid."""
-        c = np.asarray(ij)
-        H, W = self.shape
-        return (c[..., 0] >= 0) & (c[..., 0] < H) & (c[..., 1] >= 0) & (c[..., 1] < W)
-
     # -- doors ------------------------------------------------------------------------------------
     def door_config(self, door_open: Mapping[str, bool] | None) -> DoorConfig:
         """Door states as a hashable tuple in :attr:`door_ids` order; missing doors count as open."""
@@ -195,10 +189,6 @@ class OccupancyGrid:
         if unknown:
             log.debug("door_open names doors the grid does not have: %s", sorted(unknown))
         return tuple(bool(door_open.get(d, True)) for d in self.door_ids)
-
-    def as_door_open(self, config: DoorConfig) -> dict[str, bool]:
-        """A :data:`DoorConfig` as ``{door_id: open}``."""
-        return dict(zip(self.door_ids, config))
 
     def obstacles(self, door_open: Mapping[str, bool] | DoorConfig | None = None) -> NDArray[np.bool_]:
         """(H, W) raw (not inflated) obstacles with the closed doorways filled."""

@@ -525,10 +525,6 @@ class ForwardBelief:
         """(S,) P(state) at the current step."""
         return self.alpha.sum(axis=(0, 2))
 
-    def pattern_marginal(self) -> NDArray[np.float64]:
-        """Posterior probability of each day pattern."""
-        return self.alpha.sum(axis=(1, 2))
-
     def forecast(self, steps: Sequence[int] | NDArray[np.int64]) -> NDArray[np.float64]:
         """(len(steps), S) state marginals at future steps (>= the current one), without changing the belief."""
         steps = np.asarray(steps, np.int64)

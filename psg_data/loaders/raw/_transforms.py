@@ -333,11 +333,6 @@ class TfBuffer:
                     h = last
         return h
 
-    def last_dynamic_stamp(self) -> int | None:
-        """Smallest over dynamic edges of their newest sample (None if no dynamic edge)."""
-        last = [s.last_stamp for s in self.dynamic.values() if s.last_stamp is not None]
-        return min(last) if last else None
-
     def prune_before(self, stamp_ns: int) -> None:
         """Drop, on every dynamic edge, the samples older than its last one at or before ``stamp_ns``."""
         for s in self.dynamic.values():
