@@ -551,7 +551,6 @@ class _ScanSink:
         self.bytes_mark = 0
         self.bytes_in = 0
         self.skip_current = False
-        self.frames_in_scan = 0
         self.warnings: list[str] = []
         self.stamp_span: tuple[int, int] | None = None
         """First and last stamp of the colour + depth pairs received."""

@@ -15,7 +15,7 @@ import struct
 import zlib
 from collections.abc import Callable, Collection, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, Generic, NamedTuple, TypeVar
 
 from psg_data.errors import ConversionError, NotOpenError
 from psg_data.loaders.raw._wire import (
@@ -29,6 +29,8 @@ from psg_data.loaders.raw._wire import (
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
+    from rosbags.rosbag1 import Reader as Ros1BagReader
+    from rosbags.rosbag2 import Reader as Ros2BagReader
     from rosbags.typesys.store import Typestore
 
 __all__ = ["RosRecording", "recording_format", "find_recordings", "RECORDING_FORMATS", "CompressedFields",
@@ -138,7 +140,29 @@ def _rosbags_ros1_internals() -> _Ros1Internals | None:
     return _Ros1Internals(identity)
 
 
-class _Ros1Reader:
+_Bag = TypeVar("_Bag", "Ros1BagReader", "Ros2BagReader")
+
+
+class _Reader(Generic[_Bag]):
+    """A rosbags reader with its connections, and the first connection of each message type."""
+
+    def __init__(self, path: Path, bag: _Bag) -> None:
+        self.path = path
+        self._bag: _Bag = bag
+        self.connections: list[Connection] = []
+        self._by_type: dict[str, Connection] = {}
+
+    def open(self) -> None:
+        self._bag.open()
+        self.connections = list(self._bag.connections)
+        for c in self.connections:
+            self._by_type.setdefault(c.msgtype, c)
+
+    def close(self) -> None:
+        self._bag.close()
+
+
+class _Ros1Reader(_Reader["Ros1BagReader"]):
     """A ROS 1 bag: opened and indexed by ``rosbags.rosbag1.Reader``, messages read zero-copy.
 
     Two costs of rosbags' own ROS 1 path are avoided:
@@ -161,17 +185,8 @@ class _Ros1Reader:
     def __init__(self, path: Path) -> None:
         from rosbags.rosbag1 import Reader
 
-        self.path = path
-        self._bag = Reader(path)
-        self.connections: list[Connection] = []
-        self._by_type: dict[str, Connection] = {}
+        super().__init__(path, Reader(path))
         self._mm: mmap.mmap | None = None
-
-    def open(self) -> None:
-        self._bag.open()
-        self.connections = list(self._bag.connections)
-        for c in self.connections:
-            self._by_type.setdefault(c.msgtype, c)
 
     def close(self) -> None:
         if self._mm is not None:
@@ -291,7 +306,7 @@ def _ros2_typestore(msgtype: str, fmt: str, msgdef: str) -> Typestore:
     return ts
 
 
-class _Ros2Reader:
+class _Ros2Reader(_Reader["Ros2BagReader"]):
     """A ROS 2 bag (sqlite3 or MCAP storage) or a bare MCAP file, read with ``rosbags.rosbag2.Reader``.
 
     Unlike rosbags' AnyReader, message definitions are parsed per type when a message of that type
@@ -303,19 +318,7 @@ class _Ros2Reader:
     def __init__(self, path: Path) -> None:
         from rosbags.rosbag2 import Reader
 
-        self.path = path
-        self._bag = Reader(path)
-        self.connections: list[Connection] = []
-        self._by_type: dict[str, Connection] = {}
-
-    def open(self) -> None:
-        self._bag.open()
-        self.connections = list(self._bag.connections)
-        for c in self.connections:
-            self._by_type.setdefault(c.msgtype, c)
-
-    def close(self) -> None:
-        self._bag.close()
+        super().__init__(path, Reader(path))
 
     def messages(self, connections: Collection[Connection] = ()) -> Iterator[_Message]:
         yield from self._bag.messages(connections=list(connections) or self.connections)
@@ -451,7 +454,7 @@ class RosRecording:
         fields = parse_compressed_image(raw, self.is_cdr, cache=self._strings)
         if fields is not None:
             return fields
-        msg: Any = self.deserialize(raw, "sensor_msgs/msg/CompressedImage", topic)
+        msg: Any = self.deserialize(raw, "sensor_msgs/msg/CompressedImage", topic)  # a generated message class
         h = msg.header
         return CompressedFields(int(h.stamp.sec) * 1_000_000_000 + int(h.stamp.nanosec), str(h.frame_id),
                                 str(msg.format), memoryview(msg.data))
