@@ -1,1 +1,1 @@
-"""psg_data.cli"""
+"""The command-line entry points ``psg-data`` and ``psg-eval`` (click)."""

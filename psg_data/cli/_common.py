@@ -1,6 +1,7 @@
 """Shared CLI plumbing: the --quiet option, logging set-up and progress output (from
 :mod:`psg_data.cli._progress`); the error contract (exit codes, one ``error:`` line) is in
-:mod:`psg_data.cli._errors`."""
+:mod:`psg_data.cli._errors`.
+"""
 
 from __future__ import annotations
 

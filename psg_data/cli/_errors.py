@@ -53,7 +53,8 @@ def _interrupted(exc: BaseException) -> None:
 
 def handle_errors(fn: F) -> F:
     """Print a :class:`PsgDataError` (or an OS error: permissions, disk full, a file gone) as one
-    ``error: ...`` line and exit 1; Ctrl-C as ``error: interrupted`` with exit 130."""
+    ``error: ...`` line and exit 1; Ctrl-C as ``error: interrupted`` with exit 130.
+    """
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:

@@ -20,7 +20,8 @@ def parse_deltas(text: str, task: str) -> tuple[float, ...]:
     try:
         values = tuple(float(p) for p in parts)
     except ValueError:
-        raise EvaluationError(f"--delta {text!r}: expected a number in [0, 1] or a list like 0.05,0.1,0.2,0.3") from None
+        raise EvaluationError(f"--delta {text!r}: expected a number in [0, 1] or a list like "
+                              "0.05,0.1,0.2,0.3") from None
     if not values or any(not (math.isfinite(v) and 0.0 <= v <= 1.0) for v in values):
         raise EvaluationError(f"--delta {text!r}: expected numbers in [0, 1]")
     if len(values) > 1 and task != "navigation":
@@ -32,7 +33,8 @@ def parse_deltas(text: str, task: str) -> tuple[float, ...]:
 
 def persistence_options(*, setting: str, horizon: str, weighting: str, windows: str, seeds: int | None) -> Any:
     """The :class:`~psg_data.evaluation.PersistenceOptions` of the command line (syntax checked now; ``auto``
-    decided by the dataset later)."""
+    decided by the dataset later).
+    """
     from psg_data.evaluation import PersistenceOptions, parse_windows
 
     if windows != "auto":

@@ -9,8 +9,9 @@ from typing import Any
 from psg_data.errors import EstimatorError, EvaluationError
 from psg_data.evaluation._hints import EstimatorSpec, dataset_hints, require_hints, with_hints
 
-__all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice", "resolve_dataset",
-           "persistence_task_for", "persistence_tasks", "dataset_hints", "require_hints", "available_hints", "BENCHMARK", "DEMO"]
+__all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice",
+           "resolve_dataset", "persistence_task_for", "persistence_tasks", "dataset_hints", "require_hints",
+           "available_hints", "BENCHMARK", "DEMO"]
 
 BENCHMARK = "persistence-benchmark"
 DEMO = "demo"
@@ -30,7 +31,8 @@ def parse_estimator_spec(text: str) -> EstimatorSpec:
     factory = get_factory(name)
     parts = [p.strip() for p in rest.split(",")] if colon else []
     if colon and not any(parts):
-        raise EstimatorError(f"--estimator {text!r}: no settings after ':'; expected NAME or NAME:key=value[,key=value]")
+        raise EstimatorError(f"--estimator {text!r}: no settings after ':'; expected NAME or "
+                             "NAME:key=value[,key=value]")
     declarations = declared(factory)
     valid = _setting_names(factory)
     settings = []
@@ -80,7 +82,8 @@ class DatasetChoice:
 
 def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
     """``demo`` (default: the built-in lab, built once into the cache), ``persistence-benchmark``
-    (the paper's Sec. V-A streams) or a dataset directory."""
+    (the paper's Sec. V-A streams) or a dataset directory.
+    """
     if value in (None, DEMO):
         from psg_data.cli._progress import Progress
         from psg_data.datasets import demo
@@ -102,7 +105,8 @@ def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
 
 def available_hints(value: str | None) -> dict[str, Any]:
     """The estimator hints a dataset choice offers, without building anything (the demo lab is a
-    synthetic lab with its generator model; the benchmark has schedules; a path: its manifest)."""
+    synthetic lab with its generator model; the benchmark has schedules; a path: its manifest).
+    """
     if value in (None, DEMO):
         return {"dataset": "<the demo lab>", "schedules": {}}
     if value == BENCHMARK:
@@ -130,6 +134,7 @@ def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool) -> 
         return persistence_task_from_benchmark(0)
     from psg_data.loaders import open_dataset
 
+    assert choice.path is not None  # a dataset choice has a path
     ds = open_dataset(choice.path)
     if labels.split(":", 1)[0] in ("privileged", "detections") and choice.label == "demo lab":
         _label_demo_if_needed(ds, labels, quiet)

@@ -61,7 +61,8 @@ def _dataset(dataset: str | None, labels: str, quiet: bool, task: str) -> Any:
     from psg_data.errors import EvaluationError
 
     if dataset in ("door-loop", "door-loop-lab"):
-        raise EvaluationError(f"--dataset {dataset}: the door loop world is a unit-test world now; --task doors runs on "
+        raise EvaluationError(f"--dataset {dataset}: the door loop world is a unit-test world now; --task doors "
+                              "runs on "
                               "a dataset's own map (--dataset demo or a dataset path)")
     choice = resolve_dataset(dataset, quiet=quiet)
     if choice.kind != "dataset":
@@ -71,6 +72,7 @@ def _dataset(dataset: str | None, labels: str, quiet: bool, task: str) -> Any:
     if choice.label == "demo lab" and kind in ("privileged", "detections", "observed"):
         from psg_data.loaders import open_dataset
 
+        assert choice.path is not None  # the demo lab is a dataset
         _label_demo_if_needed(open_dataset(choice.path), labels, quiet)
     return choice
 

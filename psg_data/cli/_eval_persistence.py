@@ -63,7 +63,8 @@ def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_see
             prog.done = done
             prog.update(0)
 
-        result, task = run_lab_draws(kind, range(lab_seeds), labels, rows, options, executor=executor, progress=progress)
+        result, task = run_lab_draws(kind, range(lab_seeds), labels, rows, options, executor=executor,
+                                     progress=progress)
     return result, task, roles
 
 

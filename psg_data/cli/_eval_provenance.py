@@ -26,5 +26,6 @@ def provenance(extra: dict[str, Any]) -> dict[str, Any]:
     from psg_data.schemas import FORMAT_VERSION
 
     return {"psg_data_version": __version__, "git_revision": _git_revision(), "format_version": FORMAT_VERSION,
-            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             **extra}

@@ -79,8 +79,10 @@ def info_cmd(path: Path, as_json: bool) -> None:
     click.echo(f"time span    {s['start_local']} .. {s['end_local']}  ({s['timezone']}, {s['span_days']:.1f} days)")
     click.echo(f"cameras      {', '.join(s['cameras'])}")
     click.echo(f"rooms        {s['rooms']}")
-    click.echo(f"receptacles  {s['receptacles']}  (" + ", ".join(f"{k}: {v}" for k, v in s['receptacles_per_room'].items()) + ")")
-    click.echo(f"doors        {s['doors']}  (states: " + ", ".join(f"{k} {v}" for k, v in s['door_states'].items()) + ")")
+    per_room = ", ".join(f"{k}: {v}" for k, v in s["receptacles_per_room"].items())
+    click.echo(f"receptacles  {s['receptacles']}  ({per_room})")
+    states = ", ".join(f"{k} {v}" for k, v in s["door_states"].items())
+    click.echo(f"doors        {s['doors']}  (states: {states})")
     click.echo(f"objects      {s['objects']}")
     click.echo(f"schedule     {s['schedule_rows']} rows ({s['schedule_absent']} absent)")
     if s["extra_tables"]:

@@ -50,7 +50,6 @@ def label_cmd(path: str, source: str, seed: int, valid_file: str | None, observe
     from psg_data.labeling import AssociationParams, label_dataset
     from psg_data.labeling._pipeline import _valid_from_file
     from psg_data.loaders import open_dataset
-
     from psg_data.writers._safe_output import check_not_input
 
     ds = open_dataset(path)

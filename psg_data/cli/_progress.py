@@ -119,7 +119,8 @@ class Progress:
 
     def close(self) -> None:
         """Stop the bar (it stays on screen) or print the final line; idempotent. Prints nothing
-        if no progress was ever reported."""
+        if no progress was ever reported.
+        """
         if self.quiet or self._closed or not self._started:
             return
         self._closed = True

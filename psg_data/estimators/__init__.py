@@ -18,11 +18,15 @@ Example::
 """
 
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream, PersistenceEstimator
+from psg_data.estimators._cadence import PAPER_SETTINGS, Cadence, training_cadence
 from psg_data.estimators._check import check_estimator, conformance_streams
 from psg_data.estimators._fremen import FremenComponents, FremenModel, LocalClock, fourier_sums
 from psg_data.estimators._fremen_estimator import FremenEstimator
+from psg_data.estimators._hmm import HmmFit, fit_error_hmm
+from psg_data.estimators._interval_em import IntervalFit, fit_interval_mixture
 from psg_data.estimators._mixture import MixtureFilter
 from psg_data.estimators._multi import joint_log_belief, map_receptacle, receptacle_belief
+from psg_data.estimators._params import Boolean, Integral, Options, Pair, Param, Real
 from psg_data.estimators._perpetua import PerpetuaEstimator
 from psg_data.estimators._perpetua_star import (
     PerpetuaStarAnnealedEstimator,
@@ -39,7 +43,6 @@ from psg_data.estimators._priors import (
     parse_llm_schedule,
     render_llm_prompt,
 )
-from psg_data.estimators._params import Boolean, Integral, Options, Pair, Param, Real
 from psg_data.estimators._registry import (
     ENTRY_POINT_GROUP,
     get_estimator,
@@ -47,6 +50,7 @@ from psg_data.estimators._registry import (
     list_estimators,
     register_estimator,
 )
+from psg_data.estimators._segmentation import segment_reference
 from psg_data.estimators._simple import (
     AlwaysAbsentEstimator,
     AlwaysPresentEstimator,
@@ -54,10 +58,6 @@ from psg_data.estimators._simple import (
     PersistenceFilterEstimator,
     TimeOfWeekFrequencyEstimator,
 )
-from psg_data.estimators._cadence import PAPER_SETTINGS, Cadence, training_cadence
-from psg_data.estimators._hmm import HmmFit, fit_error_hmm
-from psg_data.estimators._interval_em import IntervalFit, fit_interval_mixture
-from psg_data.estimators._segmentation import segment_reference
 from psg_data.estimators._survival import SURVIVAL_FAMILIES, SurvivalMixture
 from psg_data.estimators._training import fit_lognormal_mixture, segment_stream
 

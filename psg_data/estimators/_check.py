@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
 
 import numpy as np
+from numpy.typing import NDArray
 
 from psg_data.errors import EstimatorError, NotFittedError
 from psg_data.estimators._base import EdgeStream, PersistenceEstimator
 
 __all__ = ["check_estimator", "conformance_streams"]
 
+_Fail = Callable[[str, str], NoReturn]
 _T0 = 1_704_085_200.0  # 2024-01-01 00:00 America/Toronto (a Monday)
 
 
@@ -59,79 +61,26 @@ def check_estimator(estimator: PersistenceEstimator, *, streams: Sequence[EdgeSt
     Raises:
         EstimatorError: naming the failed check.
     """
-    report: dict[str, str] = {}
-
-    def fail(check: str, msg: str) -> None:
+    def fail(check: str, msg: str) -> NoReturn:
         raise EstimatorError(f"check_estimator({type(estimator).__name__}): {check}: {msg}")
 
     data = list(streams) if streams is not None else conformance_streams()
-    train, test = [], []
-    for s in data:
-        cut = s.t_s[0] + (s.t_s[-1] - s.t_s[0]) * 2 / 3
-        tr = s.between(-np.inf, cut)
-        train.append(EdgeStream(s.edge, tr.t_s, tr.y, dict(s.meta)))
-        test.append(s.between(cut, np.inf))
-
+    train, test = _split(data)
+    report: dict[str, str] = {}
     try:
         _fresh(estimator).make_filter(data[0].edge)
         fail("not_fitted", "make_filter before fit did not raise NotFittedError")
     except NotFittedError:
         report["not_fitted"] = "ok"
-
     est = _fresh(estimator)
     if est.fit(train, val_streams=None, timezone=timezone) is not est:
         fail("fit_returns_self", "fit() must return self")
     report["fit_returns_self"] = "ok"
     est2 = _fresh(estimator).fit(train, val_streams=None, timezone=timezone)
-
     for tr, te in zip(train, test):
-        f = est.make_filter(tr.edge)
-        f.update_many(tr.t_s, tr.y)
-        if f.last_t_s != float(tr.t_s[-1]):
-            fail("last_t_s", f"last_t_s is {f.last_t_s}, expected {tr.t_s[-1]}")
-        q = np.linspace(tr.t_s[-1], tr.t_s[-1] + 3 * 86400, 97)
-        p = np.asarray(f.predict(q))
-        if p.shape != q.shape:
-            fail("shape", f"predict of shape {q.shape} returned {p.shape}")
-        p2d = np.asarray(f.predict(q.reshape(-1, 1)))
-        if p2d.shape != (q.size, 1):
-            fail("shape", f"predict of shape {(q.size, 1)} returned {p2d.shape}")
-        if not np.all(np.isfinite(p)) or p.min() < 0 or p.max() > 1:
-            fail("range", f"predictions must be finite and in [0, 1], got [{np.nanmin(p)}, {np.nanmax(p)}]")
-        if not np.array_equal(np.asarray(f.predict(q)), p):
-            fail("predict_pure", "predict changed the filter (second call differs)")
-        g = est2.make_filter(tr.edge)
-        g.update_many(tr.t_s, tr.y)
-        if not np.array_equal(np.asarray(g.predict(q)), p):
-            fail("determinism", "two fits with equal settings predict differently")
-        one = est.make_filter(tr.edge)
-        for ti, yi in zip(tr.t_s, tr.y):
-            one.update(float(ti), int(yi))
-        if not np.allclose(np.asarray(one.predict(q)), p, rtol=0, atol=1e-9):
-            fail("update_vs_update_many", "update() one at a time differs from update_many()")
-        state = f.get_state()
-        try:
-            text = json.dumps(state, allow_nan=False)
-        except (TypeError, ValueError) as exc:
-            fail("state_json", f"get_state() is not JSON-serialisable: {exc}")
-        h = est.filter_from_state(json.loads(text))
-        if not np.array_equal(np.asarray(h.predict(q)), p):
-            fail("state_roundtrip", "filter_from_state(get_state()) predicts differently")
-        if len(te):
-            f.update_many(te.t_s, te.y)
-            h.update_many(te.t_s, te.y)
-            q2 = np.linspace(te.t_s[-1], te.t_s[-1] + 86400, 25)
-            if not np.allclose(np.asarray(h.predict(q2)), np.asarray(f.predict(q2)), rtol=0, atol=1e-12):
-                fail("state_roundtrip", "restored filter diverges after further updates")
-        last = f.last_t_s
-        assert last is not None
-        for bad in (lambda: f.update(last - 10.0, 1), lambda: f.update_many([last + 5.0, last + 1.0], [1, 0])):
-            try:
-                bad()
-                fail("time_monotonicity", "an observation earlier than the last one did not raise EstimatorError")
-            except EstimatorError as exc:
-                if "check_estimator" in str(exc):
-                    raise
+        f, q, p = _check_predictions(est, est2, tr, fail)
+        _check_state(est, f, q, p, te, fail)
+        _check_monotonic(f, fail)
     report.update(shape="ok", range="ok", predict_pure="ok", determinism="ok", update_vs_update_many="ok",
                   state_json="ok", state_roundtrip="ok", time_monotonicity="ok", last_t_s="ok")
     params: dict[str, Any] = estimator.get_params()
@@ -139,3 +88,80 @@ def check_estimator(estimator: PersistenceEstimator, *, streams: Sequence[EdgeSt
         fail("get_params", "get_params() must return a dict")
     report["get_params"] = "ok"
     return report
+
+
+def _split(data: Sequence[EdgeStream]) -> tuple[list[EdgeStream], list[EdgeStream]]:
+    """Each stream's first two thirds (in time, ground truth kept) for training, the rest for testing."""
+    train, test = [], []
+    for s in data:
+        cut = s.t_s[0] + (s.t_s[-1] - s.t_s[0]) * 2 / 3
+        tr = s.between(-np.inf, cut)
+        train.append(EdgeStream(s.edge, tr.t_s, tr.y, dict(s.meta)))
+        test.append(s.between(cut, np.inf))
+    return train, test
+
+
+def _check_predictions(est: PersistenceEstimator, est2: PersistenceEstimator, tr: EdgeStream,
+                       fail: _Fail) -> tuple[Any, NDArray[np.float64], NDArray[np.float64]]:
+    """last_t_s, shape, range, predict_pure, determinism, update_vs_update_many on one edge.
+
+    Returns:
+        (the filter after the training observations, the query times (s), its predictions).
+    """
+    f = est.make_filter(tr.edge)
+    f.update_many(tr.t_s, tr.y)
+    if f.last_t_s != float(tr.t_s[-1]):
+        fail("last_t_s", f"last_t_s is {f.last_t_s}, expected {tr.t_s[-1]}")
+    q = np.linspace(tr.t_s[-1], tr.t_s[-1] + 3 * 86400, 97)
+    p = np.asarray(f.predict(q))
+    if p.shape != q.shape:
+        fail("shape", f"predict of shape {q.shape} returned {p.shape}")
+    p2d = np.asarray(f.predict(q.reshape(-1, 1)))
+    if p2d.shape != (q.size, 1):
+        fail("shape", f"predict of shape {(q.size, 1)} returned {p2d.shape}")
+    if not np.all(np.isfinite(p)) or p.min() < 0 or p.max() > 1:
+        fail("range", f"predictions must be finite and in [0, 1], got [{np.nanmin(p)}, {np.nanmax(p)}]")
+    if not np.array_equal(np.asarray(f.predict(q)), p):
+        fail("predict_pure", "predict changed the filter (second call differs)")
+    g = est2.make_filter(tr.edge)
+    g.update_many(tr.t_s, tr.y)
+    if not np.array_equal(np.asarray(g.predict(q)), p):
+        fail("determinism", "two fits with equal settings predict differently")
+    one = est.make_filter(tr.edge)
+    for ti, yi in zip(tr.t_s, tr.y):
+        one.update(float(ti), int(yi))
+    if not np.allclose(np.asarray(one.predict(q)), p, rtol=0, atol=1e-9):
+        fail("update_vs_update_many", "update() one at a time differs from update_many()")
+    return f, q, p
+
+
+def _check_state(est: PersistenceEstimator, f: Any, q: NDArray[np.float64], p: NDArray[np.float64],
+                 te: EdgeStream, fail: _Fail) -> None:
+    """state_json and state_roundtrip (also after the test observations ``te``; updates ``f``)."""
+    state = f.get_state()
+    try:
+        text = json.dumps(state, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        fail("state_json", f"get_state() is not JSON-serialisable: {exc}")
+    h = est.filter_from_state(json.loads(text))
+    if not np.array_equal(np.asarray(h.predict(q)), p):
+        fail("state_roundtrip", "filter_from_state(get_state()) predicts differently")
+    if len(te):
+        f.update_many(te.t_s, te.y)
+        h.update_many(te.t_s, te.y)
+        q2 = np.linspace(te.t_s[-1], te.t_s[-1] + 86400, 25)
+        if not np.allclose(np.asarray(h.predict(q2)), np.asarray(f.predict(q2)), rtol=0, atol=1e-12):
+            fail("state_roundtrip", "restored filter diverges after further updates")
+
+
+def _check_monotonic(f: Any, fail: _Fail) -> None:
+    """time_monotonicity: observations earlier than the last one raise EstimatorError."""
+    last = f.last_t_s
+    assert last is not None
+    for bad in (lambda: f.update(last - 10.0, 1), lambda: f.update_many([last + 5.0, last + 1.0], [1, 0])):
+        try:
+            bad()
+            fail("time_monotonicity", "an observation earlier than the last one did not raise EstimatorError")
+        except EstimatorError as exc:
+            if "check_estimator" in str(exc):
+                raise

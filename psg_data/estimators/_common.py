@@ -12,9 +12,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError, NotFittedError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.estimators._params import Integral, Options, Param, Real, check_params
 from psg_data.estimators._interval_em import INTERVAL_FAMILIES
 from psg_data.estimators._mixture import ESCAPE_FIRST
+from psg_data.estimators._params import Integral, Options, Param, Real, check_params
 from psg_data.estimators._survival_training import SEGMENTATIONS, fit_edge_survivals, training_runs
 
 __all__ = ["BaseEstimator", "BaseFilter", "TRAINING_PARAMETERS", "edge_to_json", "edge_from_json", "fit_training",
@@ -95,7 +95,8 @@ class BaseEstimator:
         valid = self._param_names()
         for key, value in params.items():
             if key not in valid:
-                raise EstimatorError(f"{self.name}: unknown setting {key!r}; valid settings: {', '.join(valid) or 'none'}")
+                raise EstimatorError(f"{self.name}: unknown setting {key!r}; valid settings: "
+                                     f"{', '.join(valid) or 'none'}")
             if key in self._parameters:
                 self._parameters[key].check(self.name, key, value)
         for key, value in params.items():
@@ -108,7 +109,7 @@ class BaseEstimator:
 
     def __repr__(self) -> str:
         """scikit-learn style: only the settings that differ from their defaults."""
-        defaults = {}
+        defaults: dict[str, Any] = {}
         for klass in type(self).__mro__:
             init = klass.__dict__.get("__init__")
             if init is not None:
@@ -161,9 +162,11 @@ class BaseFilter:
             raise EstimatorError(f"edge {self.edge}: observations must be 0 or 1")
         if t.size > 1 and np.any(np.diff(t) < 0):
             i = int(np.argmax(np.diff(t) < 0)) + 1
-            raise EstimatorError(f"edge {self.edge}: observation times must be non-decreasing, got {t[i]} after {t[i - 1]}")
+            raise EstimatorError(f"edge {self.edge}: observation times must be non-decreasing, got {t[i]} after "
+                                 f"{t[i - 1]}")
         if self._last_t is not None and t[0] < self._last_t:
-            raise EstimatorError(f"edge {self.edge}: observation at t={t[0]} is earlier than the last one at t={self._last_t}")
+            raise EstimatorError(f"edge {self.edge}: observation at t={t[0]} is earlier than the last one at "
+                                 f"t={self._last_t}")
         self._update_many(t, yy.astype(np.int8))
         self._last_t = float(t[-1])
 

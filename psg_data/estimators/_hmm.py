@@ -108,8 +108,8 @@ def _batch(streams: Sequence[EdgeStream], long_gap_s: float) -> _Batch:
     if not objects:
         raise EstimatorError("error-rate HMM: no observations")
     times, edges = [], []
-    for o in objects:
-        ss = [by_obj[o][r] for r in sorted(by_obj[o])]
+    for obj in objects:
+        ss = [by_obj[obj][r] for r in sorted(by_obj[obj])]
         edges.append([s.edge for s in ss])
         times.append(np.unique(np.concatenate([s.t_s for s in ss])))
     n_obj, t_max = len(objects), max(t.size for t in times)
@@ -117,12 +117,12 @@ def _batch(streams: Sequence[EdgeStream], long_gap_s: float) -> _Batch:
     y = np.full((n_obj, t_max, k_max), -1, dtype=np.int8)
     long = np.zeros((n_obj, t_max), dtype=bool)
     valid = np.zeros((n_obj, t_max), dtype=bool)
-    for i, o in enumerate(objects):
+    for i, obj in enumerate(objects):
         tt = times[i]
         valid[i, :tt.size] = True
         long[i, 1:tt.size] = np.diff(tt) > long_gap_s
-        for k, r in enumerate(sorted(by_obj[o])):
-            s = by_obj[o][r]
+        for k, r in enumerate(sorted(by_obj[obj])):
+            s = by_obj[obj][r]
             j = np.searchsorted(tt, s.t_s)
             y[i, j, k] = s.y  # a repeated time keeps its last observation
     return _Batch(objects, edges, times, y, long, valid, np.array([len(e) + 1 for e in edges], dtype=np.int64))
@@ -260,12 +260,13 @@ def fit_error_hmm(streams: Sequence[EdgeStream], *, p_m: float | None = None, p_
 
     Args:
         streams: observations per edge (object id = ``edge[0]``); times in s.
-        p_m, p_f: fix an error rate instead of estimating it.
+        p_m: fix the missed-detection rate P_M instead of estimating it.
+        p_f: fix the false-positive rate P_F instead of estimating it.
         long_gap_factor: a gap longer than this many typical gaps uses the long-gap transitions.
         prior_strength: Dirichlet pseudo-count (in all, per object) of the destination
             distribution toward uniform.
-        max_iter, tol: Baum-Welch stops after max_iter iterations or when the penalised log
-            likelihood changes by less than tol.
+        max_iter: Baum-Welch stops after this many iterations at most.
+        tol: Baum-Welch stops when the penalised log likelihood changes by less than this.
 
     Returns:
         :class:`HmmFit` with the rates, the pooled stay probabilities and per-edge posteriors.
@@ -321,7 +322,7 @@ def fit_error_hmm(streams: Sequence[EdgeStream], *, p_m: float | None = None, p_
         d /= d.sum(axis=1, keepdims=True)
     assert gamma is not None
     post: dict[EdgeKey, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
-    by_edge = {}
+    by_edge: dict[EdgeKey, list[EdgeStream]] = {}
     for s in streams:
         by_edge.setdefault(s.edge, []).append(s)
     for i, es in enumerate(b.edges):

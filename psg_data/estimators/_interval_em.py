@@ -80,9 +80,9 @@ def _log_diff_ndtr(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np
     return np.where(hi == -np.inf, -np.inf, out)
 
 
-def _prepare(lo: ArrayLike, hi: ArrayLike, weights: ArrayLike | None) -> tuple[NDArray[np.float64], ...]:
-    lo = np.asarray(lo, dtype=np.float64).reshape(-1)
-    hi = np.asarray(hi, dtype=np.float64).reshape(-1)
+def _prepare(lo_in: ArrayLike, hi_in: ArrayLike, weights: ArrayLike | None) -> tuple[NDArray[np.float64], ...]:
+    lo = np.asarray(lo_in, dtype=np.float64).reshape(-1)
+    hi = np.asarray(hi_in, dtype=np.float64).reshape(-1)
     w = np.ones(lo.size) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     if not (lo.shape == hi.shape == w.shape):
         raise EstimatorError(f"interval EM: lo, hi and weights differ in length ({lo.size}, {hi.size}, {w.size})")
@@ -94,7 +94,7 @@ def _prepare(lo: ArrayLike, hi: ArrayLike, weights: ArrayLike | None) -> tuple[N
     # merge duplicate rows (sparse scans give many equal intervals)
     key = np.stack([lo, hi])
     uniq, inv = np.unique(key, axis=1, return_inverse=True)
-    wsum = np.bincount(inv.reshape(-1), weights=w)
+    wsum = np.bincount(inv.reshape(-1), weights=w).astype(np.float64)
     return uniq[0].copy(), uniq[1].copy(), wsum
 
 
@@ -238,7 +238,7 @@ def _em_batch(family: str, lo: NDArray[np.float64], hi: NDArray[np.float64], w: 
         with np.errstate(divide="ignore"):
             ll, r = _mix_loglik(logp, np.log(pi), w)
         ll = ll + corr
-        for j in np.flatnonzero(active):
+        for j in np.flatnonzero(active).tolist():
             tr = traces[j]
             if tr and abs(float(ll[j]) - tr[-1]) < tol:
                 active[j] = False
@@ -328,15 +328,17 @@ def fit_interval_mixture(lo: ArrayLike, hi: ArrayLike, *, family: str = "lognorm
     """Fit a survival mixture to interval-censored durations; K = 1..max_components by AIC.
 
     Args:
-        lo, hi: (n,) bounds in seconds, ``0 <= lo <= hi``; ``hi = inf`` right-censored, ``lo == hi``
-            exact. Rows with hi = 0 or bad bounds are ignored.
+        lo: (n,) lower bounds in seconds, ``0 <= lo <= hi``; rows with bad bounds are ignored.
+        hi: (n,) upper bounds in seconds; ``hi = inf`` right-censored, ``lo == hi`` exact; rows with
+            hi = 0 are ignored.
         family: "lognormal", "exponential" or "weibull".
         weights: (n,) positive row weights (default 1).
         max_components: largest K tried (capped at the number of distinct rows).
         sigma_min: floor of sigma of ln T (log-normal) to avoid components collapsing on one value.
         random_state: seed of the perturbed restarts (deterministic for a seed).
         n_restarts: extra starts per K with perturbed initial locations.
-        max_iter, tol: EM stops after max_iter iterations or when the log likelihood changes by < tol.
+        max_iter: EM stops after this many iterations at most.
+        tol: EM stops when the log likelihood changes by less than this.
 
     Raises:
         EstimatorError: unknown family or no usable interval.
@@ -353,15 +355,16 @@ def fit_interval_mixture(lo: ArrayLike, hi: ArrayLike, *, family: str = "lognorm
     for k in range(1, max(1, min(int(max_components), lo_.size)) + 1):
         starts = [np.zeros(k)] + [rng.normal(0.0, 0.5 * spread, k) for _ in range(n_restarts if k > 1 else 0)]
         inits = [_init(family, g, w, k, s) for s in starts]
-        pis, p1s, p2s, traces = _em_batch(family, lo_, hi_, w, *(np.stack([x[i] for x in inits]) for i in range(3)),
-                                          sigma_min, max_iter, tol)
+        pi0, p10, p20 = (np.stack([x[i] for x in inits]) for i in range(3))
+        pis, p1s, p2s, traces = _em_batch(family, lo_, hi_, w, pi0, p10, p20, sigma_min, max_iter, tol)
         j = int(np.argmax([tr[-1] for tr in traces]))
         pi, p1, p2, trace = pis[j], p1s[j], p2s[j], traces[j]
         ll = trace[-1]
         aic = 2.0 * npar * k - 2.0 * ll
         aics[k] = aic
         keep = pi >= 0.01
-        mix = SurvivalMixture(family, pi[keep], p1[keep], p2[keep] if family != "exponential" else np.ones(int(keep.sum())))
+        scale = p2[keep] if family != "exponential" else np.ones(int(keep.sum()))
+        mix = SurvivalMixture(family, pi[keep], p1[keep], scale)
         if best is None or aic < best.aic:
             best = IntervalFit(mix, ll, aic, aics, int(lo_.size), float(w.sum()), trace)
         elif aic >= aics.get(k - 1, math.inf):  # AIC stopped improving: larger K are not tried

@@ -162,7 +162,7 @@ class MixtureFilter:
         return np.logaddexp(np.asarray(self.ly, dtype=np.float64), self.l + np.asarray(self.lsf, dtype=np.float64))
 
     def log_evidence(self) -> float:
-        """log p(Y) of the mixture (0 before any observation)."""
+        """Log p(Y) of the mixture (0 before any observation)."""
         v = self.log_prior + self.component_log_evidence()
         m = np.max(v)
         return float(m + np.log(np.sum(np.exp(v - m))))

@@ -25,7 +25,7 @@ def receptacle_belief(filters: Mapping[str, EdgeFilter], t_s: ArrayLike) -> dict
 
 
 def joint_log_belief(beliefs: Mapping[str, Any], states: Mapping[str, int]) -> NDArray[np.float64]:
-    """log p(x^{j,1..K} = states) = sum_k log p(x^k = states[k]) under the factorisation of eq. 15."""
+    """Log p(x^{j,1..K} = states) = sum_k log p(x^k = states[k]) under the factorisation of eq. 15."""
     out: NDArray[np.float64] | float = 0.0
     for k, b in beliefs.items():
         p = np.clip(np.asarray(b, dtype=np.float64), 0.0, 1.0)

@@ -190,6 +190,10 @@ class PerpetuaEstimator(BaseEstimator):
     """
 
     name = "perpetua"
+    survivals_: dict[EdgeKey, tuple[SurvivalMixture, SurvivalMixture]]
+    default_survivals_: tuple[SurvivalMixture, SurvivalMixture]
+    p_m_: float
+    p_f_: float
     _parameters = {
         "delta_low": Real(0.0, 1.0, closed="neither", help="switch to emergence when the belief drops to this"),
         "delta_high": Real(0.0, 1.0, closed="neither", help="switch back to persistence at this"),

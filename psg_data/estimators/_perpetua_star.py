@@ -64,9 +64,9 @@ from psg_data.estimators._fremen_estimator import fit_fremen_edge, training_cloc
 from psg_data.estimators._mixture import ESCAPE, ESCAPE_FIRST, MixtureFilter, ScanResult
 from psg_data.estimators._params import Integral, MappingParam, Options, Real
 from psg_data.estimators._priors import (
+    PROFILE_DAYS,
     ConstantPrior,
     FremenPrior,
-    PROFILE_DAYS,
     OraclePrior,
     ProfilePrior,
     SchedulePrior,
@@ -146,6 +146,112 @@ class _Track:
         self.a, self.h, self.res, self.L, self.p, self.n0, self.c = a, h, res, L, p, n0, c
 
 
+class _Batch:
+    """The arrays and the two models of one :meth:`PerpetuaStarFilter._update_many` call.
+
+    ``Ls`` / ``Es`` are the filter's own lists (the discounted log-likelihood ratios and the last
+    log evidences of the persistence and emergence models), updated in place.
+    """
+
+    def __init__(self, f: PerpetuaStarFilter, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
+        self.t, self.yi, self.n = t, y.astype(np.intp), int(t.size)
+        self.plogit = f._prior_logit(t)
+        self.models = (f.per, f.emg)
+        self.log_g = f._log_g(f._last_t, t)
+        self.Ls, self.Es = f._Ls, f._Es
+
+    def scan(self, j: int, a: int, c: int, st: tuple[Any, ...]) -> _Track:
+        """Rows [a, a + c) of model j from state ``st`` (:meth:`live` / :meth:`last_state`)."""
+        origin, tau0, l0, ly0, lsf0, e0, l_0, n0 = st
+        b = min(self.n, a + c)
+        origin = float(self.t[a]) if origin is None else origin
+        res = self.models[j].scan_from(origin, tau0, l0, ly0, lsf0, self.t[a:b], self.yi[a:b])
+        ev = res.log_evidence
+        inc = np.empty(b - a)
+        inc[0] = ev[0] - e0
+        np.subtract(ev[1:], ev[:-1], out=inc[1:])
+        L = discounted_cumsum_log(l_0, inc, self.log_g[a:b])
+        p = res.p_own if j == 0 else 1.0 - res.p_own
+        return _Track(a, b, res, L, p, n0, min(_MAX_CHUNK, c * _GROWTH))
+
+    def live(self, j: int) -> tuple[Any, ...]:
+        """Model j's current state, as :meth:`scan` takes it."""
+        m = self.models[j]
+        return (m.origin, m.tau, m.l, m.ly, m.lsf, self.Es[j], self.Ls[j], m.n)
+
+    @staticmethod
+    def last_state(tr: _Track) -> tuple[Any, ...]:
+        """The state after a track's last row, as :meth:`scan` takes it."""
+        r, i = tr.res, tr.h - tr.a - 1
+        return (r.origin, float(r.tau[i]), float(r.l[i]), r.ly[:, i], r.lsf[:, i], float(r.log_evidence[i]),
+                float(tr.L[i]), tr.n0 + i + 1)
+
+    def extend(self, tracks: list[_Track | None], left: list[int], pos: int) -> None:
+        """Scan a stepped model whose scalar steps are used up, or a scanned one whose rows end at pos."""
+        for j in (0, 1):
+            tr = tracks[j]
+            if tr is None:
+                if left[j] <= 0:
+                    tracks[j] = self.scan(j, pos, _FIRST_CHUNK, self.live(j))
+            elif tr.h <= pos:
+                tracks[j] = self.scan(j, pos, tr.c, self.last_state(tr))
+
+    def first_change(self, tp: _Track, te: _Track, pos: int, phase: int) -> tuple[int, int | None]:
+        """(phase, first row >= pos where the filtered state leaves it, or None) over the rows both cover."""
+        h = min(tp.h, te.h)
+        ip, ie = pos - tp.a, pos - te.a
+        m = h - pos
+        z = te.L[ie:ie + m] - tp.L[ip:ip + m]
+        z += self.plogit[pos:h]
+        w = _sigmoid(z)
+        s = (w * te.p[ie:ie + m] + (1.0 - w) * tp.p[ip:ip + m]) >= 0.5
+        if phase < 0:
+            phase = int(s[0])
+        ch = s != bool(phase)
+        return phase, (pos + int(np.argmax(ch)) if ch.any() else None)
+
+    def step_one(self, k: int, tracks: list[_Track | None], left: list[int]) -> int:
+        """The filtered state at row k, stepping the models that have no rows there."""
+        tk, yk = float(self.t[k]), int(self.yi[k])
+        Ls, Es = self.Ls, self.Es
+        lv, pv = [0.0, 0.0], [0.0, 0.0]
+        for j in (0, 1):
+            tr = tracks[j]
+            if tr is None:
+                e, po = self.models[j].step(tk, yk)
+                Ls[j] = math.exp(float(self.log_g[k])) * Ls[j] + (e - Es[j])
+                Es[j] = e
+                left[j] -= 1
+                lv[j], pv[j] = Ls[j], (po if j == 0 else 1.0 - po)
+            else:
+                r = k - tr.a
+                lv[j], pv[j] = float(tr.L[r]), float(tr.p[r])
+        w1 = 0.5 * (1.0 + math.tanh(0.5 * ((lv[1] - lv[0]) + float(self.plogit[k]))))
+        return int(w1 * pv[1] + (1.0 - w1) * pv[0] >= 0.5)
+
+    def restart(self, j: int, k: int, tracks: list[_Track | None], left: list[int]) -> None:
+        """Model j restarts at t_k: its rows are dropped and it is stepped for the next few rows."""
+        tr = tracks[j]
+        if tr is not None:
+            self.Ls[j] = float(tr.L[k - tr.a])
+            tracks[j] = None
+        mj = self.models[j]
+        mj.reset(float(self.t[k]))
+        self.Es[j] = mj.step(float(self.t[k]), int(self.yi[k]))[0]
+        left[j] = _STEPS_AFTER_RESTART
+
+    def commit(self, tracks: list[_Track | None]) -> None:
+        """Write the scanned models' states after the last row back into the models."""
+        for j, mj in enumerate(self.models):
+            tr = tracks[j]
+            if tr is not None:
+                i = self.n - 1 - tr.a
+                mj.commit(tr.res, i)
+                mj.n = tr.n0 + i + 1
+                self.Es[j] = float(tr.res.log_evidence[i])
+                self.Ls[j] = float(tr.L[i])
+
+
 class PerpetuaStarFilter(BaseFilter):
     """One edge of Perpetua*. See the module docstring for the equations."""
 
@@ -189,6 +295,7 @@ class PerpetuaStarFilter(BaseFilter):
             return math.exp(self._lg_obs)
         if t_prev is None:
             return 1.0
+        assert self._lg_per_s is not None  # forgetting in time when not per observation
         return math.exp(self._lg_per_s * max(t - t_prev, 0.0))
 
     @property
@@ -229,7 +336,8 @@ class PerpetuaStarFilter(BaseFilter):
         if y not in (0, 1):
             raise EstimatorError(f"edge {self.edge}: observations must be 0 or 1")
         if self._last_t is not None and t < self._last_t:
-            raise EstimatorError(f"edge {self.edge}: observation at t={t} is earlier than the last one at t={self._last_t}")
+            raise EstimatorError(f"edge {self.edge}: observation at t={t} is earlier than the last one at "
+                                 f"t={self._last_t}")
         self._step(t, int(y), self._last_t)
         self._last_t = t
 
@@ -272,109 +380,34 @@ class PerpetuaStarFilter(BaseFilter):
                 self._step(ti, yv, prev)
                 prev = ti
             return
-        yi = y.astype(np.intp)
-        plogit = self._prior_logit(t)
-        models = (self.per, self.emg)
-        cmax = _MAX_CHUNK
-        log_g = self._log_g(self._last_t, t)
-        Ls, Es = self._Ls, self._Es
-
-        def scan(j: int, a: int, c: int, st: tuple[Any, ...]) -> _Track:
-            origin, tau0, l0, ly0, lsf0, e0, l_0, n0 = st
-            b = min(n, a + c)
-            origin = float(t[a]) if origin is None else origin
-            res = models[j].scan_from(origin, tau0, l0, ly0, lsf0, t[a:b], yi[a:b])
-            ev = res.log_evidence
-            inc = np.empty(b - a)
-            inc[0] = ev[0] - e0
-            np.subtract(ev[1:], ev[:-1], out=inc[1:])
-            L = discounted_cumsum_log(l_0, inc, log_g[a:b])
-            p = res.p_own if j == 0 else 1.0 - res.p_own
-            return _Track(a, b, res, L, p, n0, min(cmax, c * _GROWTH))
-
-        def live(j: int) -> tuple[Any, ...]:
-            m = models[j]
-            return (m.origin, m.tau, m.l, m.ly, m.lsf, Es[j], Ls[j], m.n)
-
-        def last_state(tr: _Track) -> tuple[Any, ...]:
-            r, i = tr.res, tr.h - tr.a - 1
-            return (r.origin, float(r.tau[i]), float(r.l[i]), r.ly[:, i], r.lsf[:, i], float(r.log_evidence[i]),
-                    float(tr.L[i]), tr.n0 + i + 1)
-
-        c0 = min(cmax, _FIRST_CHUNK)
-        tracks: list[_Track | None] = [scan(0, 0, c0, live(0)), scan(1, 0, c0, live(1))]
+        bt = _Batch(self, t, y)
+        c0 = min(_MAX_CHUNK, _FIRST_CHUNK)
+        tracks: list[_Track | None] = [bt.scan(0, 0, c0, bt.live(0)), bt.scan(1, 0, c0, bt.live(1))]
         left = [0, 0]  # scalar steps left before a stepped model is scanned again
-        pos = 0
-        phase = self.phase
+        pos, phase = 0, self.phase
         while pos < n:
-            for j in (0, 1):
-                tr = tracks[j]
-                if tr is None:
-                    if left[j] <= 0:
-                        tracks[j] = scan(j, pos, _FIRST_CHUNK, live(j))
-                elif tr.h <= pos:
-                    tracks[j] = scan(j, pos, tr.c, last_state(tr))
+            bt.extend(tracks, left, pos)
             tp, te = tracks
             if tp is not None and te is not None:
-                h = min(tp.h, te.h)
-                ip, ie = pos - tp.a, pos - te.a
-                m = h - pos
-                z = te.L[ie:ie + m] - tp.L[ip:ip + m]
-                z += plogit[pos:h]
-                w = _sigmoid(z)
-                s = (w * te.p[ie:ie + m] + (1.0 - w) * tp.p[ip:ip + m]) >= 0.5
-                if phase < 0:
-                    phase = int(s[0])
-                ch = s != bool(phase)
-                if not ch.any():
-                    pos = h
+                phase, k = bt.first_change(tp, te, pos, phase)
+                if k is None:
+                    pos = min(tp.h, te.h)
                     continue
-                k = pos + int(np.argmax(ch))
             else:  # one observation, stepping the models without rows
                 k = pos
-                tk, yk = float(t[k]), int(yi[k])
-                lv, pv = [0.0, 0.0], [0.0, 0.0]
-                for j in (0, 1):
-                    tr = tracks[j]
-                    if tr is None:
-                        e, po = models[j].step(tk, yk)
-                        Ls[j] = math.exp(float(log_g[k])) * Ls[j] + (e - Es[j])
-                        Es[j] = e
-                        left[j] -= 1
-                        lv[j], pv[j] = Ls[j], (po if j == 0 else 1.0 - po)
-                    else:
-                        r = k - tr.a
-                        lv[j], pv[j] = float(tr.L[r]), float(tr.p[r])
-                w1 = 0.5 * (1.0 + math.tanh(0.5 * ((lv[1] - lv[0]) + float(plogit[k]))))
-                s1 = int(w1 * pv[1] + (1.0 - w1) * pv[0] >= 0.5)
-                pos = k + 1
+                s1 = bt.step_one(k, tracks, left)
                 if phase < 0:
                     phase = s1
                 if s1 == phase:
+                    pos = k + 1
                     continue
             # the filtered state changes at k: the model of the new state restarts at t_k
             phase = 1 - phase
-            j = 0 if phase == 1 else 1
-            tr = tracks[j]
-            if tr is not None:
-                r = k - tr.a
-                Ls[j] = float(tr.L[r])
-                tracks[j] = None
-            mj = models[j]
-            mj.reset(float(t[k]))
-            Es[j] = mj.step(float(t[k]), int(yi[k]))[0]
-            left[j] = _STEPS_AFTER_RESTART
+            bt.restart(0 if phase == 1 else 1, k, tracks, left)
             self.n_restarts += 1
             pos = k + 1
         self.phase = phase
-        for j, mj in enumerate(models):
-            tr = tracks[j]
-            if tr is not None:
-                i = n - 1 - tr.a
-                mj.commit(tr.res, i)
-                mj.n = tr.n0 + i + 1
-                Es[j] = float(tr.res.log_evidence[i])
-                Ls[j] = float(tr.L[i])
+        bt.commit(tracks)
 
     # ------------------------------------------------------------------ predict
     def model_posterior(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -468,6 +501,12 @@ class PerpetuaStarEstimator(BaseEstimator):
     """
 
     name = "perpetua_star"
+    survivals_: dict[EdgeKey, tuple[SurvivalMixture, SurvivalMixture]]
+    default_survivals_: tuple[SurvivalMixture, SurvivalMixture]
+    p_m_: float
+    p_f_: float
+    gamma_: float | None
+    half_life_s_: float | None
     anneal_prediction = False
     _parameters = {
         "prior": Options(*PRIOR_KINDS, help="switching prior"),

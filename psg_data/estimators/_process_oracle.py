@@ -214,7 +214,8 @@ class ProcessOracleFilter(BaseFilter):
 
     def _window(self, lo: float, hi: float) -> tuple[NDArray[np.float64], list[str], NDArray[np.int8]]:
         """Observations of the entity with lo < t <= hi: siblings from the training data and the
-        tracker, the own edge from the filter's updates."""
+        tracker, the own edge from the filter's updates.
+        """
         d = self._data
         a, b = np.searchsorted(d.t, lo, side="right"), np.searchsorted(d.t, hi, side="right")
         sib = d.label[a:b] != self.edge[1]

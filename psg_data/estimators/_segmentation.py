@@ -62,7 +62,7 @@ def segment_stream(y: ArrayLike, *, min_size: int = 5, penalty: float = 3.0) -> 
 
 
 def segment_reference(y: ArrayLike, *, penalty: float = 3.0, min_size: int = 2, jump: int = 5) -> NDArray[np.int64]:
-    """ruptures' PELT with the L2 cost, as the Perpetua reference runs it (see the module docstring).
+    """Ruptures' PELT with the L2 cost, as the Perpetua reference runs it (see the module docstring).
 
     Candidate change points are the multiples of ``jump`` that leave ``min_size`` samples on the
     left, plus N; the L2 cost of ``y[s:e]`` is ``sum (y - mean)^2`` (for 0/1 data ``k (n - k) / n``

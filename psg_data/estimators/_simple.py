@@ -201,7 +201,8 @@ class AlwaysPresentEstimator(_NoFitEstimator):
 
 class AlwaysAbsentEstimator(_NoFitEstimator):
     """Predicts 0 everywhere: the chance row of the thresholded metrics (B-Acc 0.5, F1 0; MAE = the
-    share of time the object is present)."""
+    share of time the object is present).
+    """
 
     name = "always_absent"
     value = 0.0
@@ -262,7 +263,8 @@ class TimeOfWeekFrequencyEstimator(BaseEstimator):
             tot = np.bincount(i, weights=y, minlength=nb)
             base = float(y.mean()) if y.size else 0.5
             a = float(self.pseudo_count)
-            self.tables_[e] = (tot + a * base) / (cnt + a) if a > 0 else np.where(cnt > 0, tot / np.maximum(cnt, 1), base)
+            raw = np.where(cnt > 0, tot / np.maximum(cnt, 1), base)
+            self.tables_[e] = (tot + a * base) / (cnt + a) if a > 0 else raw
         self.default_ = np.full(nb, 0.5)
         self.fitted_ = True
         return self

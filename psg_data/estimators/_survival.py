@@ -93,7 +93,7 @@ class SurvivalMixture:
             return np.log(self.weights)
 
     def log_sf(self, t: ArrayLike) -> NDArray[np.float64]:
-        """log S_l(t) for every component.
+        """Log S_l(t) for every component.
 
         Args:
             t: (...) durations in seconds since the origin; negative values count as 0.
@@ -118,7 +118,7 @@ class SurvivalMixture:
         return -np.logaddexp(0.0, z)
 
     def log_sf_rows(self, tau: NDArray[np.float64]) -> NDArray[np.float64]:
-        """log S_l(tau) as a (K, n) array for (n,) durations ``tau >= 0`` (s); the filters' batch layout."""
+        """Log S_l(tau) as a (K, n) array for (n,) durations ``tau >= 0`` (s); the filters' batch layout."""
         f = self.family
         if f == "exponential":
             return -self.p1[:, None] * tau
@@ -134,7 +134,7 @@ class SurvivalMixture:
         return -np.logaddexp(0.0, z)
 
     def log_sf_scalar(self, tau: float) -> list[float]:
-        """log S_l(tau) for one duration ``tau`` (s) as a list of K floats (math module, no numpy).
+        """Log S_l(tau) for one duration ``tau`` (s) as a list of K floats (math module, no numpy).
 
         Equals :meth:`log_sf_rows` up to rounding (~1e-14 relative); used by the filters' one-at-a-time
         fast path, where numpy's per-call overhead dominates for a handful of components.
@@ -166,7 +166,7 @@ class SurvivalMixture:
         return cached
 
     def log_sf_one(self, t: ArrayLike, k: ArrayLike) -> NDArray[np.float64]:
-        """log S_k(t) for component index ``k`` (broadcast with ``t``)."""
+        """Log S_k(t) for component index ``k`` (broadcast with ``t``)."""
         t = np.maximum(np.asarray(t, dtype=np.float64), 0.0)
         k = np.asarray(k, dtype=np.intp)
         p1 = self.p1[k]

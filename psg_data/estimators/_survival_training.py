@@ -137,8 +137,10 @@ def training_runs(streams: Sequence[EdgeStream], *, segmentation: str = "hmm", d
         segmentation: one of :data:`SEGMENTATIONS`.
         durations: "segments" (runs from the segmentation), "ground_truth" (runs from the meta
             ground truth; required) or "auto" (ground truth where present).
-        p_m, p_f: fixed error rates (None: estimated).
-        min_segment, segment_penalty: settings of the "bernoulli" segmentation.
+        p_m: fixed missed-detection rate (None: estimated).
+        p_f: fixed false-positive rate (None: estimated).
+        min_segment: minimum segment length (observations) of the "bernoulli" segmentation.
+        segment_penalty: change-point penalty of the "bernoulli" segmentation.
 
     Raises:
         EstimatorError: unknown options, or ground truth requested but missing.
@@ -227,7 +229,8 @@ class _Fitter:
     def __init__(self, family: str, max_components: int, sigma_min: float, seed: int) -> None:
         self.family, self.max_components, self.sigma_min, self.seed = family, max_components, sigma_min, seed
 
-    def fit(self, lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray[np.float64], k_max: int) -> SurvivalMixture:
+    def fit(self, lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray[np.float64],
+            k_max: int) -> SurvivalMixture:
         return fit_interval_mixture(lo, hi, family=self.family, weights=w, max_components=max(1, k_max),
                                     sigma_min=self.sigma_min, random_state=self.seed).mixture
 

@@ -183,11 +183,14 @@ def collect_durations(streams: Sequence[EdgeStream], *, source: str = "segments"
         streams: training streams (ground truth, if used, in ``meta['gt_t_s']`` / ``meta['gt_state']``).
         source: "segments" (PELT on the observations), "ground_truth" (requires the meta keys) or
             "auto" (ground truth when present).
+        min_size: minimum PELT segment length (observations).
+        penalty: PELT change-point penalty.
     """
     if source not in ("segments", "ground_truth", "auto"):
         raise EstimatorError(f"durations source must be 'segments', 'ground_truth' or 'auto', got {source!r}")
     if int(min_size) < 1 or not float(penalty) >= 0:
-        raise EstimatorError(f"segmentation: min_segment must be >= 1 and segment_penalty >= 0, got {min_size}, {penalty}")
+        raise EstimatorError(f"segmentation: min_segment must be >= 1 and segment_penalty >= 0, got {min_size}, "
+                             f"{penalty}")
     out: dict[EdgeKey, EdgeDurations] = {}
     ys, labs = [], []
     for s in streams:
@@ -195,7 +198,8 @@ def collect_durations(streams: Sequence[EdgeStream], *, source: str = "segments"
             continue
         has_gt = "gt_t_s" in s.meta and "gt_state" in s.meta
         if source == "ground_truth" and not has_gt:
-            raise EstimatorError(f"edge {s.edge}: durations source 'ground_truth' needs meta['gt_t_s'] and meta['gt_state']")
+            raise EstimatorError(f"edge {s.edge}: durations source 'ground_truth' needs meta['gt_t_s'] and "
+                                 "meta['gt_state']")
         bounds = segment_stream(s.y, min_size=min_size, penalty=penalty)
         p, a, lab = runs_from_segments(s.t_s, s.y, bounds)
         if has_gt and source != "segments":

@@ -33,6 +33,7 @@ from psg_data.evaluation._dataset_task import (
     persistence_task_from_dataset,
     persistence_task_from_lab,
 )
+from psg_data.evaluation._door_report import door_results, summarise_doors
 from psg_data.evaluation._hints import EstimatorSpec, dataset_hints, require_hints, with_hints
 from psg_data.evaluation._intervals import (
     Interval,
@@ -42,7 +43,15 @@ from psg_data.evaluation._intervals import (
     ratio_interval,
     t_interval,
 )
+from psg_data.evaluation._navigation_report import (
+    choose_map_query,
+    navigation_results,
+    plot_delta_sweep,
+    write_navigation_results,
+)
+from psg_data.evaluation._navigation_scores import query_terms, score_records, summarise_navigation
 from psg_data.evaluation._options import PersistenceOptions
+from psg_data.evaluation._persistence_plots import plot_beliefs, plot_horizon, plot_metric_bars
 from psg_data.evaluation._persistence_result import PersistenceResult, merge_results, summarize_rows
 from psg_data.evaluation._persistence_task import (
     RegistryFactory,
@@ -61,9 +70,13 @@ from psg_data.evaluation._persistence_types import (
     PredictionTrace,
     WeekdayResult,
 )
-from psg_data.evaluation._persistence_plots import plot_beliefs, plot_horizon, plot_metric_bars
-from psg_data.evaluation._references import PAPER_METHODS, Reference, door_references, navigation_references, \
-    persistence_references
+from psg_data.evaluation._references import (
+    PAPER_METHODS,
+    Reference,
+    door_references,
+    navigation_references,
+    persistence_references,
+)
 from psg_data.evaluation._report import (
     choose_plot_edges,
     format_persistence_table,
@@ -81,14 +94,6 @@ from psg_data.evaluation._results import (
     save_results,
 )
 from psg_data.evaluation._tables import format_compare, format_results, format_table, print_results, render_table
-from psg_data.evaluation._navigation_scores import query_terms, score_records, summarise_navigation
-from psg_data.evaluation._navigation_report import (
-    choose_map_query,
-    navigation_results,
-    plot_delta_sweep,
-    write_navigation_results,
-)
-from psg_data.evaluation._door_report import door_results, summarise_doors
 from psg_data.evaluation._windows import (
     DailyWindows,
     dataset_cadence_s,

@@ -125,7 +125,8 @@ def _label_grid(ds: Any, gt: Any, labels: str, seed: int) -> Any:
         raise EvaluationError(f"labels {labels!r}: a lab drawn without images has only its ground truth; use gt or "
                               "noisy:P, or build the dataset (psg-data synth) and label it")
     if not ds.has_table("labels"):
-        raise EvaluationError(f"{ds.root}: dataset has no labels table; run `psg-data label {ds.root} --source {labels}` first")
+        raise EvaluationError(f"{ds.root}: dataset has no labels table; run `psg-data label {ds.root} --source "
+                              f"{labels}` first")
     try:
         grid = LabelGrid.from_table(ds.table("labels"), spec.name)
     except LabelingError:
@@ -203,7 +204,8 @@ def _task(name: str, g: _Grids, dense: DenseGroundTruth | None, timezone: str, i
                               "fill scans.split or provide three weeks of scans")
     edges = [(gt.object_ids[o], gt.receptacle_ids[r]) for o, r in zip(*np.nonzero(gt.valid))]
     if not edges:
-        raise EvaluationError(f"{info.get('dataset', name)}: no edges (the schedule never places an object on a receptacle)")
+        raise EvaluationError(f"{info.get('dataset', name)}: no edges (the schedule never places an object on a "
+                              "receptacle)")
     test_truth = _window_truth(g, "test", edges, dense)
     assert test_truth is not None
     train_truth = _window_truth(g, "train", edges, dense)
@@ -222,7 +224,8 @@ def _task(name: str, g: _Grids, dense: DenseGroundTruth | None, timezone: str, i
 
 def _lab_dense(lab: Any, windows: DailyWindows, step_s: float = DENSE_STEP_S) -> DenseGroundTruth:
     """Dense ground truth of a synthetic lab, every ``step_s`` aligned with the clock, inside ``windows``
-    (both ends included, so that a state changing at a step start changes on a grid point)."""
+    (both ends included, so that a state changing at a step start changes on a grid point).
+    """
     step_ns = int(round(step_s * 1e9))
 
     def dense(start_ns: int, end_ns: int) -> tuple[NDArray[np.int64], dict[EdgeKey, NDArray[np.int64]]]:
@@ -240,7 +243,8 @@ def _lab_dense(lab: Any, windows: DailyWindows, step_s: float = DENSE_STEP_S) ->
 
 
 # -- public builders -----------------------------------------------------------------------------------
-def persistence_task_from_dataset(dataset: Any, *, labels: str = "gt", dense_ground_truth: DenseGroundTruth | str | None = "auto",
+def persistence_task_from_dataset(dataset: Any, *, labels: str = "gt",
+                                  dense_ground_truth: DenseGroundTruth | str | None = "auto",
                                   seed: int = 0) -> PersistenceTask:
     """Build a :class:`PersistenceTask` from a psg-dataset (see the module docstring).
 
@@ -287,7 +291,8 @@ def persistence_task_from_dataset(dataset: Any, *, labels: str = "gt", dense_gro
 
 def lab_ground_truth(lab: Any) -> Any:
     """The ground-truth :class:`~psg_data.labeling.LabelGrid` of a :class:`~psg_data.synth.LabModel`
-    (what :func:`psg_data.labeling.ground_truth` gives on the dataset ``psg-data synth`` writes)."""
+    (what :func:`psg_data.labeling.ground_truth` gives on the dataset ``psg-data synth`` writes).
+    """
     from psg_data.labeling import LabelGrid
     from psg_data.schemas._tables import CODE_ABSENT, CODE_INVALID, CODE_PRESENT
 
@@ -303,7 +308,8 @@ def lab_ground_truth(lab: Any) -> Any:
                 present[s, j, ri[r]] = True
     codes = np.where(present, CODE_PRESENT, CODE_ABSENT).astype(np.int8)
     codes[:, ~present.any(axis=0)] = CODE_INVALID
-    return LabelGrid([p.scan_id for p in plans], objs, recs, np.array([p.start_ns for p in plans], np.int64), codes, "gt")
+    starts = np.array([p.start_ns for p in plans], np.int64)
+    return LabelGrid([p.scan_id for p in plans], objs, recs, starts, codes, "gt")
 
 
 def persistence_task_from_lab(lab: Any, *, labels: str = "gt", seed: int = 0) -> PersistenceTask:
@@ -346,14 +352,16 @@ def persistence_task_from_lab(lab: Any, *, labels: str = "gt", seed: int = 0) ->
 
 def persistence_task_from_benchmark(seed: int = 0, **kwargs: Any) -> PersistenceTask:
     """One draw of the Sec. V-A benchmark (:func:`psg_data.synth.make_persistence_benchmark`) with the paper's
-    protocol: adaptive, no forecast horizon, the plain trapezoid over the dense 60 s grid."""
+    protocol: adaptive, no forecast horizon, the plain trapezoid over the dense 60 s grid.
+    """
     from psg_data.estimators import PAPER_SETTINGS
     from psg_data.synth import make_persistence_benchmark
 
     bm = make_persistence_benchmark(seed=seed, **kwargs)
     return PersistenceTask(
         name="persistence-benchmark", train_streams=bm.train_streams, test_streams=bm.test_streams,
-        ground_truth=dict(bm.test_truth), timezone=bm.timezone, val_streams=bm.val_streams,
+        ground_truth={k: (t, y.astype(np.int64)) for k, (t, y) in bm.test_truth.items()}, timezone=bm.timezone,
+        val_streams=bm.val_streams,
         info={"dataset": "persistence-benchmark", "seed": seed, "p_m": bm.p_m, "p_f": bm.p_f, "shift": bm.shift,
               "edges": len(bm.edges), "ground_truth": "dense 60 s grid over the test week",
               "split": "week 0 validation, weeks 1-4 train, week 5 test", "labels": "benchmark observations",

@@ -59,7 +59,8 @@ def door_terms(df: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 def summarise_doors(records: Any, names: list[str], *, seed: int = 0) -> dict[str, dict[str, Summary]]:
     """Method -> metric -> :class:`Summary` (pooled over seeds; bootstrap over door queries; std over seeds).
-    ``extra m`` and ``wasted m`` of a method without such episodes are 0 (nothing walked), as in the table."""
+    ``extra m`` and ``wasted m`` of a method without such episodes are 0 (nothing walked), as in the table.
+    """
     out: dict[str, dict[str, Summary]] = {}
     for n in names:
         df = records[records["estimator"] == n]
@@ -122,7 +123,8 @@ def pick_blocked_door_query(res: Any, label: str) -> int:
     """Index (in the first seed's queries) of a door query whose all-open first plan ran into a closed
     door, preferring one where ``label`` planned around it and arrived, then one where ``label``
     predicted the door closed and did not set off (nothing wasted), then one where ``label``'s own
-    first plan was blocked too; else 0."""
+    first plan was blocked too; else 0.
+    """
     first = res.first
     eps, base = first.episodes[label], first.episodes["all_open"]
     blocked = [i for i, b in enumerate(base) if b.first_plan_blocked]
@@ -135,7 +137,8 @@ def pick_blocked_door_query(res: Any, label: str) -> int:
 def write_door_results(res: Any, out: Path, *, roles: Mapping[str, tuple[str, str]] | None, info: Mapping[str, Any]
                        ) -> EvalResults:
     """results.json / summary.csv / table.txt, results.csv (door summary), by_seed.csv, records.csv,
-    objects/ (the objects run) and objects/walk.csv."""
+    objects/ (the objects run) and objects/walk.csv.
+    """
     results = door_results(res, roles=roles, info=info)
     save_results(results, out)
     res.per_seed.to_csv(out / "by_seed.csv", index=False)

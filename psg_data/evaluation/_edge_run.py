@@ -108,7 +108,8 @@ class _Progress:
     t: float | None = None
 
 
-def _predictions(f: Any, job: EdgeJob, cfg: ScoreConfig, at: _Progress) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _predictions(f: Any, job: EdgeJob, cfg: ScoreConfig,
+                 at: _Progress) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Beliefs at the evaluation times and, per time, the time of the last observation the filter had.
 
     Adaptive with horizon ``h``: the prediction at ``t`` is made after exactly the test observations
@@ -169,9 +170,11 @@ def run_edge(name: str, seed: int, est: PersistenceEstimator, job: EdgeJob, cfg:
 
     def issue(stage: str, t: float | None, msg: str, n: int = 1) -> EvaluationIssue:
         where = f"estimator {name!r} seed {seed} edge ({obj!r}, {rec!r})"
-        return EvaluationIssue(name, seed, obj, rec, stage, t, f"{where}: {msg}" + (f" at t_s={t!r}" if t is not None else ""), n)
+        when = f" at t_s={t!r}" if t is not None else ""
+        return EvaluationIssue(name, seed, obj, rec, stage, t, f"{where}: {msg}{when}", n)
 
-    def result(status: str, n_points: int = 0, span: float = 0.0, metrics: dict[str, float] | None = None) -> EdgeResult:
+    def result(status: str, n_points: int = 0, span: float = 0.0,
+               metrics: dict[str, float] | None = None) -> EdgeResult:
         return EdgeResult(name, seed, obj, rec, status, n_points, span, int(job.hist_t.size), int(job.test_t.size),
                           metrics if metrics is not None else nan_metrics(), job.draw)
 

@@ -73,7 +73,8 @@ def label_noise(labels: str) -> tuple[float, float] | None:
 
 def with_label_noise(spec: EstimatorSpec, labels: str) -> EstimatorSpec:
     """The ceiling knows the data's noise model: ``process_oracle`` on ``noisy:P`` labels gets
-    ``p_m`` / ``p_f`` of the source unless the user set them (learned estimators never do)."""
+    ``p_m`` / ``p_f`` of the source unless the user set them (learned estimators never do).
+    """
     noise = label_noise(labels)
     if spec.name != "process_oracle" or noise is None:
         return spec

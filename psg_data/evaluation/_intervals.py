@@ -174,7 +174,8 @@ def cluster_jackknife(num: ArrayLike, den: ArrayLike, *, confidence: float = 0.9
 def ratio_interval(num: ArrayLike, den: ArrayLike, *, confidence: float = 0.95, n_bootstrap: int = 2000,
                    seed: int = 0, unit: str = "objects") -> Interval:
     """The within-dataset default: :func:`cluster_bootstrap` with >= :data:`MIN_BOOTSTRAP_UNITS` units,
-    else :func:`cluster_jackknife`."""
+    else :func:`cluster_jackknife`.
+    """
     n_, _ = _ratio_inputs(num, den)
     if n_.size >= MIN_BOOTSTRAP_UNITS:
         return cluster_bootstrap(num, den, confidence=confidence, n_bootstrap=n_bootstrap, seed=seed, unit=unit)

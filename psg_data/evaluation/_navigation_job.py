@@ -1,5 +1,6 @@
 """Navigation and door runs as ``psg-eval`` makes them: the methods (the user's, the paper's, the
-reference rows), the run, the results schema, the files and the figures."""
+reference rows), the run, the results schema, the files and the figures.
+"""
 
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ _NAV_BUILTINS = ("oracle", "last_seen_map", "random_receptacle")
 
 
 def navigation_methods(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, references: bool = True,
-                       labels: str = "gt") -> tuple[dict[str, str], dict[str, dict[str, Any]], dict[str, tuple[str, str]]]:
+                       labels: str = "gt"
+                       ) -> tuple[dict[str, str], dict[str, dict[str, Any]], dict[str, tuple[str, str]]]:
     """(label -> method name, label -> settings with the dataset's hints, label -> (role, description))."""
     methods: dict[str, str] = {}
     roles: dict[str, tuple[str, str]] = {}
@@ -50,7 +52,8 @@ def _maps(res: Any, out: Path, methods: list[str]) -> None:
         key = (label, sd, qid)
         r = rec.loc[(label, sd, qid, float(res.config["delta"]))]
         title = (f"{label}: {r['outcome']} after {r['path_m']:.1f} m (query {qid} of seed {sd})\n{q.object_id} "
-                 f"({q.category}): on {q.gt_receptacle or 'nothing'}, on {q.map_receptacle or 'nothing'} at the last map")
+                 f"({q.category}): on {q.gt_receptacle or 'nothing'}, on {q.map_receptacle or 'nothing'} at the "
+                 "last map")
         plot_query(res.env, q, out / f"map_{label}.png", beliefs=res.beliefs.get(key), trail=res.trails.get(key),
                    cache=res.cache, title=title)
 
@@ -88,7 +91,8 @@ def run_navigation_job(specs: Sequence[EstimatorSpec], dataset: Path, options: A
 def door_methods(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, references: bool = True
                  ) -> tuple[list[tuple[str, str]], dict[str, dict[str, Any]], dict[str, tuple[str, str]], list[str]]:
     """(label, name) pairs of the door estimators, their settings, the roles of every row (baselines
-    ``oracle`` and ``all_open`` included), and the labels whose object runs are made (not the references)."""
+    ``oracle`` and ``all_open`` included), and the labels whose object runs are made (not the references).
+    """
     rows = list(specs)
     roles: dict[str, tuple[str, str]] = {}
     if references:
@@ -108,7 +112,8 @@ def door_methods(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, refer
 
 def _door_figures(res: Any, label: str, spec: EstimatorSpec, out: Path) -> None:
     """door_plan_<label>.png (a door query whose all-open first plan ran into a closed door) and
-    doors_<label>.png (an object query planned around a predicted-closed door)."""
+    doors_<label>.png (an object query planned around a predicted-closed door).
+    """
     from psg_data.evaluation._door_report import pick_blocked_door_query
     from psg_data.navigation import pick_door_example, plot_door_example, plot_door_query
 

@@ -121,9 +121,8 @@ def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
     if s is None:
         out.append("±: -")
         return out
-    counts = {g: v.n for g, v in (("static", rows[0].values.get("static_sr")), ("dynamic", rows[0].values.get("dynamic_sr")),
-                                  ("absent", rows[0].values.get("absent_ar")), ("overall", rows[0].values.get("overall_sr")))
-              if v is not None}
+    groups = {"static": "static_sr", "dynamic": "dynamic_sr", "absent": "absent_ar", "overall": "overall_sr"}
+    counts = {g: v.n for g, key in groups.items() if (v := rows[0].values.get(key)) is not None}
     what = ", ".join(f"{k} {n}" for k, n in counts.items())
     out.append(f"±: half-width of the 95 % interval over each column's queries, resampled whole ({what}; {n_sets} "
                f"query sets pooled): expanded percentile bootstrap, or a jackknife t-interval under "
@@ -140,7 +139,7 @@ def _main_table(res: Any, roles: Mapping[str, tuple[str, str]], layout: str) -> 
     ceiling = next((r for r in rows if r.role == "ceiling"), None)
     chance = next((r for r in rows if r.role == "chance"), None)
     primary = "overall_sr" if ceiling is not None else None
-    if primary:
+    if primary and ceiling is not None:
         for r in rows:
             r.pct_of_ceiling = pct_of_ceiling(r.values[primary].mean, ceiling.values[primary].mean,
                                               chance.values[primary].mean if chance else 0.0)
@@ -150,7 +149,8 @@ def _main_table(res: Any, roles: Mapping[str, tuple[str, str]], layout: str) -> 
                  for i in infos]
     n = int(res.summary["n_queries"].iloc[0]) // max(1, len(res.config.get("seeds") or [1])) if len(res.summary) else 0
     title = (f"Object navigation on {res.config.get('env')} ({n} queries x {len(res.config.get('seeds') or [])} query "
-             f"sets, protocol {res.config.get('protocol')}, {res.config.get('setting')}, delta {res.config.get('delta')})")
+             f"sets, protocol {res.config.get('protocol')}, {res.config.get('setting')}, delta "
+             f"{res.config.get('delta')})")
     return ResultTable("navigation", title, infos, rows, _notes(rows, metrics, res), groups,
                        ["queries", "query sets"], primary)
 
@@ -168,7 +168,8 @@ def _sweep_table(res: Any, roles: Mapping[str, tuple[str, str]]) -> ResultTable 
                               counts={"delta": f"{r['delta']:g}"}))
     infos = [MetricInfo(k, f"{'overall' if k == 'overall_sr' else k.split('_')[0]} {NAV_METRICS[k].label}",
                         NAV_METRICS[k].better, NAV_METRICS[k].description, 100.0, 1) for k in keys]
-    notes = ["delta: the agent declares the target absent when no untried receptacle has a belief >= delta; a low delta "
+    notes = ["delta: the agent declares the target absent when no untried receptacle has a belief >= delta; a low "
+             "delta "
              "finds more moved objects and aborts less on absent ones (delta_sweep.png)"]
     return ResultTable("delta_sweep", "Delta sweep (same queries and filters for every delta)", infos, rows, notes,
                        count_columns=["delta"])
@@ -187,14 +188,16 @@ def navigation_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None 
         tables.append(sweep)
     main = tables[0]
     s = next((v for r in main.rows for v in r.values.values() if v.method != "none"), None)
-    interval = {"method": s.method, "unit": "queries", "n": s.n, "confidence": 0.95, "text": main.notes[-1]} if s else {}
+    interval = ({"method": s.method, "unit": "queries", "n": s.n, "confidence": 0.95, "text": main.notes[-1]}
+                if s else {})
     return EvalResults("navigation", tables, config=dict(res.config), info=dict(info or {}), interval=interval)
 
 
 def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,
                              info: Mapping[str, Any] | None = None) -> dict[str, Path]:
     """Write the results schema (results.json, summary.csv, table.txt), records.parquet, per_seed.csv,
-    results.csv (one row per method, every column of the summary) and sweep.csv (with a sweep)."""
+    results.csv (one row per method, every column of the summary) and sweep.csv (with a sweep).
+    """
     out = Path(out_dir)
     paths = save_results(navigation_results(res, roles=roles, info=info), out)
     extra = {"records": out / "records.parquet", "per_seed": out / "per_seed.csv", "csv": out / "results.csv"}
@@ -210,7 +213,8 @@ def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[st
 def choose_map_query(res: Any, methods: list[str] | None = None) -> tuple[int, int]:
     """(seed, query_id) of the first query set's most informative query for the maps: a dynamic target
     on which the methods' outcomes and first receptacles disagree most (then: any dynamic one,
-    then query 0)."""
+    then query 0).
+    """
     rec = res.records
     rec = rec[rec["delta"] == float(res.config.get("delta", 0.2))] if "delta" in rec else rec
     sd = sorted(res.queries)[0]

@@ -41,7 +41,7 @@ COUNTS = ("n_queries", "n_static", "n_dynamic", "n_absent", "n_unreachable")
 def _spl_terms(s: NDArray[np.bool_], l_: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64]:
     den = np.maximum(p, l_)
     ratio = np.divide(l_, den, out=np.ones(s.size, dtype=np.float64), where=den > 0)
-    return s * ratio
+    return s.astype(np.float64) * ratio
 
 
 def query_terms(df: Any, *, absent_in_overall: str = "abort_is_success", unreachable: str = "exclude"
@@ -50,6 +50,8 @@ def query_terms(df: Any, *, absent_in_overall: str = "abort_is_success", unreach
 
     Args:
         df: per-query records (columns of :func:`psg_data.navigation.episode_record`).
+        absent_in_overall: how absent queries count in the overall SR/SPL, one of :data:`ABSENT_RULES`.
+        unreachable: "exclude" (queries whose target cannot be reached are left out) or "failure".
     """
     if absent_in_overall not in ABSENT_RULES:
         raise EvaluationError(f"absent_in_overall: expected one of {ABSENT_RULES}, got {absent_in_overall!r}")
@@ -99,7 +101,8 @@ def _ratio(num: NDArray[np.float64], den: NDArray[np.float64]) -> float:
 def score_records(df: Any, *, absent_in_overall: str = "abort_is_success", unreachable: str = "exclude"
                   ) -> dict[str, float]:
     """Table metrics of one method on one query set: the :data:`METRICS` (NaN for an empty category)
-    and the counts ``n_static``, ``n_dynamic``, ``n_absent``, ``n_unreachable``, ``n_queries``."""
+    and the counts ``n_static``, ``n_dynamic``, ``n_absent``, ``n_unreachable``, ``n_queries``.
+    """
     terms = query_terms(df, absent_in_overall=absent_in_overall, unreachable=unreachable)
     out: dict[str, float] = {m: _ratio(*terms[m]) for m in METRICS}
     out.update(_counts(df))

@@ -131,8 +131,8 @@ class PersistenceOptions:
         horizon = self.horizon
         if horizon == "auto":
             horizon = float(protocol.get("horizon_s", getattr(task, "cadence_s", None) or 0.0))
-        return replace(self, horizon=float(horizon), weighting=weighting,
-                       windows=windows if weighting == "windows" else "none")
+        kept: DailyWindows | str = windows if weighting == "windows" and windows is not None else "none"
+        return replace(self, horizon=float(horizon), weighting=weighting, windows=kept)
 
     @property
     def windows_or_none(self) -> DailyWindows | None:

@@ -52,7 +52,8 @@ class GroundTruthEstimator:
     def __init__(self, truth: Mapping[EdgeKey, tuple[Any, Any]]) -> None:
         self.truth = {k: (np.asarray(t, np.float64), np.asarray(y, np.int64)) for k, (t, y) in truth.items()}
 
-    def fit(self, streams: Sequence[EdgeStream], *, val_streams: Any = None, timezone: str = "UTC") -> GroundTruthEstimator:
+    def fit(self, streams: Sequence[EdgeStream], *, val_streams: Any = None,
+            timezone: str = "UTC") -> GroundTruthEstimator:
         return self
 
     def make_filter(self, edge: EdgeKey) -> _TruthFilter:

@@ -34,7 +34,8 @@ Roles = dict[str, tuple[str, str]]
 def persistence_rows(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, references: bool = True
                      ) -> tuple[list[EstimatorSpec], Roles]:
     """The rows of a run: the user's specs, then (with ``references``) the paper's comparison methods and
-    the reference rows (ceiling, baselines, chance) not already given; and label -> (role, description)."""
+    the reference rows (ceiling, baselines, chance) not already given; and label -> (role, description).
+    """
     out = list(specs)
     roles: Roles = {}
     if not references:
@@ -49,7 +50,7 @@ def persistence_rows(specs: Sequence[EstimatorSpec], hints: dict[str, Any], *, r
 
 
 def factories_for(specs: Sequence[EstimatorSpec], task: PersistenceTask) -> dict[str, Callable[..., Any]]:
-    """label -> picklable factory (registry estimators with the task's hints; ``ground_truth`` -> the truth)."""
+    """Label -> picklable factory (registry estimators with the task's hints; ``ground_truth`` -> the truth)."""
     out: dict[str, Callable[..., Any]] = {}
     for s in specs:
         if s.name == "ground_truth":
@@ -89,7 +90,8 @@ def _draw_job(kind: str, seed: int, labels: str, specs: Sequence[EstimatorSpec],
     from psg_data.evaluation._report import choose_plot_edges
 
     task = draw_task(kind, seed, labels)
-    res = run_persistence_rows(specs, task, options, keep_predictions=choose_plot_edges(task.ground_truth) if keep else ())
+    kept = choose_plot_edges(task.ground_truth) if keep else ()
+    res = run_persistence_rows(specs, task, options, keep_predictions=kept)
     return res, (task if keep else None)
 
 
@@ -114,7 +116,8 @@ def run_lab_draws(kind: str, seeds: Sequence[int], labels: str, specs: Sequence[
             if progress is not None:
                 progress(k + 1, len(seeds))
     else:
-        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0): s for k, s in enumerate(seeds)}
+        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0): s
+                for k, s in enumerate(seeds)}
         from concurrent.futures import as_completed
 
         for done, fut in enumerate(as_completed(futs), 1):

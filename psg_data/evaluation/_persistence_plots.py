@@ -24,7 +24,6 @@ from psg_data.evaluation._persistence_types import PredictionTrace
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-    from psg_data.evaluation._results import EvalResults
 
 __all__ = ["plot_beliefs", "plot_metric_bars", "plot_horizon", "save_figure", "compressed_axis"]
 
@@ -40,7 +39,8 @@ def save_figure(fig: Figure, out_path: str | Path | None, dpi: int = 110) -> Fig
 
 def compressed_axis(t_s: NDArray[np.float64], gap_factor: float = 3.0) -> tuple[NDArray[np.float64], list[int]]:
     """Positions (hours) along the scored time: every gap longer than ``gap_factor`` x the median step
-    is shrunk to one median step. Returns (positions, indices where a cut starts a new segment)."""
+    is shrunk to one median step. Returns (positions, indices where a cut starts a new segment).
+    """
     t = np.asarray(t_s, np.float64)
     if t.size < 2:
         return t / 3600.0, []
@@ -51,7 +51,8 @@ def compressed_axis(t_s: NDArray[np.float64], gap_factor: float = 3.0) -> tuple[
     return np.concatenate([[0.0], np.cumsum(d2)]) / 3600.0, [int(i) + 1 for i in np.flatnonzero(cut)]
 
 
-def _broken(x: NDArray[np.float64], y: NDArray[np.float64], cuts: Sequence[int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _broken(x: NDArray[np.float64], y: NDArray[np.float64],
+            cuts: Sequence[int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Insert NaN at the cuts so a line is not drawn across them."""
     if not cuts:
         return x, y
@@ -170,9 +171,10 @@ def _bar_panel(ax: Any, table: Any, metric: Any, colours: list[Any]) -> None:
     ax.set_ylim(0, 1.1)
 
 
-def plot_metric_bars(results: EvalResults | Any, out_path: str | Path | None = None) -> Figure:
+def plot_metric_bars(results: Any, out_path: str | Path | None = None) -> Figure:
     """Bars of the table's metrics per row (module docstring). ``results``: an
-    :class:`~psg_data.evaluation.EvalResults` or a :class:`~psg_data.evaluation.PersistenceResult`."""
+    :class:`~psg_data.evaluation.EvalResults` or a :class:`~psg_data.evaluation.PersistenceResult`.
+    """
     import matplotlib
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
@@ -193,7 +195,7 @@ def plot_metric_bars(results: EvalResults | Any, out_path: str | Path | None = N
     axes = fig.subplots(1, len(table.metrics), squeeze=False)[0]
     for ax, m in zip(axes, table.metrics):
         _bar_panel(ax, table, m, colours)
-    handles = [Line2D([], [], color="k", ls="--", lw=1.0, label="chance (always_absent)"),
+    handles: list[Any] = [Line2D([], [], color="k", ls="--", lw=1.0, label="chance (always_absent)"),
                Line2D([], [], color="k", marker="|", ls="", ms=8, label="95 % interval (see the table's ± line)")]
     handles += [Patch(facecolor="white", edgecolor="0.25", hatch=h, label=f"reference row: {role}")
                 for role, h in _ROLE_HATCH.items() if any(r.role == role for r in table.rows)]
@@ -216,7 +218,8 @@ def _bin_shares(result: Any, order: list[str]) -> dict[str, float]:
 
 def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Sequence[str] = ()) -> Figure:
     """The metrics by time since the edge's last observation the filter had (``by_horizon.csv``), with
-    intervals; one line per row; the chance row (``always_absent``) dashed black."""
+    intervals; one line per row; the chance row (``always_absent``) dashed black.
+    """
     import matplotlib
     from matplotlib.figure import Figure
 
@@ -236,7 +239,8 @@ def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Seque
         for i, n in enumerate(names):
             d = df[(df.estimator == n) & (df.metric == key)].set_index("horizon").reindex(order)
             m = d["mean"].to_numpy(float)
-            err = np.vstack([np.nan_to_num(m - d["ci_low"].to_numpy(float)), np.nan_to_num(d["ci_high"].to_numpy(float) - m)])
+            err = np.vstack([np.nan_to_num(m - d["ci_low"].to_numpy(float)),
+                             np.nan_to_num(d["ci_high"].to_numpy(float) - m)])
             ax.errorbar(x + (i - (len(names) - 1) / 2) * 0.05, m, yerr=err, marker="o", ms=4, lw=1.2, capsize=2,
                         color=cmap(i % 10), label=n)
         if "always_absent" in set(df.estimator):

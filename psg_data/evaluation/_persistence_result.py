@@ -48,7 +48,7 @@ def _weights(rows: Sequence[Any], metric: str) -> list[float]:
 
 
 def _object_sums(rows: Sequence[Any], metric: str) -> dict[int, dict[int, dict[str, tuple[float, float]]]]:
-    """draw -> seed -> object -> (N, D) over the rows with a finite value and positive weight."""
+    """Draw -> seed -> object -> (N, D) over the rows with a finite value and positive weight."""
     out: dict[int, dict[int, dict[str, tuple[float, float]]]] = {}
     for r, w in zip(rows, _weights(rows, metric)):
         v = r.metrics.get(metric, float("nan"))
@@ -255,7 +255,8 @@ def merge_results(results: Sequence[PersistenceResult]) -> PersistenceResult:
     draws: list[int] = []
     for r in results:
         if r.estimators != first.estimators or r.config.get("setting") != first.config.get("setting"):
-            raise EvaluationError("merge_results: runs differ in estimators or setting; merge only runs of one configuration")
+            raise EvaluationError("merge_results: runs differ in estimators or setting; merge only runs of one "
+                                  "configuration")
         for d in r.config.get("draws", [0]):
             if d in draws:
                 raise EvaluationError(f"merge_results: draw {d} appears in two runs")
@@ -269,6 +270,7 @@ def merge_results(results: Sequence[PersistenceResult]) -> PersistenceResult:
                           for r in results]
     merged = PersistenceResult(config=config, edges=[e for r in results for e in r.edges],
                                breakdown_rows=[w for r in results for w in r.breakdown_rows],
-                               errors=[e for r in results for e in r.errors], traces=[t for r in results for t in r.traces])
+                               errors=[e for r in results for e in r.errors],
+                               traces=[t for r in results for t in r.traces])
     merged.fill_summary()
     return merged

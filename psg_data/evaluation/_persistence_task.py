@@ -53,7 +53,15 @@ from numpy.typing import NDArray
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream, PersistenceEstimator
 from psg_data.evaluation._dataset_task import PersistenceTask
-from psg_data.evaluation._edge_run import EdgeJob, EdgeOutcome, ScoreConfig, fit_estimator, nan_metrics, run_chunk, run_edge
+from psg_data.evaluation._edge_run import (
+    EdgeJob,
+    EdgeOutcome,
+    ScoreConfig,
+    fit_estimator,
+    nan_metrics,
+    run_chunk,
+    run_edge,
+)
 from psg_data.evaluation._options import AUTO_SEEDS, PersistenceOptions
 from psg_data.evaluation._persistence_result import PersistenceResult
 from psg_data.evaluation._persistence_types import EdgeResult, EvaluationIssue, clean_json
@@ -110,7 +118,7 @@ def resolve_estimators(estimators: Any) -> dict[str, EstimatorFactory]:
 
 def seeds_for(factory: EstimatorFactory, seeds: tuple[int, ...] | str) -> tuple[int, ...]:
     """The seeds an estimator is fitted with (see :class:`PersistenceOptions` ``seeds``)."""
-    wanted = AUTO_SEEDS if seeds == "auto" else tuple(seeds)  # type: ignore[arg-type]
+    wanted: tuple[int, ...] = AUTO_SEEDS if seeds == "auto" else tuple(int(s) for s in seeds)
     try:
         est = factory(random_state=wanted[0])
         depends = getattr(est, "fit_depends_on_seed", None)
@@ -122,7 +130,8 @@ def seeds_for(factory: EstimatorFactory, seeds: tuple[int, ...] | str) -> tuple[
 
 
 # -- inputs ---------------------------------------------------------------------------------------
-def _stream_dict(streams: Sequence[EdgeStream] | Mapping[EdgeKey, EdgeStream] | None, what: str) -> dict[EdgeKey, EdgeStream]:
+def _stream_dict(streams: Sequence[EdgeStream] | Mapping[EdgeKey, EdgeStream] | None,
+                 what: str) -> dict[EdgeKey, EdgeStream]:
     if streams is None:
         return {}
     items = list(streams.values()) if isinstance(streams, Mapping) else list(streams)
@@ -205,7 +214,8 @@ def _check_task(task: PersistenceTask) -> None:
 
         ZoneInfo(task.timezone)
     except Exception:  # noqa: BLE001
-        raise EvaluationError(f"unknown timezone {task.timezone!r}; expected an IANA name such as 'Europe/Zurich'") from None
+        raise EvaluationError(f"unknown timezone {task.timezone!r}; expected an IANA name such as "
+                              "'Europe/Zurich'") from None
     n_obs = sum(len(s) for s in task.test_streams)
     if n_obs == 0:
         raise EvaluationError(f"test split is empty: {len(task.test_streams)} test streams with 0 observations; check "
@@ -309,7 +319,8 @@ def _execute_inline(run: _Run) -> None:
 
 def _worker_error(name: str, seed: int, jobs: int, e: BaseException) -> EvaluationError:
     if isinstance(e, BrokenProcessPool):
-        return EvaluationError(f"estimator {name!r} seed {seed}: a worker process died (jobs={jobs}): {e}; scripts using "
+        return EvaluationError(f"estimator {name!r} seed {seed}: a worker process died (jobs={jobs}): {e}; scripts "
+                               "using "
                                "jobs > 1 need an `if __name__ == '__main__':` guard; or use jobs=1")
     return EvaluationError(f"estimator {name!r} seed {seed}: could not run in a worker process (jobs={jobs}): "
                            f"{type(e).__name__}: {e}; use jobs=1 or make the factory and fitted estimator picklable")
@@ -479,7 +490,7 @@ def evaluate_persistence(estimators: Any, train_streams: Sequence[EdgeStream], t
     """:func:`run_persistence_task` on bare streams (no dataset: no scoring windows, no cadence).
 
     Args:
-        estimators, jobs, progress, keep_predictions, executor: as in :func:`run_persistence_task`.
+        estimators: as in :func:`run_persistence_task`.
         train_streams: training observations, one :class:`EdgeStream` per edge.
         test_streams: test-window observations (applied online in the adaptive setting).
         ground_truth: per edge a grid of times (seconds, UTC epoch) and states (1 present,
@@ -491,6 +502,11 @@ def evaluate_persistence(estimators: Any, train_streams: Sequence[EdgeStream], t
         options: the settings; or give them as keywords (``setting="predictive"``, ``seeds=(0, 1)``,
             ``horizon="2h"``, ``windows="9-17"``, ...: fields of :class:`PersistenceOptions`).
             Without windows the plain trapezoid is used and the horizon ``auto`` is 0.
+        jobs: as in :func:`run_persistence_task`.
+        progress: as in :func:`run_persistence_task`.
+        keep_predictions: as in :func:`run_persistence_task`.
+        executor: as in :func:`run_persistence_task`.
+        **settings: fields of :class:`PersistenceOptions` (when ``options`` is not given).
     """
     if options is not None and settings:
         raise EvaluationError("evaluate_persistence: pass options= or keyword settings, not both")

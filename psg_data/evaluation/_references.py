@@ -88,7 +88,8 @@ def persistence_references(hints: dict[str, Any]) -> list[Reference]:
 
 def navigation_references(hints: dict[str, Any]) -> list[Reference]:
     """Navigation's reference rows (``oracle``, ``last_seen_map`` and ``random_receptacle`` are built into
-    the harness; the others are registry estimators)."""
+    the harness; the others are registry estimators).
+    """
     out = [_ref("oracle", "ceiling")]
     if hints.get("dataset") is not None or hints.get("model") is not None:
         out.append(Reference(EstimatorSpec.of("process_oracle"), "ceiling",

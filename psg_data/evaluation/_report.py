@@ -155,7 +155,8 @@ def persistence_results(result: PersistenceResult, *, roles: Mapping[str, tuple[
         r.pct_of_ceiling = pct_of_ceiling(r.values["balanced_accuracy"].mean, ceiling.get("balanced_accuracy"),
                                           chance.get("balanced_accuracy")) if primary else None
     metrics = [PERSISTENCE_METRICS[m] for m in TIME_METRICS]
-    metrics = [MetricInfo(m.key, m.label, m.better, m.description, m.scale, m.digits, chance.get(m.key)) for m in metrics]
+    metrics = [MetricInfo(m.key, m.label, m.better, m.description, m.scale, m.digits, chance.get(m.key))
+               for m in metrics]
     notes = [*_metric_notes(metrics, chance, result), _setting_note(cfg)]
     cn = _ceiling_note(rows, ceiling, chance)
     if cn:
@@ -186,11 +187,11 @@ def format_persistence_table(result: PersistenceResult, *, roles: Mapping[str, t
 
 def choose_plot_edges(result_or_truth: Any, k: int = 4) -> list[tuple[str, str]]:
     """The ``k`` edges whose ground truth changes most often in the test window (ties: name order)."""
+    import numpy as np
+
     truth = result_or_truth
     scored = []
-    for edge, (t, y) in truth.items():
-        import numpy as np
-
+    for edge, (_, y) in truth.items():
         y = np.asarray(y)
         y = y[(y == 0) | (y == 1)]
         scored.append((-int(np.count_nonzero(np.diff(y))), edge))
@@ -203,7 +204,8 @@ def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *,
                               ) -> dict[str, Path]:
     """Write ``results.json`` (the results schema), ``summary.csv``, ``table.txt``, ``results.csv`` (one row
     per estimator, seed, draw and edge), ``seeds.json`` and the breakdowns per object / receptacle /
-    weekday / horizon (``by_*.csv``)."""
+    weekday / horizon (``by_*.csv``).
+    """
     import json
 
     out = Path(out_dir)

@@ -105,7 +105,8 @@ class ResultTable:
         for r in self.rows:
             if r.method == method:
                 return r
-        raise EvaluationError(f"table {self.name!r}: no row {method!r} (rows: {', '.join(r.method for r in self.rows)})")
+        rows = ", ".join(r.method for r in self.rows)
+        raise EvaluationError(f"table {self.name!r}: no row {method!r} (rows: {rows})")
 
     def metric(self, key: str) -> MetricInfo:
         return next(m for m in self.metrics if m.key == key)
@@ -166,7 +167,8 @@ class EvalResults:
             raise EvaluationError(f"{where}: results schema version {v!r}; this psg-data reads versions 1 to "
                                   f"{SCHEMA_VERSION} (upgrade psg-data to read newer files)")
         try:
-            return EvalResults(str(d["task"]), [ResultTable.from_dict(t) for t in d["tables"]], dict(d.get("config") or {}),
+            return EvalResults(str(d["task"]), [ResultTable.from_dict(t) for t in d["tables"]],
+                               dict(d.get("config") or {}),
                                dict(d.get("info") or {}), dict(d.get("interval") or {}),
                                dict(d.get("breakdowns") or {}), list(d.get("errors") or []), int(v))
         except (KeyError, TypeError, ValueError) as exc:

@@ -125,7 +125,8 @@ def format_results(results: EvalResults, *, width: int | None = WIDE) -> str:
 
 def print_results(results: EvalResults, *, file: Any = None) -> None:
     """Print every table and its notes to ``file`` (default stdout) through rich: styled in a
-    terminal, plain text (wide enough not to wrap) when redirected."""
+    terminal, plain text (wide enough not to wrap) when redirected.
+    """
     out = file if file is not None else sys.stdout
     is_tty = hasattr(out, "isatty") and out.isatty()
     con = _console(out, None if is_tty else WIDE, not is_tty)
@@ -155,9 +156,9 @@ def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | Non
         from rich.table import Table
         from rich.text import Text
 
-        t = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
+        grid = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
         for c in ("run", "Method", "ref", "setting", *(_headers(merged)), "±"):
-            t.add_column(Text(c), justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right",
+            grid.add_column(Text(c), justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right",
                          no_wrap=True)
         for run, table, res in runs:
             for r in _ordered(table.rows):
@@ -165,7 +166,7 @@ def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | Non
                 what = f"{iv.method} over {iv.n} {iv.unit}" if iv is not None and iv.method != "none" else "-"
                 cells = [run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
                          *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], what]
-                t.add_row(*(Text(c) for c in cells))
-        con.print(t)
+                grid.add_row(*(Text(c) for c in cells))
+        con.print(grid)
         blocks.append("\n".join([merged.title, *(ln.rstrip() for ln in buf.getvalue().rstrip("\n").splitlines())]))
     return "\n\n".join(blocks)

@@ -134,7 +134,8 @@ def parse_windows(text: str, timezone: str) -> DailyWindows:
         lo_s, dash, hi_s = part.partition("-")
         lo, hi = _hour(lo_s), _hour(hi_s)
         if not dash or lo is None or hi is None:
-            raise EvaluationError(f"--windows {text!r}: expected local hour ranges like 9-17 or 09:00-12:00,13:00-17:00, "
+            raise EvaluationError(f"--windows {text!r}: expected local hour ranges like 9-17 or "
+                                  "09:00-12:00,13:00-17:00, "
                                   f"got {part.strip()!r}")
         hours.append((lo, hi))
     return DailyWindows(tuple(sorted(hours)), timezone, source="configured")

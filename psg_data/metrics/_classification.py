@@ -158,7 +158,8 @@ def confusion_counts(
     return _counts(y, b, w, threshold)
 
 
-def _counts(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64], threshold: float) -> tuple[float, float, float, float]:
+def _counts(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64],
+            threshold: float) -> tuple[float, float, float, float]:
     pos = b >= threshold
     t = y == 1
     tp = float(np.sum(w[t & pos]))
@@ -178,7 +179,8 @@ def _mae(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64], th
     return float(np.sum(w * np.abs(y - x)) / np.sum(w))
 
 
-def _bacc(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64], threshold: float, convention: str) -> float:
+def _bacc(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64], threshold: float,
+          convention: str) -> float:
     tp, fp, fn, tn = _counts(y, b, w, threshold)
     if convention == "reference":
         return (tp / (tp + fn + _EPS) + tn / (tn + fp + _EPS)) / 2.0

@@ -114,7 +114,7 @@ def spl(
     p = _lengths("path_m", path_m, n)
     den = np.maximum(p, l_)
     ratio = np.divide(l_, den, out=np.ones(n, dtype=np.float64), where=den > 0)
-    return _wmean(s * ratio, _weights(n, sample_weight), "spl")
+    return _wmean(s.astype(np.float64) * ratio, _weights(n, sample_weight), "spl")
 
 
 def abort_rate(

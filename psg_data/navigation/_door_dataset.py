@@ -19,7 +19,7 @@ into a :class:`~psg_data.navigation.DoorWorld`:
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -94,7 +94,8 @@ def door_world_from_dataset(dataset: Any, *, labels: str = "gt", label_seed: int
     from psg_data.evaluation._windows import dataset_windows
 
     windows = dataset_windows(ds)
-    doors_at, truth = tl.doors_at, "latest scan row"
+    doors_at: Callable[[float], dict[str, bool]] = tl.doors_at
+    truth = "latest scan row"
     if ds.info.extra.get("generator") == "psg_data.synth":
         from psg_data.navigation._env import schedule_truth
         from psg_data.synth import LabModel
@@ -225,7 +226,8 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
 
 def _door_summary(per_seed: Any, records: Any, n_seeds: int) -> Any:
     """One row per method: the metrics pooled over the seeds' queries (:mod:`psg_data.evaluation._door_report`),
-    ``*_std`` across seeds, the summed counts."""
+    ``*_std`` across seeds, the summed counts.
+    """
     import pandas as pd
 
     from psg_data.evaluation._door_report import summarise_doors

@@ -36,7 +36,7 @@ def plot_query(
     door_p_open: Mapping[str, float] | None = None,
     compare: tuple[NDArray[np.int64], str] | None = None,
     label: str = "path",
-) -> Path:
+) -> Figure:
     """A top-down map of one query: a ``matplotlib.figure.Figure``, written as a PNG at
     ``out_path`` if given (no pyplot, the user's backend is left alone).
 
@@ -69,30 +69,21 @@ def plot_query(
     from matplotlib.figure import Figure
 
     grid = cache.grid if cache is not None else env.grid
-    cfg = grid.door_config(query.doors_open)
-    free = grid.free(cfg)
-    obs = grid.obstacles(cfg)
-    img = np.where(obs, 0.15, np.where(free, 0.97, 0.75))
     H, W = grid.shape
-    aspect = H / max(W, 1)
-    fig = Figure(figsize=(10, max(3.0, 10 * aspect + 1.0)))
+    fig = Figure(figsize=(10, max(3.0, 10 * H / max(W, 1) + 1.0)))
     ax = fig.subplots()
-    ax.imshow(img, origin="lower", extent=grid.extent_m, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    _draw_free_space(ax, grid, query)
     cmap = matplotlib.colormaps["viridis"]
     _draw_receptacles(ax, env, query, dict(beliefs or {}), cmap)
     _draw_doors(ax, env, query, door_p_open)
     sx, sy = query.start_xy
     ax.plot([sx], [sy], "o", color="tab:blue", ms=7, label="start")
-    if compare is not None and np.size(compare[0]):
-        t = np.asarray(compare[0], dtype=np.int64)
-        xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
-        ax.plot(xy[:, 0], xy[:, 1], "--", color="0.35", lw=1.6, label=compare[1])
-        ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="0.35", ms=8, mew=2)
-    if trail is not None and np.size(trail):
-        t = np.asarray(trail, dtype=np.int64)
-        xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
-        ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", lw=2, label=label)
-        ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", color="black", ms=9, mew=2, label="final")
+    if compare is not None:
+        _draw_walk(ax, grid, compare[0], dict(ls="--", color="0.35", lw=1.6, label=compare[1]),
+                   dict(color="0.35", ms=8, mew=2))
+    if trail is not None:
+        _draw_walk(ax, grid, trail, dict(ls="-", color="tab:blue", lw=2, label=label),
+                   dict(color="black", ms=9, mew=2, label="final"))
     sm = ScalarMappable(cmap=cmap, norm=Normalize(0, 1))
     fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.02, label="predicted P(object on receptacle)")
     ax.set_xlabel("x (m)")
@@ -105,6 +96,24 @@ def plot_query(
         out.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=dpi, bbox_inches="tight")
     return fig
+
+
+def _draw_free_space(ax: Any, grid: Any, query: Query) -> None:
+    """The inflated free space with the query's true door states: free light, blocked grey, raw obstacles dark."""
+    cfg = grid.door_config(query.doors_open)
+    img = np.where(grid.obstacles(cfg), 0.15, np.where(grid.free(cfg), 0.97, 0.75))
+    ax.imshow(img, origin="lower", extent=grid.extent_m, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+
+
+def _draw_walk(ax: Any, grid: Any, trail: NDArray[np.int64], line: dict[str, Any], end: dict[str, Any]) -> None:
+    """A walked path (flat cell indices) as a line, its last cell as a cross."""
+    if not np.size(trail):
+        return
+    t = np.asarray(trail, dtype=np.int64)
+    W = grid.shape[1]
+    xy = grid.cell_to_world(np.stack([t // W, t % W], axis=1))
+    ax.plot(xy[:, 0], xy[:, 1], **line)
+    ax.plot([xy[-1, 0]], [xy[-1, 1]], "x", **end)
 
 
 _DOOR_CMAP = ("#e75480", "#f2e6c9", "#008080")  # pink (predicted closed) .. teal (predicted open)
@@ -172,7 +181,8 @@ def pick_door_example(result: Any, label: str) -> tuple[int, int] | None:
     predicted]"`` and ``"<label> [doors all open]"``) where the predicted doors paid off: the
     prediction closed a door that was closed, the all-open plan walked into a closed door, and the
     predicted plan found the object without meeting one. Falls back to any query where the
-    all-open plan met a closed door and the predicted one did not; None if there is none."""
+    all-open plan met a closed door and the predicted one did not; None if there is none.
+    """
     import json
 
     rec = result.records
@@ -202,6 +212,8 @@ def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: s
             to show P(open).
         key: (seed, query_id), e.g. from :func:`pick_door_example`.
         out_path: PNG path (None: do not write).
+        estimator: the registry name or estimator refitted for P(open) (default: ``label``'s name).
+        settings: estimator settings of that fit.
 
     Returns:
         The figure (:func:`plot_query`).

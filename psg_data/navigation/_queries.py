@@ -30,8 +30,8 @@ from psg_data.errors import EvaluationError
 from psg_data.navigation._env import WEEK_S, NavigationEnv
 from psg_data.navigation._grid import OccupancyGrid
 
-__all__ = ["Query", "make_queries", "start_cells", "queries_to_frame", "queries_from_frame", "save_queries", "load_queries",
-           "CATEGORIES"]
+__all__ = ["Query", "make_queries", "start_cells", "queries_to_frame", "queries_from_frame", "save_queries",
+           "load_queries", "CATEGORIES"]
 
 log = logging.getLogger(__name__)
 

@@ -26,8 +26,8 @@ import numpy as np
 
 from psg_data.errors import EvaluationError, NotFittedError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey
-from psg_data.navigation._agent import AgentConfig, Episode, episode_record, run_episode
 from psg_data.evaluation._navigation_scores import ABSENT_RULES, METRICS, score_records, summarise_navigation
+from psg_data.navigation._agent import AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import last_seen_filters, oracle_filters, random_filters
 from psg_data.navigation._env import NavigationEnv
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, NavigationOptions
@@ -87,7 +87,8 @@ def build_filters(env: NavigationEnv, spec: MethodSpec, *, settings: Mapping[str
         return out
     if callable(spec):
         return dict(spec(env))
-    raise EvaluationError(f"method spec: expected a name, estimator, filter mapping or callable, got {type(spec).__name__}")
+    raise EvaluationError("method spec: expected a name, estimator, filter mapping or callable, got "
+                          f"{type(spec).__name__}")
 
 
 def door_belief_from_filters(filters: Mapping[EdgeKey, EdgeFilter]) -> Callable[[float], dict[str, bool]]:
@@ -152,7 +153,8 @@ class NavigationResult:
     def format_table(self, *, layout: str = "auto", roles: Mapping[str, tuple[str, str]] | None = None) -> str:
         """The paper-shaped table as plain text (:func:`psg_data.evaluation.navigation_results`, rendered):
         ``layout`` ``sim`` (Table "Predictive Navigation"), ``real`` (Table "Real-World Navigation") or
-        ``auto`` (``real`` for the paper-real protocol)."""
+        ``auto`` (``real`` for the paper-real protocol).
+        """
         from psg_data.evaluation._navigation_report import navigation_results
         from psg_data.evaluation._tables import format_results
 
@@ -161,7 +163,8 @@ class NavigationResult:
     def save(self, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,
              info: Mapping[str, Any] | None = None) -> dict[str, Path]:
         """Write records.parquet, per_seed.csv, summary.csv and the results schema (results.json,
-        table.txt) to ``out_dir``."""
+        table.txt) to ``out_dir``.
+        """
         from psg_data.evaluation._navigation_report import write_navigation_results
 
         return write_navigation_results(self, out_dir, roles=roles, info=info)
@@ -312,14 +315,16 @@ def _summarise(records: Any, names: list[str], options: NavigationOptions) -> tu
     """(per_seed, summary) at ``delta`` and the sweep summary over every delta (None without a sweep)."""
     import pandas as pd
 
-    rules = {"absent_in_overall": options.absent_in_overall, "unreachable": options.unreachable}
-    main = records[records["delta"] == float(options.delta)]
-    per_seed, summary = summarise_navigation(main, names, **rules)
+    def summary_at(delta: float) -> tuple[Any, Any]:
+        return summarise_navigation(records[records["delta"] == delta], names,
+                                    absent_in_overall=options.absent_in_overall, unreachable=options.unreachable)
+
+    per_seed, summary = summary_at(float(options.delta))
     if not options.delta_sweep:
         return per_seed, summary, None
     parts = []
     for d in options.deltas:
-        _, sm = summarise_navigation(records[records["delta"] == d], names, **rules)
+        _, sm = summary_at(d)
         parts.append(sm.assign(delta=d))
     return per_seed, summary, pd.concat(parts, ignore_index=True)
 
