@@ -148,7 +148,9 @@ def _weibull_logp(lo: NDArray[np.float64], hi: NDArray[np.float64], k: NDArray[n
         ub = np.exp(k * zb)
         tail = np.log(-np.expm1(-(ub - ua)))
         dens = np.log(k) - np.log(s) + (k - 1.0) * za - ua
-    return np.where(exact, dens, -ua + tail)
+        # S(lo) = 0 to double precision (ua = inf): P(lo < T <= hi) is 0, not inf - inf
+        interval = np.where(np.isinf(ua), -np.inf, -ua + tail)
+    return np.where(exact, dens, interval)
 
 
 def _weibull_nll_grad(v: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64],
