@@ -37,13 +37,17 @@ class EdgeFilter(Protocol):
     """
 
     @property
-    def last_t_s(self) -> float | None: ...
+    def last_t_s(self) -> float | None:
+        """Time (s) of the last observation applied, None before the first."""
 
-    def update(self, t_s: float, y: int) -> None: ...
+    def update(self, t_s: float, y: int) -> None:
+        """Apply one observation ``y`` (1 seen present, 0 seen absent) at ``t_s`` (s)."""
 
-    def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None: ...
+    def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None:
+        """Apply observations in time order; equal to :meth:`update` one at a time."""
 
-    def predict(self, t_s: ArrayLike) -> NDArray[np.float64]: ...
+    def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """P(object on receptacle) at times ``t_s`` (s), same shape; does not change the filter."""
 
     def get_state(self) -> dict[str, Any]:
         """JSON-serialisable state; ``estimator.filter_from_state(state)`` restores the filter."""

@@ -47,23 +47,28 @@ class Cadence:
 
     @property
     def half_life_s(self) -> float:
+        """Default forgetting half-life: one typical gap, seconds."""
         return self.typical_gap_s
 
     @property
     def alpha0_per_s(self) -> float:
+        """Default annealing decay rate: ln 2 per typical gap, per second."""
         return math.log(2.0) / self.typical_gap_s
 
     @property
     def n_periods(self) -> int:
+        """Default number of FreMEn candidate periods: a week down to twice the typical gap (at most 1000)."""
         return int(max(1, min(MAX_PERIODS, math.floor(WEEK_S / (2.0 * self.typical_gap_s)))))
 
     @property
     def profile_step_s(self) -> float:
+        """Default step of the profile prior: the typical gap rounded to a divisor of a day, seconds."""
         minutes = max(1, round(self.typical_gap_s / 60.0))
         divisors = [d for d in range(1, 1441) if 1440 % d == 0]
         return 60.0 * float(min(divisors, key=lambda d: (abs(d - minutes), d)))
 
     def to_dict(self) -> dict[str, float | bool | int]:
+        """A JSON-serialisable dict."""
         return {"typical_gap_s": self.typical_gap_s, "measured": self.measured, "half_life_s": self.half_life_s,
                 "alpha0_per_s": self.alpha0_per_s, "n_periods": self.n_periods, "profile_step_s": self.profile_step_s}
 

@@ -94,13 +94,16 @@ class LocalClock:
 
     @classmethod
     def before(cls, t_s: float, timezone: str) -> LocalClock:
+        """A clock whose origin is the local Monday 00:00 (``timezone``) at or before Unix time ``t_s``."""
         return cls(timezone, reference_monday(t_s, timezone))
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return {"timezone": self.timezone, "ref_wall_s": self.ref_wall_s}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> LocalClock:
+        """The object a :meth:`to_dict` dict describes."""
         return cls(d["timezone"], float(d["ref_wall_s"]))
 
 
@@ -175,6 +178,7 @@ class FremenComponents:
 
     @property
     def order(self) -> int:
+        """Number of periodic components."""
         return int(self.k.size)
 
     def raw(self, tau: ArrayLike) -> NDArray[np.float64]:
@@ -194,11 +198,13 @@ class FremenComponents:
         return np.clip(self.raw(tau), 0.0, 1.0)
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return {"mean": self.mean, "k": self.k.tolist(), "re": self.coef.real.tolist(), "im": self.coef.imag.tolist(),
                 "base_period_s": self.base_period_s}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FremenComponents:
+        """The object a :meth:`to_dict` dict describes."""
         coef = np.asarray(d["re"], dtype=np.float64) + 1j * np.asarray(d["im"], dtype=np.float64)
         return cls(float(d["mean"]), np.asarray(d["k"], dtype=np.int64), coef, float(d["base_period_s"]))
 
@@ -246,6 +252,7 @@ class FremenModel:
 
     @property
     def mean(self) -> float:
+        """The static term: the mean of the observations (0.5 before any)."""
         return self.sum_y / self.n if self.n else 0.5
 
     def coefficients(self) -> NDArray[np.complex128]:
@@ -290,6 +297,7 @@ class FremenModel:
         return err / tau.size
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"n_periods": self.n_periods, "base_period_s": self.base_period_s, "n": self.n, "sum_y": self.sum_y,
                 "s_re": self.s.real.tolist(), "s_im": self.s.imag.tolist(), "z_re": self.z.real.tolist(),
                 "z_im": self.z.imag.tolist()}

@@ -103,6 +103,7 @@ class FremenEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> FremenEstimator:
+        """Fit per-edge models to the training streams (times in s, UTC); returns self."""
         self.validate_params()
         tr = streams_by_edge(streams)
         va = streams_by_edge(val_streams)
@@ -126,10 +127,12 @@ class FremenEstimator(BaseEstimator):
         return self
 
     def make_filter(self, edge: EdgeKey) -> FremenFilter:
+        """A new filter for ``edge`` (object_id, receptacle_id) with the fitted models, before any observation."""
         self._check_fitted()
         return FremenFilter(edge, self.components_.get(edge, self.default_), self.clock_)
 
     def filter_from_state(self, state: dict[str, Any]) -> FremenFilter:
+        """The filter that :meth:`get_state` of one of this estimator's filters described."""
         edge = self._check_state(state)
         f = self.make_filter(edge)
         f._last_t = state["last_t_s"]

@@ -80,6 +80,7 @@ class HmmFit:
     n_steps: int = 0
 
     def summary(self) -> dict[str, float | int | dict[str, float]]:
+        """The fitted rates and stay probabilities as plain numbers (for ``fit_summary_``)."""
         return {"p_m": self.p_m, "p_f": self.p_f, "stay": dict(self.stay), "long_gap_s": self.long_gap_s,
                 "iterations": len(self.log_likelihood), "objects": self.n_objects, "object_steps": self.n_steps}
 

@@ -134,6 +134,7 @@ class MixtureFilter:
 
     @property
     def log_prior(self) -> NDArray[np.float64]:
+        """Log prior weights of the mixture components (natural log)."""
         return self._log_prior
 
     @log_prior.setter
@@ -155,6 +156,7 @@ class MixtureFilter:
 
     @property
     def started(self) -> bool:
+        """Whether the survival clock has an origin (given to :meth:`reset` or set by the next observation)."""
         return self.origin is not None
 
     def component_log_evidence(self) -> NDArray[np.float64]:
@@ -174,6 +176,7 @@ class MixtureFilter:
         return w / w.sum()
 
     def dominant(self) -> int:
+        """Index of the component with the largest posterior weight."""
         return int(np.argmax(self.log_prior + self.component_log_evidence()))
 
     # ------------------------------------------------------------------ batch scan
@@ -257,6 +260,7 @@ class MixtureFilter:
         self.last_t = float(res.t[i])
 
     def update_many(self, t: ArrayLike, y: ArrayLike, chunk: int = 65536) -> None:
+        """Apply observations in time order, vectorised ``chunk`` at a time; equal to :meth:`update` per one."""
         t = np.asarray(t, dtype=np.float64).reshape(-1)
         y = np.asarray(y).reshape(-1)
         for s in range(0, t.size, chunk):
@@ -332,6 +336,7 @@ class MixtureFilter:
         return ev, math.exp(p if p < 0.0 else 0.0)
 
     def update(self, t: float, y: int) -> None:
+        """Apply one observation ``y`` (0/1) at time ``t`` (s)."""
         self.step(float(t), int(y))
 
     # ------------------------------------------------------------------ prediction
@@ -356,10 +361,12 @@ class MixtureFilter:
 
     # ------------------------------------------------------------------ serialisation
     def get_state(self) -> dict[str, Any]:
+        """JSON-serialisable state (:meth:`set_state` restores it)."""
         return {"origin": self.origin, "n": self.n, "l": self.l, "ly": encode_floats(self.ly), "tau": self.tau,
                 "lsf": encode_floats(self.lsf), "last_t": self.last_t, "log_prior": encode_floats(self.log_prior)}
 
     def set_state(self, s: dict[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`."""
         self.origin = s["origin"]
         self.n = int(s["n"])
         self.l = float(s["l"])

@@ -226,6 +226,7 @@ class PerpetuaEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> PerpetuaEstimator:
+        """Fit per-edge models to the training streams (times in s, UTC); returns self."""
         self.validate_params()
         if not (0.0 < float(self.delta_low) < float(self.delta_high) < 1.0):
             raise EstimatorError(f"{self.name}: need 0 < delta_low < delta_high < 1, got {self.delta_low}, "
@@ -239,6 +240,7 @@ class PerpetuaEstimator(BaseEstimator):
         return self
 
     def make_filter(self, edge: EdgeKey) -> PerpetuaFilter:
+        """A new filter for ``edge`` (object_id, receptacle_id) with the fitted models, before any observation."""
         self._check_fitted()
         edge = (str(edge[0]), str(edge[1]))
         per, emg = self.survivals_.get(edge, self.default_survivals_)
@@ -248,5 +250,6 @@ class PerpetuaEstimator(BaseEstimator):
                               escape=esc, escape_first=esc1, name=self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> PerpetuaFilter:
+        """The filter that :meth:`get_state` of one of this estimator's filters described."""
         self._check_state(state)
         return PerpetuaFilter.from_state(state)

@@ -681,6 +681,7 @@ class PerpetuaStarEstimator(BaseEstimator):
         return self.priors_.get(e, ConstantPrior(0.5))
 
     def make_filter(self, edge: EdgeKey) -> PerpetuaStarFilter:
+        """A new filter for ``edge`` (object_id, receptacle_id) with the fitted models, before any observation."""
         self._check_fitted()
         edge = (str(edge[0]), str(edge[1]))
         per, emg = self.survivals_.get(edge, self.default_survivals_)
@@ -691,6 +692,7 @@ class PerpetuaStarEstimator(BaseEstimator):
                                   anneal_prediction=self.anneal_prediction, name=self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> PerpetuaStarFilter:
+        """The filter that :meth:`get_state` of one of this estimator's filters described."""
         self._check_state(state)
         return PerpetuaStarFilter.from_state(state)
 

@@ -46,6 +46,7 @@ class ConstantPrior:
         return np.full(np.shape(t_s), float(np.clip(self.value, 0.0, 1.0)))
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"kind": "constant", "value": self.value}
 
 
@@ -58,6 +59,7 @@ class FremenPrior:
         return self.components.predict(self.clock(t_s))
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"kind": "fremen", "components": self.components.to_dict(), "clock": self.clock.to_dict()}
 
 
@@ -88,6 +90,7 @@ class SchedulePrior:
         return np.where(inside, float(self.inside), float(self.outside))
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"kind": "schedule", "intervals": [list(iv) for iv in self.intervals], "inside": self.inside,
                 "outside": self.outside, "timezone": self.timezone}
 
@@ -107,6 +110,7 @@ class OraclePrior:
         return v[i]
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"kind": "oracle", "values": list(self.values), "bin_s": self.bin_s, "clock": self.clock.to_dict()}
 
     @classmethod
@@ -191,6 +195,7 @@ class ProfilePrior:
         return cls(tuple(tuple(float(x) for x in row) for row in v), float(step_s), days, timezone)
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"kind": "profile", "values": [list(r) for r in self.values], "step_s": self.step_s, "days": self.days,
                 "timezone": self.timezone}
 

@@ -103,6 +103,7 @@ class PersistenceFilterEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> PersistenceFilterEstimator:
+        """Fit per-edge models to the training streams (times in s, UTC); returns self."""
         self.validate_params()
         durs, (pm, pf) = collect_durations(list(streams), source=self.durations)
         self.p_m_ = float(self.p_m) if self.p_m is not None else pm
@@ -125,10 +126,12 @@ class PersistenceFilterEstimator(BaseEstimator):
         return self
 
     def make_filter(self, edge: EdgeKey) -> PersistenceFilterFilter:
+        """A new filter for ``edge`` (object_id, receptacle_id) with the fitted models, before any observation."""
         self._check_fitted()
         return PersistenceFilterFilter(edge, self.survivals_.get(edge, self.default_), self.p_m_, self.p_f_, self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> PersistenceFilterFilter:
+        """The filter that :meth:`get_state` of one of this estimator's filters described."""
         edge = self._check_state(state)
         f = PersistenceFilterFilter(edge, SurvivalMixture.from_dict(state["survival"]), state["p_m"], state["p_f"],
                                     self.name)
@@ -250,6 +253,7 @@ class TimeOfWeekFrequencyEstimator(BaseEstimator):
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> TimeOfWeekFrequencyEstimator:
+        """Fit per-edge models to the training streams (times in s, UTC); returns self."""
         self.validate_params()
         streams = list(streams)
         self.clock_ = training_clock(streams, timezone)
@@ -270,10 +274,12 @@ class TimeOfWeekFrequencyEstimator(BaseEstimator):
         return self
 
     def make_filter(self, edge: EdgeKey) -> _TowFilter:
+        """A new filter for ``edge`` (object_id, receptacle_id) with the fitted models, before any observation."""
         self._check_fitted()
         return _TowFilter(edge, self.tables_.get(edge, self.default_), self.clock_, float(self.bin_s), self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> _TowFilter:
+        """The filter that :meth:`get_state` of one of this estimator's filters described."""
         edge = self._check_state(state)
         f = self.make_filter(edge)
         f._last_t = state["last_t_s"]

@@ -85,10 +85,12 @@ class SurvivalMixture:
 
     @property
     def n_components(self) -> int:
+        """Number of mixture components."""
         return int(self.weights.size)
 
     @property
     def log_weights(self) -> NDArray[np.float64]:
+        """Natural log of the component weights."""
         with np.errstate(divide="ignore"):
             return np.log(self.weights)
 
@@ -185,15 +187,18 @@ class SurvivalMixture:
         return -np.logaddexp(0.0, p1 * (lt - np.log(p2)))
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return {"family": self.family, "weights": self.weights.tolist(), "p1": self.p1.tolist(),
                 "p2": self.p2.tolist()}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SurvivalMixture:
+        """The object a :meth:`to_dict` dict describes."""
         return cls(d["family"], np.asarray(d["weights"]), np.asarray(d["p1"]), np.asarray(d["p2"]))
 
     @classmethod
     def single(cls, family: str, p1: float, p2: float = 1.0) -> SurvivalMixture:
+        """A one-component mixture of ``family`` with parameters ``p1``, ``p2``."""
         return cls(family, np.ones(1), np.array([p1], dtype=np.float64), np.array([p2], dtype=np.float64))
 
     @classmethod

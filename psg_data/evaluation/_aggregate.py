@@ -67,6 +67,7 @@ class Summary:
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> Summary:
+        """The object a :meth:`to_dict` dict describes."""
         nan = float("nan")
         f = lambda k: nan if d.get(k) is None else float(d[k])  # noqa: E731
         return Summary(f("mean"), f("std"), f("ci_low"), f("ci_high"), int(d.get("n") or 0),

@@ -28,6 +28,7 @@ class EstimatorSpec:
 
     @staticmethod
     def of(name: str, **settings: Any) -> EstimatorSpec:
+        """The spec of registry name ``name`` with ``settings`` (label ``name:key=value,...``)."""
         label = name + (":" + ",".join(f"{k}={v}" for k, v in settings.items()) if settings else "")
         return EstimatorSpec(label, name, tuple(settings.items()))
 

@@ -61,13 +61,16 @@ class Interval:
 
     @property
     def half_width(self) -> float:
+        """Half the interval's width (the ± printed in tables)."""
         return (self.high - self.low) / 2.0 if math.isfinite(self.low) and math.isfinite(self.high) else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> Interval:
+        """The object a :meth:`to_dict` dict describes."""
         nan = float("nan")
         return Interval(nan if d.get("estimate") is None else float(d["estimate"]),
                         nan if d.get("low") is None else float(d["low"]),

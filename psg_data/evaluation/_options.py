@@ -104,9 +104,11 @@ class PersistenceOptions:
 
     @classmethod
     def fields(cls) -> list[str]:
+        """The names of the options."""
         return [f.name for f in fields(cls)]
 
     def replace(self, **changes: Any) -> PersistenceOptions:
+        """A copy with ``changes`` applied; unknown names raise :class:`EvaluationError`."""
         bad = sorted(set(changes) - set(self.fields()))
         if bad:
             raise EvaluationError(f"persistence options: unknown settings {bad}; valid: {', '.join(self.fields())}")
@@ -136,6 +138,7 @@ class PersistenceOptions:
 
     @property
     def windows_or_none(self) -> DailyWindows | None:
+        """The scoring windows, or None when scores integrate the plain trapezoid."""
         return self.windows if isinstance(self.windows, DailyWindows) else None
 
     def describe_setting(self) -> str:
@@ -146,6 +149,7 @@ class PersistenceOptions:
         return "adaptive" if h in (0, 0.0) else f"adaptive, horizon {format_duration(float(h))}"  # type: ignore[arg-type]
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         d = asdict(self)
         d["windows"] = self.windows.to_dict() if isinstance(self.windows, DailyWindows) else self.windows
         d["seeds"] = list(self.seeds) if isinstance(self.seeds, tuple) else self.seeds

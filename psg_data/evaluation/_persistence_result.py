@@ -124,10 +124,12 @@ class PersistenceResult:
 
     @property
     def estimators(self) -> list[str]:
+        """The estimator names of the run, in order."""
         return list(self.config["estimators"])
 
     @property
     def weekdays(self) -> list[BreakdownRow]:
+        """The per-weekday breakdown rows."""
         return [r for r in self.breakdown_rows if r.by == "weekday"]
 
     def fill_summary(self) -> None:

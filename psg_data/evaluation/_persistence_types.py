@@ -67,6 +67,7 @@ class EvaluationIssue:
     n_times: int = 1
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return clean_json(asdict(self))
 
 
@@ -104,9 +105,11 @@ class EdgeResult:
 
     @property
     def edge(self) -> EdgeKey:
+        """(object_id, receptacle_id)."""
         return (self.object_id, self.receptacle_id)
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         d = asdict(self)
         d.update(d.pop("metrics"))
         return clean_json(d)
@@ -138,6 +141,7 @@ class BreakdownRow:
         return int(self.key)
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         d = asdict(self)
         if self.by == "weekday":
             d["weekday_name"] = WEEKDAY_NAMES[int(self.key)]

@@ -41,6 +41,7 @@ class Reference:
 
     @property
     def label(self) -> str:
+        """The row label in tables."""
         return self.spec.label
 
 

@@ -55,10 +55,12 @@ class MetricInfo:
     chance: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return clean_json(self.__dict__)
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> MetricInfo:
+        """The object a :meth:`to_dict` dict describes."""
         return MetricInfo(str(d["key"]), str(d["label"]), str(d["better"]), str(d.get("description", "")),
                           float(d.get("scale", 1.0)), int(d.get("digits", 3)),
                           None if d.get("chance") is None else float(d["chance"]))
@@ -76,12 +78,14 @@ class ResultRow:
     counts: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return clean_json({"method": self.method, "role": self.role, "description": self.description,
                            "values": {k: v.to_dict() for k, v in self.values.items()},
                            "pct_of_ceiling": self.pct_of_ceiling, "counts": self.counts})
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> ResultRow:
+        """The object a :meth:`to_dict` dict describes."""
         return ResultRow(str(d["method"]), str(d.get("role", "method")),
                          {k: Summary.from_dict(v or {}) for k, v in (d.get("values") or {}).items()},
                          str(d.get("description", "")), d.get("pct_of_ceiling"), dict(d.get("counts") or {}))
@@ -102,6 +106,7 @@ class ResultTable:
     """the metric the ``% of ceiling`` column is computed on (None: no such column)"""
 
     def row(self, method: str) -> ResultRow:
+        """The row of ``method``; :class:`EvaluationError` if there is none."""
         for r in self.rows:
             if r.method == method:
                 return r
@@ -109,15 +114,18 @@ class ResultTable:
         raise EvaluationError(f"table {self.name!r}: no row {method!r} (rows: {rows})")
 
     def metric(self, key: str) -> MetricInfo:
+        """The column of metric ``key``."""
         return next(m for m in self.metrics if m.key == key)
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return clean_json({"name": self.name, "title": self.title, "metrics": [m.to_dict() for m in self.metrics],
                            "groups": [[g, list(ks)] for g, ks in self.groups], "count_columns": self.count_columns,
                            "primary": self.primary, "rows": [r.to_dict() for r in self.rows], "notes": self.notes})
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> ResultTable:
+        """The object a :meth:`to_dict` dict describes."""
         return ResultTable(str(d["name"]), str(d.get("title", "")), [MetricInfo.from_dict(m) for m in d["metrics"]],
                            [ResultRow.from_dict(r) for r in d["rows"]], list(d.get("notes") or []),
                            [(str(g), list(ks)) for g, ks in d.get("groups") or []], list(d.get("count_columns") or []),
@@ -139,6 +147,7 @@ class EvalResults:
 
     @property
     def ok(self) -> bool:
+        """Whether no estimator reported an error."""
         return not self.errors
 
     def table(self, name: str | None = None) -> ResultTable:
@@ -152,6 +161,7 @@ class EvalResults:
                               f"{', '.join(t.name for t in self.tables)})")
 
     def to_dict(self) -> dict[str, Any]:
+        """The versioned JSON form (``results.json``; :meth:`from_dict` reads it)."""
         return clean_json({"schema": SCHEMA, "schema_version": self.schema_version, "task": self.task,
                            "tables": [t.to_dict() for t in self.tables], "interval": self.interval,
                            "config": self.config, "info": self.info, "breakdowns": self.breakdowns,
@@ -159,6 +169,7 @@ class EvalResults:
 
     @staticmethod
     def from_dict(d: dict[str, Any], where: str = "results") -> EvalResults:
+        """Read the versioned JSON form; newer schema versions raise :class:`EvaluationError`."""
         if d.get("schema") != SCHEMA:
             raise EvaluationError(f"{where}: not a psg-eval results file (no 'schema': {SCHEMA!r}; files of psg-eval "
                                   "before results schema 1 are not read: rerun the command in info.command)")

@@ -65,6 +65,7 @@ class DailyWindows:
 
     @staticmethod
     def describe_hours(hours: Sequence[tuple[float, float]]) -> str:
+        """Hour ranges as text, e.g. ``09:00-17:00``."""
         return ",".join(f"{_hhmm(lo)}-{_hhmm(hi)}" for lo, hi in hours)
 
     def describe(self) -> str:
@@ -104,6 +105,7 @@ class DailyWindows:
         return out
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict."""
         return {"hours": [list(h) for h in self.hours], "timezone": self.timezone, "source": self.source,
                 "text": self.describe()}
 

@@ -106,14 +106,17 @@ class RandomFilter(_Clock):
         self._key = (int(seed), zlib.crc32(f"{edge[0]}\x00{edge[1]}".encode()))
 
     def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None:
+        """Advance to the last time; the values are ignored (the chance agent's beliefs do not use them)."""
         self._advance(np.asarray(t_s, dtype=np.float64).reshape(-1))
 
     def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """Uniform random beliefs in [0, 1], shaped as ``t_s``: a function of (seed, edge, time in ms)."""
         t = np.asarray(t_s, dtype=np.float64)
         flat = [float(np.random.default_rng([*self._key, int(round(x * 1000))]).random()) for x in t.reshape(-1)]
         return np.asarray(flat, dtype=np.float64).reshape(t.shape)
 
     def get_state(self) -> dict[str, Any]:
+        """JSON-serialisable state (the edge and the last time)."""
         return {"estimator": "random_receptacle", "edge": list(self.edge), "last_t_s": self._last}
 
 

@@ -366,6 +366,7 @@ class DoorNavigationResult:
     p_open: dict[str, list[dict[str, float]]]
 
     def format_table(self) -> str:
+        """The results as a plain-text table."""
         t = self.table.copy()
         for c in ("blocked_rate", "SR", "SPL"):
             t[c] = (100 * t[c]).round(1)
