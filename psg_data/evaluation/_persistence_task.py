@@ -41,8 +41,9 @@ on either.
 from __future__ import annotations
 
 import logging
+import pickle
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
@@ -319,9 +320,8 @@ def _execute_inline(run: _Run) -> None:
 
 def _worker_error(name: str, seed: int, jobs: int, e: BaseException) -> EvaluationError:
     if isinstance(e, BrokenProcessPool):
-        return EvaluationError(f"estimator {name!r} seed {seed}: a worker process died (jobs={jobs}): {e}; scripts "
-                               "using "
-                               "jobs > 1 need an `if __name__ == '__main__':` guard; or use jobs=1")
+        return EvaluationError(f"estimator {name!r} seed {seed}: a worker process died (jobs={jobs}): {e}; "
+                               "scripts using jobs > 1 need an `if __name__ == '__main__':` guard; or use jobs=1")
     return EvaluationError(f"estimator {name!r} seed {seed}: could not run in a worker process (jobs={jobs}): "
                            f"{type(e).__name__}: {e}; use jobs=1 or make the factory and fitted estimator picklable")
 
@@ -330,12 +330,14 @@ def _execute_pool(run: _Run, pool: Executor, jobs: int) -> None:
     n_chunks = max(1, min(len(run.jobs), 4 * jobs))
     chunks = [list(range(k, len(run.jobs), n_chunks)) for k in range(n_chunks)]
     pending: dict[Future[Any], tuple[str, str, int, list[int]]] = {}
-    for name, seed in run.pairs():
-        try:
-            pending[pool.submit(fit_estimator, *run.fit_args(name, seed))] = ("fit", name, seed, [])
+    for name in run.factories if isinstance(pool, ProcessPoolExecutor) else ():
+        try:  # checked here: a pickling failure inside the pool races with stopping it (CPython 3.11)
+            pickle.dumps(run.factories[name])
         except Exception as e:  # noqa: BLE001
-            raise EvaluationError(f"estimator {name!r}: factory cannot be sent to worker processes (jobs={jobs}): {e}; "
-                                  "use jobs=1 or a picklable factory") from None
+            raise EvaluationError(f"estimator {name!r}: factory cannot be sent to worker processes (jobs={jobs}): "
+                                  f"{type(e).__name__}: {e}; use jobs=1 or a picklable factory") from None
+    for name, seed in run.pairs():
+        pending[pool.submit(fit_estimator, *run.fit_args(name, seed))] = ("fit", name, seed, [])
     while pending:
         finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
         for fut in finished:
