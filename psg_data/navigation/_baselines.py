@@ -9,7 +9,8 @@
 - ``random_receptacle`` (chance): on the object's known edges (the receptacles it was seen on), a
   belief drawn uniformly in [0, 1] per edge and query time (seeded, the same draw for the same edge
   and time in any process): the agent visits the known receptacles in a random order and aborts
-  when every draw falls below delta; updates are ignored.
+  when every draw falls below delta; updates are ignored. It has no door model: with predicted doors
+  it plans with every door open.
 """
 
 from __future__ import annotations

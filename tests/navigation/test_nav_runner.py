@@ -221,6 +221,15 @@ def test_door_belief_last_map_discovers_closed_doors(nav_env):
     assert (present["path_m"] >= present["shortest_path_m"] - 1e-9).all()
 
 
+def test_chance_row_plans_with_open_doors_when_doors_are_predicted(nav_env):
+    """random_receptacle has no door model; predicted doors (the CLI's default) must not send its name to
+    the estimator registry, and it plans as with every door open."""
+    pred = run_navigation(nav_env, ["random_receptacle"], seed=0, n_queries=30, door_belief="predicted").records
+    open_ = run_navigation(nav_env, ["random_receptacle"], seed=0, n_queries=30, door_belief="all_open").records
+    cols = ["query_id", "outcome", "success", "path_m"]
+    assert len(pred) == 30 and pred[cols].equals(open_[cols])
+
+
 def test_reachable_only_queries(nav_env):
     win = nav_env.windows.intervals(nav_env.t_map_s, nav_env.t_end_s)
     qs = make_queries(nav_env, 60, seed=0, reachable_only=True, windows=win)
