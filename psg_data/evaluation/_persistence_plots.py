@@ -68,6 +68,25 @@ def _local_labels(t_s: NDArray[np.float64], starts: Sequence[int], timezone: str
     return [f"{d.strftime('%a')}\n{d.strftime('%H:%M')}" for d in idx]
 
 
+def _tick_starts(t_s: NDArray[np.float64], cuts: Sequence[int], timezone: str) -> list[int]:
+    """Tick positions: each scored window's start; without windows (one unbroken span), each local midnight."""
+    if cuts or t_s.size < 2:
+        return [0, *cuts]
+    import pandas as pd
+
+    day = pd.to_datetime(t_s, unit="s", utc=True).tz_convert(timezone).normalize()
+    change = np.asarray(day[1:] != day[:-1])
+    return [0, *(np.flatnonzero(change) + 1).tolist()]
+
+
+def _colours(names: Sequence[Any]) -> list[Any]:
+    """One distinct colour per row: tab10 up to ten rows, tab20 beyond."""
+    import matplotlib
+
+    cmap = matplotlib.colormaps["tab10" if len(names) <= 10 else "tab20"]
+    return [cmap(i % cmap.N) for i in range(len(names))]
+
+
 def _draw_order(traces: Sequence[PredictionTrace]) -> list[PredictionTrace]:
     """Wiggly beliefs first (underneath), smooth ones on top, so that no line hides the others."""
     return sorted(traces, key=lambda tr: -float(np.sum(np.abs(np.diff(tr.belief)))))
@@ -102,7 +121,7 @@ def _edge_panel(ax: Any, mine: list[PredictionTrace], colours: dict[str, Any], t
         ox = _pos_of(ref.obs_t_s[inside], ref.t_s, x)
         oy = np.where(ref.obs_y[inside] == 1, 1.06, -0.06)
         ax.plot(ox, oy, "|", color="k", ms=7, mew=1.2, label="test observation (top: seen present, bottom: absent)")
-    starts = [0, *cuts]
+    starts = _tick_starts(ref.t_s, cuts, timezone)
     ax.set_xticks(x[starts], _local_labels(ref.t_s, starts, timezone), fontsize=7)
     ax.set_ylim(-0.12, 1.12)
     ax.set_ylabel("P(present)", fontsize=8)
@@ -115,7 +134,6 @@ def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path | None 
 
     Returns a ``matplotlib.figure.Figure``, written as a PNG at ``out_path`` if given.
     """
-    import matplotlib
     from matplotlib.figure import Figure
 
     traces = [t for t in traces if t.estimator not in set(skip)]
@@ -124,8 +142,7 @@ def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path | None 
     traces = [t for t in traces if t.seed == seed and t.draw == min(tr.draw for tr in traces)]
     edges = list(dict.fromkeys(t.edge for t in traces))
     names = list(dict.fromkeys(t.estimator for t in traces))
-    cmap = matplotlib.colormaps["tab10"]
-    colours = {n: cmap(i % 10) for i, n in enumerate(names)}
+    colours = dict(zip(names, _colours(names)))
     fig = Figure(figsize=(11, 1.9 * max(1, len(edges)) + 1.4))
     axes = fig.subplots(max(1, len(edges)), 1, squeeze=False)
     for ax, edge in zip(axes[:, 0], edges):
@@ -175,7 +192,6 @@ def plot_metric_bars(results: Any, out_path: str | Path | None = None) -> Figure
     """Bars of the table's metrics per row (module docstring). ``results``: an
     :class:`~psg_data.evaluation.EvalResults` or a :class:`~psg_data.evaluation.PersistenceResult`.
     """
-    import matplotlib
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -189,8 +205,7 @@ def plot_metric_bars(results: Any, out_path: str | Path | None = None) -> Figure
 
     table = type(table)(table.name, table.title, table.metrics, _ordered(table.rows), table.notes, table.groups,
                         table.count_columns, table.primary)
-    cmap = matplotlib.colormaps["tab10"]
-    colours = [cmap(i % 10) for i in range(len(table.rows))]
+    colours = _colours(table.rows)
     fig = Figure(figsize=(4.2 * len(table.metrics), 3.9))
     axes = fig.subplots(1, len(table.metrics), squeeze=False)[0]
     for ax, m in zip(axes, table.metrics):
@@ -220,7 +235,6 @@ def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Seque
     """The metrics by time since the edge's last observation the filter had (``by_horizon.csv``), with
     intervals; one line per row; the chance row (``always_absent``) dashed black.
     """
-    import matplotlib
     from matplotlib.figure import Figure
 
     from psg_data.evaluation._edge_run import horizon_bin_names
@@ -230,7 +244,7 @@ def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Seque
     order = [b for b in [*horizon_bin_names(), "no observation yet"] if b in set(df["horizon"])]
     shares = _bin_shares(result, order)
     names = [n for n in result.estimators if n not in set(skip)]
-    cmap = matplotlib.colormaps["tab10"]
+    colours = _colours(names)
     fig = Figure(figsize=(13, 4.2))
     axes = fig.subplots(1, 3)
     x = np.arange(len(order))
@@ -242,7 +256,7 @@ def plot_horizon(result: Any, out_path: str | Path | None = None, *, skip: Seque
             err = np.vstack([np.nan_to_num(m - d["ci_low"].to_numpy(float)),
                              np.nan_to_num(d["ci_high"].to_numpy(float) - m)])
             ax.errorbar(x + (i - (len(names) - 1) / 2) * 0.05, m, yerr=err, marker="o", ms=4, lw=1.2, capsize=2,
-                        color=cmap(i % 10), label=n)
+                        color=colours[i], label=n)
         if "always_absent" in set(df.estimator):
             c = df[(df.estimator == "always_absent") & (df.metric == key)].set_index("horizon").reindex(order)
             ax.plot(x, c["mean"].to_numpy(float), "k--", lw=1.0, label="chance (always_absent)")

@@ -49,3 +49,17 @@ def test_persistence_plots_return_figures_and_leave_the_backend(tmp_path: Path, 
     for p in (tmp_path / "sub" / "bars.png", tmp_path / "belief.png"):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert [ln.get_label() for ln in fig.axes[0].get_lines()][:2] == ["last_seen", "always_present"]
+
+
+def test_belief_ticks_at_local_midnights_without_windows_and_distinct_colours() -> None:
+    """An unbroken span (the benchmark: no scoring windows) gets a tick at every local midnight, not only at
+    its start; more than ten rows get distinct colours."""
+    import pandas as pd
+
+    from psg_data.evaluation._persistence_plots import _colours, _tick_starts
+
+    t0 = pd.Timestamp("2024-01-01 00:00", tz="America/Toronto").timestamp()
+    t = t0 + np.arange(0, 3 * 86400, 600.0)
+    assert _tick_starts(t, [], "America/Toronto") == [0, 144, 288]
+    assert _tick_starts(t, [10, 20], "America/Toronto") == [0, 10, 20]
+    assert len({tuple(c) for c in _colours(list(range(12)))}) == 12
