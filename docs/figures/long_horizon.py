@@ -47,7 +47,8 @@ def main(out: Path) -> None:
         p, b, a, y = (np.concatenate([r[i] for r in v]) for i in range(4))
         print(f"last seen {k:7s} ({len(v):2d} edges, > 24 h ahead): prior f {p.mean():.3f}  eq. 14 {b.mean():.3f}  "
               f"annealed {a.mean():.3f}  true occupancy {y.mean():.3f}")
-    obj = max({e[0] for e in curves}, key=lambda o: sum(1 for e in curves if e[0] == o))
+    objs = sorted({e[0] for e in curves})  # sorted: the choice must not depend on the hash seed
+    obj = max(objs, key=lambda o: sum(1 for e in curves if e[0] == o))
     edges = sorted(e for e in curves if e[0] == obj)
     fig, axes = plt.subplots(len(edges), 1, figsize=(10, 1.9 * len(edges) + 0.6), sharex=True)
     for ax, e in zip(np.atleast_1d(axes), edges):

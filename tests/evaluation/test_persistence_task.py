@@ -368,3 +368,17 @@ def test_registry_names_pass_random_state_only_when_accepted(monkeypatch):
     assert res.config["estimator_seeds"] == {"seeded": [0, 3], "plain": [0]}
     assert res.summary["plain"]["mae"].std == 0.0 and res.summary["seeded"]["mae"].std > 0
     assert res.config["estimator_params"]["plain"] == {"value": 0.25}
+
+
+def test_chance_note_states_only_a_measured_balanced_accuracy():
+    """Without the always_absent row the table's B-Acc chance is unknown (it depends on the edges that
+    hold one state only) and is not printed; with it, its measured value is."""
+    from psg_data.evaluation._report import persistence_results
+
+    train, test, gt = make_world()
+    without = persistence_results(evaluate_persistence(["last_seen"], train, test, gt)).table()
+    note = next(n for n in without.notes if n.startswith("B-Acc"))
+    assert "chance" not in note
+    res = evaluate_persistence(["last_seen", "always_absent"], train, test, gt)
+    note = next(n for n in persistence_results(res).table().notes if n.startswith("B-Acc"))
+    assert f"chance: always_absent {res.summary['always_absent']['balanced_accuracy'].mean:.3f}" in note
