@@ -20,13 +20,19 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(os.name != "posix", reason="p
 HANG_S = 30.0
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def interrupt_when(args: list[str], ready: Path, cwd: Path, after_s: float = 0.5) -> tuple[int, str, float]:
     """Run ``args`` in a new process group, send SIGINT to the group ``after_s`` after ``ready`` appears.
 
     Returns (exit code, stderr, seconds from the signal to the exit).
     """
+    # a test run started in the background by a non-interactive shell inherits SIGINT ignored, and so
+    # would the command (which then rightly ignores the Ctrl-C): give it the default disposition
     proc = subprocess.Popen(args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_default_sigint)
     t_end = time.monotonic() + 120
     while not ready.exists() and proc.poll() is None and time.monotonic() < t_end:
         time.sleep(0.05)
