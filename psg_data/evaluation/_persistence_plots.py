@@ -153,10 +153,12 @@ def plot_beliefs(traces: Sequence[PredictionTrace], out_path: str | Path | None 
     if handles:
         from matplotlib.lines import Line2D
 
-        handles.append(Line2D([], [], color="0.5", lw=0.8, ls=":"))
-        labels.append("cut: time outside the scoring windows (not scored, not drawn)")
-        handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.45))
-        labels.append("thin, light line: a belief that oscillates between evaluation times")
+        if any(compressed_axis(t.t_s)[1] for t in traces):
+            handles.append(Line2D([], [], color="0.5", lw=0.8, ls=":"))
+            labels.append("cut: time outside the scoring windows (not scored, not drawn)")
+        if any(_wiggly(t.belief) for t in traces):
+            handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.45))
+            labels.append("thin, light line: a belief that oscillates between evaluation times")
         fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False, bbox_to_anchor=(0.5, 0.0))
     fig.suptitle(title or f"Belief over the test window, the {len(edges)} edges whose state changes most "
                           f"(seed {seed}, local time {timezone})", fontsize=10)

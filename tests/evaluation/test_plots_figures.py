@@ -63,3 +63,15 @@ def test_belief_ticks_at_local_midnights_without_windows_and_distinct_colours() 
     assert _tick_starts(t, [], "America/Toronto") == [0, 144, 288]
     assert _tick_starts(t, [10, 20], "America/Toronto") == [0, 10, 20]
     assert len({tuple(c) for c in _colours(list(range(12)))}) == 12
+
+
+def test_belief_legend_lists_only_what_is_drawn(tmp_path: Path) -> None:
+    """No 'cut' entry on an unbroken time axis, no 'thin line' entry when no belief oscillates."""
+    from psg_data.evaluation._persistence_types import PredictionTrace
+
+    t = 1_700_000_000.0 + np.arange(0, 86400, 600.0)
+    tr = PredictionTrace("last_seen", 0, ("mug", "table"), t, np.full(t.size, 0.2), (t < t[50]).astype(np.int64),
+                         np.array([t[0]]), np.array([1], np.int8))
+    fig = plot_beliefs([tr], tmp_path / "b.png")
+    texts = [x.get_text() for leg in fig.legends for x in leg.get_texts()]
+    assert texts and not any(x.startswith("cut:") or x.startswith("thin") for x in texts)
