@@ -28,8 +28,6 @@ RANK = {name: k for k, layer in enumerate(LAYERS) for name in layer}
 KNOWN = {
     ("schemas", "synth"): "schemas/validate.py checks generator/process.json, whose format (StepProcess) still "
                           "lives in synth/_process.py",
-    ("synth", "labeling"): "synth/stats.py, a report tool (python -m psg_data.synth.stats), labels the lab it "
-                           "describes",
 }
 """Imports against the flow not fixed yet, with the reason; each must still exist (no stale entries)."""
 

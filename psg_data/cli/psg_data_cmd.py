@@ -20,6 +20,7 @@ _COMMANDS = {
     "convert": "psg_data.cli._convert_cmd:convert_cmd",
     "label": "psg_data.cli._label_cmd:label_cmd",
     "view": "psg_data.cli._view_cmd:view_cmd",
+    "lab-stats": "psg_data.cli._lab_stats_cmd:lab_stats_cmd",
 }
 
 

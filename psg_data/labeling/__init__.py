@@ -63,6 +63,7 @@ from psg_data.labeling._pipeline import (
     parse_source,
     summarize,
 )
+from psg_data.labeling._statistics import visibility_statistics
 from psg_data.labeling._visibility import (
     SurfaceVisibility,
     VisibilityParams,
@@ -84,4 +85,5 @@ __all__ = [
     "LabelResult", "LabelSummary", "SourceSpec", "compute_labels", "grid_streams", "label_dataset", "label_streams",
     "load_label_streams", "parse_source", "summarize",
     "SurfaceVisibility", "VisibilityParams", "compute_visibility", "surface_visibility", "visibility_matrix",
+    "visibility_statistics",
 ]

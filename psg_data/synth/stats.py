@@ -1,14 +1,14 @@
 """Statistics of a synthetic lab's schedules: how much a scan schedule can see and predict.
 
-``python -m psg_data.synth.stats [--generator G] [--routine-strength R] [--dataset PATH]`` prints
-them (RESULTS.md, section "The built-in lab"). Definitions (moving objects: their state changes at
+``psg-data lab-stats [--generator G] [--routine-strength R] [--dataset PATH]`` prints them as JSON
+(RESULTS.md, section "The built-in lab"). Definitions (moving objects: their state changes at
 least once over the dataset's scans; moving edges: (object, receptacle) pairs whose presence
 changes):
 
 * ``visits_unseen_by_timing``: share of visits (maximal stays of a moving object on one receptacle
   in the dataset's days) during which no scan starts;
-* ``visits_seen_privileged``: share of visits with at least one privileged code 1 (the object was
-  seen there; needs a dataset, visibility from its depth images);
+* ``visits_seen_privileged`` (:func:`psg_data.labeling.visibility_statistics`, with ``--dataset``):
+  share of visits with at least one privileged code 1 (visibility from the depth images);
 * ``p_same_next_scan`` / ``_within_day`` / ``_overnight``: P(a moving object is on the same
   receptacle, or absent again, at the next scan), over consecutive scans, within a day (2 h later)
   and from the last scan of a day to the first of the next;
@@ -20,7 +20,6 @@ changes):
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import datetime as dt
 from typing import Any
@@ -28,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["schedule_statistics", "visibility_statistics"]
+__all__ = ["schedule_statistics"]
 
 
 def _entropy(p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -98,62 +97,3 @@ def schedule_statistics(config: Any = None, *, sim_weeks: int = 52) -> dict[str,
         "time_of_week_share_mean": float(sh.mean()), "time_of_week_share_min": float(sh.min()),
         "time_of_week_share_max": float(sh.max()), "sim_weeks": sim_weeks,
     }
-
-
-def visibility_statistics(dataset: Any) -> dict[str, Any]:
-    """What the privileged labels of a lab dataset see: share of visits of moving objects with at
-    least one code 1, and share of scans in which a present moving object is seen.
-    """
-    from psg_data.labeling import compute_labels
-    from psg_data.loaders import open_dataset
-
-    ds = dataset if hasattr(dataset, "table") else open_dataset(dataset)
-    res = compute_labels(ds, "privileged")
-    if res.gt is None:
-        raise ValueError(f"{ds.root}: no schedule table; visibility statistics need the ground truth")
-    gt, codes = res.gt.codes, res.labels.codes
-    present = gt == 1
-    obj_present = present.any(axis=2)
-    moving = [o for o in range(gt.shape[1])
-              if len({tuple(np.flatnonzero(present[s, o])) for s in range(gt.shape[0])}) > 1]
-    visits = seen = 0
-    for o in moving:
-        rec = np.where(obj_present[:, o], present[:, o].argmax(axis=1), -1)
-        s = 0
-        while s < rec.size:
-            e = s
-            while e + 1 < rec.size and rec[e + 1] == rec[s]:
-                e += 1
-            if rec[s] >= 0:
-                visits += 1
-                seen += bool(np.any(codes[s:e + 1, o, rec[s]] == 1))
-            s = e + 1
-    pres = obj_present[:, moving]
-    seen_scans = (codes[:, moving] == 1).any(axis=2)
-    return {"visits_scanned": visits, "visits_seen_privileged": seen / max(visits, 1),
-            "present_scans_seen_privileged": float(seen_scans[pres].mean())}
-
-
-def main(argv: list[str] | None = None) -> None:
-    import json
-
-    from psg_data.synth._model import LabConfig
-
-    ap = argparse.ArgumentParser(prog="python -m psg_data.synth.stats", description=__doc__.splitlines()[0])
-    ap.add_argument("--generator", default="steps-v2")
-    ap.add_argument("--routine-strength", type=float, default=None)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--dataset", default=None, help="also report privileged visibility of this lab dataset")
-    ap.add_argument("--sim-weeks", type=int, default=52)
-    a = ap.parse_args(argv)
-    kw: dict[str, Any] = {"seed": a.seed, "generator": a.generator}
-    if a.routine_strength is not None:
-        kw["routine_strength"] = a.routine_strength
-    out = schedule_statistics(LabConfig(**kw), sim_weeks=a.sim_weeks)
-    if a.dataset:
-        out.update(visibility_statistics(a.dataset))
-    print(json.dumps(out, indent=1))
-
-
-if __name__ == "__main__":
-    main()

@@ -184,3 +184,34 @@ def test_noisy_source_rates_on_lab(lab_copy: Path) -> None:
     assert r.p_m_ci[0] <= p_m <= r.p_m_ci[1] and r.p_f_ci[0] <= p_f <= r.p_f_ci[1]
     # privileged agrees with ground truth on observed cells, so the estimate against gt is the same
     assert s.rates is not None and s.rates.p_m == r.p_m and s.rates.p_f == r.p_f
+
+
+def _visits_by_loop(gt: np.ndarray, codes: np.ndarray) -> tuple[int, int]:
+    """(visits of moving objects, visits with a code 1 on their receptacle), scan by scan."""
+    visits = seen = 0
+    for o in range(gt.shape[1]):
+        rec = [int(np.argmax(gt[s, o] == 1)) if (gt[s, o] == 1).any() else -1 for s in range(gt.shape[0])]
+        if len(set(rec)) < 2:
+            continue
+        s = 0
+        while s < len(rec):
+            e = s
+            while e + 1 < len(rec) and rec[e + 1] == rec[s]:
+                e += 1
+            if rec[s] >= 0:
+                visits += 1
+                seen += bool((codes[s:e + 1, o, rec[s]] == 1).any())
+            s = e + 1
+    return visits, seen
+
+
+def test_visibility_statistics_count_visits_as_a_scan_by_scan_loop(lab_path: Path) -> None:
+    from psg_data.labeling import compute_labels, visibility_statistics
+
+    ds = open_dataset(lab_path)
+    res = compute_labels(ds, "privileged")
+    visits, seen = _visits_by_loop(res.gt.codes, res.labels.codes)
+    out = visibility_statistics(ds)
+    assert visits > 0 and out["visits_scanned"] == visits
+    assert out["visits_seen_privileged"] == pytest.approx(seen / visits)
+    assert 0.0 < out["present_scans_seen_privileged"] <= 1.0

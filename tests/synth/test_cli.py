@@ -63,3 +63,18 @@ def test_raw_formats_go_through_export_raw(tmp_path: Path, monkeypatch) -> None:
     r = CliRunner().invoke(synth_cmd, [str(tmp_path / "bags"), *ARGS, "--format", "ros2-mcap", "-q"])
     assert r.exit_code == 0, r.output
     assert calls == [("ros2-mcap", 4)] and (tmp_path / "bags").is_dir()
+
+
+def test_lab_stats_prints_json_and_refuses_a_bad_dataset(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import json
+
+    from click.testing import CliRunner
+
+    from psg_data.cli.psg_data_cmd import main
+
+    res = CliRunner().invoke(main, ["lab-stats", "--sim-weeks", "1"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert out["generator"] == "steps-v2" and out["visits_unseen_by_timing"] == 0.0
+    bad = CliRunner().invoke(main, ["lab-stats", "--sim-weeks", "1", "--dataset", str(tmp_path)])
+    assert bad.exit_code == 1 and bad.output.strip().startswith("error: ") and "Traceback" not in bad.output
