@@ -44,7 +44,19 @@ def convex_hull(points: ArrayLike) -> NDArray[np.float64]:
 
 
 def box_footprint(box: Box) -> NDArray[np.float64]:
-    """Top-down footprint of an oriented box: the convex hull of its corners on z = 0, (V, 2), metres."""
+    """Top-down footprint of an oriented box: the convex hull of its corners on z = 0, (V, 2), metres.
+
+    A box turned about z only (the usual case) projects to its four bottom corners: they are returned
+    directly, as the hull would order them (counter-clockwise from the lowest-x vertex), without Qhull.
+    """
+    R = np.asarray(box.rotation, float)
+    e = np.asarray(box.extent_m, float)
+    if R[2, 0] == 0.0 and R[2, 1] == 0.0 and R[0, 2] == 0.0 and R[1, 2] == 0.0 and e[0] > 0 and e[1] > 0:
+        loc = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * (e[:2] / 2.0)
+        P = np.round(loc @ R[:2, :2].T + np.asarray(box.center_m, float)[:2], 12)
+        if np.linalg.det(R[:2, :2]) < 0:  # a box flipped upside down: the same corners, clockwise
+            P = P[::-1]
+        return np.roll(P, -int(np.lexsort((P[:, 1], P[:, 0]))[0]), axis=0)
     return convex_hull(box.corners()[:, :2])
 
 

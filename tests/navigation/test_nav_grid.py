@@ -195,3 +195,15 @@ def test_grid_from_scans_of_a_dataset(tmp_path):
     assert free[a] and free[b]
     assert astar(free, a, b, 0.05).length_m == pytest.approx(3.0, abs=0.06)
     assert not free[tuple(g.world_to_cell([3.0, 1.9]))]  # never observed (footprint is about 1.6 x 1.2 m)
+
+
+@settings(max_examples=200, deadline=None)
+@given(yaw=st.floats(-4.0, 4.0), flip=st.booleans(), ex=st.floats(0.01, 3.0), ey=st.floats(0.01, 3.0),
+       cx=st.floats(-5.0, 5.0), cy=st.floats(-5.0, 5.0))
+def test_yaw_only_footprint_equals_the_hull_of_the_corners(yaw, flip, ex, ey, cx, cy) -> None:  # type: ignore[no-untyped-def]
+    """The four-corner shortcut for boxes turned about z returns exactly what the convex hull does."""
+    from psg_data._geometry import box_footprint, convex_hull, yaw_rotation
+
+    R = yaw_rotation(yaw) @ (np.diag([1.0, -1.0, -1.0]) if flip else np.eye(3))
+    box = Box(np.array([cx, cy, 0.4]), np.array([ex, ey, 0.8]), R)
+    assert np.array_equal(box_footprint(box), convex_hull(box.corners()[:, :2]))
