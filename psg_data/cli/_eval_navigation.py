@@ -62,8 +62,7 @@ def _dataset(dataset: str | None, labels: str, quiet: bool, task: str) -> Any:
 
     if dataset in ("door-loop", "door-loop-lab"):
         raise EvaluationError(f"--dataset {dataset}: the door loop world is a unit-test world now; --task doors "
-                              "runs on "
-                              "a dataset's own map (--dataset demo or a dataset path)")
+                              "runs on a dataset's own map (--dataset demo or a dataset path)")
     choice = resolve_dataset(dataset, quiet=quiet)
     if choice.kind != "dataset":
         raise EvaluationError(f"--task {task} needs a dataset with rooms, doors and receptacles (not the persistence "

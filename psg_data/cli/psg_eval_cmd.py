@@ -84,9 +84,9 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 @click.option("--setting", type=click.Choice(["predictive", "adaptive"]), default="adaptive", show_default=True,
               help="adaptive: test observations update the estimators online (see --horizon); predictive: they do not.")
 @click.option("--horizon", default="auto", show_default=True, metavar="auto|DURATION",
-              help="Adaptive persistence: a prediction at t uses the observations up to t - HORIZON (0, 30min, 2h, "
-                   "1d). "
-                   "auto: one scan interval of the dataset (the lab: 2 h); the persistence benchmark: 0 (the paper).")
+              help="Adaptive persistence: a prediction at t uses the observations up to t - HORIZON "
+                   "(0, 30min, 2h, 1d). auto: one scan interval of the dataset (the lab: 2 h); the persistence "
+                   "benchmark: 0 (the paper).")
 @click.option("--windows", default="auto", show_default=True, metavar="auto|HH[:MM]-HH[:MM][,...]",
               help="Scoring windows, local hours (e.g. 9-17): time integrals and navigation / door queries stay inside "
                    "them. auto: the dataset's operating hours (the lab: 09:00-17:00; a converted dataset: the hours "

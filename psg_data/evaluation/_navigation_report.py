@@ -169,8 +169,7 @@ def _sweep_table(res: Any, roles: Mapping[str, tuple[str, str]]) -> ResultTable 
     infos = [MetricInfo(k, f"{'overall' if k == 'overall_sr' else k.split('_')[0]} {NAV_METRICS[k].label}",
                         NAV_METRICS[k].better, NAV_METRICS[k].description, 100.0, 1) for k in keys]
     notes = ["delta: the agent declares the target absent when no untried receptacle has a belief >= delta; a low "
-             "delta "
-             "finds more moved objects and aborts less on absent ones (delta_sweep.png)"]
+             "delta finds more moved objects and aborts less on absent ones (delta_sweep.png)"]
     return ResultTable("delta_sweep", "Delta sweep (same queries and filters for every delta)", infos, rows, notes,
                        count_columns=["delta"])
 
