@@ -22,9 +22,20 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from psg_data.errors import EstimatorError
 from psg_data.schemas._streams import EdgeKey, EdgeStream
 
-__all__ = ["EdgeKey", "EdgeStream", "EdgeFilter", "PersistenceEstimator"]
+__all__ = ["EdgeKey", "EdgeStream", "EdgeFilter", "PersistenceEstimator", "streams_by_edge"]
+
+
+def streams_by_edge(streams: Sequence[EdgeStream] | None) -> dict[EdgeKey, list[EdgeStream]]:
+    """The streams grouped by edge, in order (an edge may have several); EstimatorError for a non-stream."""
+    out: dict[EdgeKey, list[EdgeStream]] = {}
+    for s in streams or ():
+        if not isinstance(s, EdgeStream):
+            raise EstimatorError(f"fit: expected EdgeStream objects, got {type(s).__name__}")
+        out.setdefault(s.edge, []).append(s)
+    return out
 
 
 @runtime_checkable

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError, NotFittedError
-from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.estimators._base import EdgeKey, EdgeStream, streams_by_edge
 from psg_data.estimators._interval_em import INTERVAL_FAMILIES
 from psg_data.estimators._mixture import ESCAPE_FIRST
 from psg_data.estimators._params import Integral, Options, Param, Real, check_params
@@ -39,15 +39,6 @@ def _same(a: Any, b: Any) -> bool:
         return bool(a == b) and type(a) is type(b)
     except Exception:  # arrays and other objects without a plain ==
         return a is b
-
-
-def streams_by_edge(streams: Sequence[EdgeStream] | None) -> dict[EdgeKey, list[EdgeStream]]:
-    out: dict[EdgeKey, list[EdgeStream]] = {}
-    for s in streams or ():
-        if not isinstance(s, EdgeStream):
-            raise EstimatorError(f"fit: expected EdgeStream objects, got {type(s).__name__}")
-        out.setdefault(s.edge, []).append(s)
-    return out
 
 
 class BaseEstimator:

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import EstimatorError
-from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.estimators._base import EdgeKey, EdgeStream, streams_by_edge
 
 __all__ = ["HmmFit", "fit_error_hmm", "typical_gap_s"]
 
@@ -323,9 +323,7 @@ def fit_error_hmm(streams: Sequence[EdgeStream], *, p_m: float | None = None, p_
         d /= d.sum(axis=1, keepdims=True)
     assert gamma is not None
     post: dict[EdgeKey, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
-    by_edge: dict[EdgeKey, list[EdgeStream]] = {}
-    for s in streams:
-        by_edge.setdefault(s.edge, []).append(s)
+    by_edge = streams_by_edge(streams)
     for i, es in enumerate(b.edges):
         tt = b.times[i]
         for k, e in enumerate(es):
