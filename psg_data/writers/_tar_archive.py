@@ -7,9 +7,11 @@ image bytes padded to 512, then the end-of-archive zero blocks, padded with zero
 ``frames`` table: a reader then fetches one image with a single ``pread`` of a known range.
 
 Members are gathered into batches of about 8 MiB (headers, the caller's bytes, padding); one writer
-thread hashes each batch (SHA-256, for ``files.parquet``) and writes it with one ``writev``, both
-without the GIL, while the caller goes on reading and encoding. Read-only data (``bytes``, views of
-a memory-mapped recording) is not copied; writable buffers are, since their owner may reuse them.
+thread joins each batch into one buffer, hashes it (SHA-256, for ``files.parquet``) and writes it
+with one ``write``, both without the GIL, while the caller goes on reading and encoding (hashing
+and writing piece by piece instead took the GIL back some 350 times per batch and was 1.09 times
+slower, BENCHMARKS.md). Read-only data (``bytes``, views of a memory-mapped recording) is not
+copied until then; writable buffers are copied at once, since their owner may reuse them.
 
 Pages of the archive more than :data:`DROP_BEHIND_BYTES` behind its end are dropped from the page
 cache (``posix_fadvise(DONTNEED)`` where the system has it): a conversion writes gigabytes that are
@@ -33,8 +35,6 @@ ARCHIVE_ALIGN = 4096
 """Archives are padded with zero blocks to a multiple of this."""
 BATCH_BYTES = 8 << 20
 """Bytes handed to the writer thread at a time."""
-_BATCH_PIECES = 512
-"""At most this many buffers per batch (one ``writev``; POSIX guarantees 16, Linux takes 1024)."""
 DROP_BEHIND_BYTES = 16 << 20
 """Pages of the archive further than this behind its end are dropped from the page cache."""
 _ZEROS = bytes(ARCHIVE_ALIGN)
@@ -74,17 +74,10 @@ def ustar_header(name: str, size: int, mtime: int = 0) -> bytes:
     return raw.ljust(100, b"\0") + _MODE_IDS + size_mtime + checksum + _TAIL
 
 
-def _write_all(fd: int, pieces: list[memoryview]) -> None:
-    """Write every piece in order (one ``writev`` for a regular file; more if it writes less)."""
-    writev = getattr(os, "writev", None)
-    i = 0
-    while i < len(pieces):
-        k = writev(fd, pieces[i:]) if writev is not None else os.write(fd, pieces[i])
-        while i < len(pieces) and k >= len(pieces[i]):
-            k -= len(pieces[i])
-            i += 1
-        if k:
-            pieces[i] = pieces[i][k:]
+def _write_all(fd: int, data: memoryview) -> None:
+    """Write all of ``data`` (one ``write`` for a regular file; more if it writes less)."""
+    while data:
+        data = data[os.write(fd, data):]
 
 
 class TarArchiveWriter:
@@ -168,7 +161,7 @@ class TarArchiveWriter:
         self._batch.append(piece)
         self._batch_bytes += len(piece)
         self._size += len(piece)
-        if self._batch_bytes >= self._limit or len(self._batch) >= _BATCH_PIECES:
+        if self._batch_bytes >= self._limit:
             self._hand_over()
 
     def _hand_over(self) -> None:
@@ -191,11 +184,10 @@ class TarArchiveWriter:
     def _write(self, batch: list[memoryview], offset: int) -> int:
         """Hash and write one batch that starts at byte ``offset`` of the archive; returns its end."""
         assert self._fd is not None
-        end = offset
-        for piece in batch:
-            self._sha.update(piece)
-            end += len(piece)
-        _write_all(self._fd, batch)
+        data = memoryview(b"".join(batch))  # one buffer: one GIL hand-off to hash it, one to write it
+        self._sha.update(data)
+        _write_all(self._fd, data)
+        end = offset + len(data)
         if end > DROP_BEHIND_BYTES and hasattr(os, "posix_fadvise"):
             os.posix_fadvise(self._fd, 0, end - DROP_BEHIND_BYTES, os.POSIX_FADV_DONTNEED)
         return end
