@@ -27,7 +27,6 @@ import heapq
 import json
 import logging
 import math
-import os
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,10 +36,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from psg_data.errors import DatasetExistsError, FormatError
+from psg_data.errors import FormatError
 from psg_data.loaders.raw._images import make_compressed_depth
 from psg_data.loaders.raw._transforms import invert, make_transform, matrix_to_quat_xyzw
 from psg_data.schemas._records import CameraIntrinsics
+from psg_data.writers._safe_output import check_output, commit_tree, make_staging
 
 __all__ = ["export_raw", "RAW_EXPORT_FORMATS", "TOPICS", "STATIC_BASE_CAMERA_LINK", "R_CAMERA_LINK_OPTICAL"]
 
@@ -250,7 +250,8 @@ def export_raw(
         dataset_path: a psg-dataset directory.
         out: output directory (one recording per scan + side files); written atomically.
         fmt: ``ros1`` (``SCAN.bag``), ``ros2-sqlite3`` or ``ros2-mcap`` (``SCAN/`` bag directories).
-        overwrite: replace ``out`` if it exists.
+        overwrite: replace ``out`` if it is a folder of recordings psg-data wrote (or empty); anything
+            else is refused (:mod:`psg_data.writers._safe_output`).
         progress: called as ``progress(n_frames, nbytes)`` after each frame.
         images: ``both`` (raw and compressed topics), ``raw`` or ``compressed``.
         seed: seed of the log-time delays (5-30 ms after ``header.stamp``).
@@ -260,6 +261,8 @@ def export_raw(
 
     Raises:
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
+        UnsafeOutputError: ``out`` or ``OUT.partial`` holds something psg-data did not write, or is
+            (or lies inside) the input dataset.
         FormatError: bad ``fmt`` / ``images``, or a scan mixing cameras.
     """
     from psg_data.loaders import open_dataset
@@ -269,12 +272,9 @@ def export_raw(
     if images not in ("both", "raw", "compressed"):
         raise FormatError(f"images: expected 'both', 'raw' or 'compressed', got {images!r}")
     out = Path(out)
-    if out.exists() and not overwrite:
-        raise DatasetExistsError(f"{out}: output exists; pass overwrite=True (--overwrite) to replace it")
+    check_output(out, overwrite=overwrite, kind="recordings", inputs=[dataset_path])
     ds = open_dataset(dataset_path)
-    tmp = out.with_name(out.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
+    tmp = make_staging(out.with_name(out.name + ".partial"))
     topics = _Topics(images in ("both", "raw"), images in ("both", "compressed"))
     rng = np.random.default_rng(seed)
     optical = {cid: (cam.frame_id or DEFAULT_OPTICAL_FRAME) for cid, cam in ds.cameras.items()}
@@ -292,9 +292,7 @@ def export_raw(
             _export_scan(ds, scan, cam, optical[cam.camera_id], _BagWriter(tmp / name, fmt, _Msgs(fmt == "ros1")),
                          topics, rng, progress)
         _write_side_files(ds, tmp, recordings, optical)
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
+        commit_tree(tmp, out, kind="recordings")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -238,3 +238,31 @@ def test_single_file_outputs_replace_only_their_own_kind(tmp_path: Path) -> None
     assert_one_error(_cli(psg_eval, "--dataset", ds, "-e", "always_present", "--no-references", "--rerun", notes,
                           "--overwrite", "-q"), "is not a Rerun recording (.rrd)")
     assert snapshot(tmp_path) == before
+
+
+def test_export_raw_replaces_only_its_own_recordings(tmp_path: Path) -> None:
+    """The library call follows the rule too: a foreign output or staging folder is never deleted."""
+    from psg_data.synth import export_raw
+
+    ds = write_tiny_dataset(tmp_path / "canon")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("x")
+    staging = tmp_path / "out.partial"
+    staging.mkdir()
+    (staging / "draft.txt").write_text("x")
+    before = snapshot(tmp_path)
+    with pytest.raises(UnsafeOutputError, match="holds thesis.tex"):
+        export_raw(ds, mine, "ros1", overwrite=True)
+    with pytest.raises(UnsafeOutputError, match="was not created by psg-data"):
+        export_raw(ds, tmp_path / "out", "ros1")
+    with pytest.raises(UnsafeOutputError, match="input"):
+        export_raw(ds, ds / "recordings", "ros1")
+    assert snapshot(tmp_path) == before
+    out = tmp_path / "bags"
+    for _ in range(2):
+        export_raw(ds, out, "ros1", overwrite=True)
+    assert json.loads((out / OUTPUT_MARKER).read_text())["kind"] == "recordings"
+    with pytest.raises(DatasetExistsError):
+        export_raw(ds, out, "ros1")
+    assert not any(p.name.startswith((".bags", "bags.")) for p in tmp_path.iterdir())
