@@ -39,3 +39,27 @@ def assert_one_error(result: Any, match: str | None = None, code: int = 1) -> st
     if match is not None:
         assert match in lines[0], lines[0]
     return lines[0]
+
+
+def interrupt_partway(monkeypatch: Any, owner: Any, name: str, *, path_arg: int = 1, only: str = "") -> None:
+    """Make the writer ``owner.name`` stop like a Ctrl-C in the middle of a file: it writes its output
+    (argument ``path_arg``, a path), cuts it to half its size and raises KeyboardInterrupt.
+
+    With ``only``, just the calls whose path's name contains it are interrupted (the others write as usual).
+    """
+    original = getattr(owner, name)
+
+    def cut(*args: Any, **kwargs: Any) -> Any:
+        path = Path(args[path_arg])
+        if only not in path.name:
+            return original(*args, **kwargs)
+        original(*args, **kwargs)
+        os.truncate(path, path.stat().st_size // 2)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(owner, name, cut)
+
+
+def files_in(folder: Path) -> list[str]:
+    """Names of the entries in ``folder`` (sorted; temporary files of an atomic write would show here)."""
+    return sorted(p.name for p in folder.iterdir())

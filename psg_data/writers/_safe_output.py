@@ -17,6 +17,11 @@ with :data:`PARTIAL_MARKER`), every file and folder of it is fsynced, and it is 
 by renames: the old output is renamed aside (``.OUT.psg-replaced``), the new one renamed into place,
 and only then is the old one removed. Nothing named ``OUT.old`` is left; after a crash in the
 middle of the swap the previous output is still complete under ``.OUT.psg-replaced``.
+
+The public library functions that write single files (``save_results``, ``write_detections``,
+``save_queries``, the ``plot_*`` functions, ...) replace the files they are told to write, as
+pandas and matplotlib do, but each one atomically (:func:`write_atomically`) and never inside an
+input they know of.
 """
 
 from __future__ import annotations
@@ -25,13 +30,14 @@ import json
 import logging
 import os
 import shutil
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from psg_data.errors import DatasetExistsError, UnsafeOutputError
 
 __all__ = ["OUTPUT_KINDS", "OUTPUT_MARKER", "PARTIAL_MARKER", "check_output", "check_not_input", "make_staging",
-           "commit_tree", "replace_file", "fsync_tree", "owned_files", "check_file_output", "FILE_SIGNATURES"]
+           "commit_tree", "replace_file", "fsync_tree", "owned_files", "check_file_output", "FILE_SIGNATURES",
+           "write_atomically"]
 
 log = logging.getLogger(__name__)
 
@@ -310,3 +316,57 @@ def replace_file(tmp: str | Path, final: str | Path) -> None:
     _fsync_path(str(tmp), directory=False)
     os.replace(tmp, final)
     _fsync_path(str(Path(final).parent), directory=True)
+
+
+_TEMP = ".{name}.psg-tmp-{pid}"
+_TEMP_TRIES = 100
+
+
+def _claim_temp(final: Path) -> Path:
+    """Create an empty temporary file beside ``final`` that no one else has (never reuses an existing one)."""
+    base = _TEMP.format(name=final.name, pid=os.getpid())
+    for k in range(_TEMP_TRIES):
+        tmp = final.with_name(base if k == 0 else f"{base}-{k}")
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666))
+        except FileExistsError:
+            continue
+        return tmp
+    raise UnsafeOutputError(f"{final.with_name(base)}: exists (and {_TEMP_TRIES - 1} numbered variants); expected "
+                            f"no such files beside the output (move them away)")
+
+
+def write_atomically(path: str | Path, write: Callable[[Path], object], *,
+                     inputs: Iterable[str | Path | None] = ()) -> Path:
+    """Replace the file ``path`` atomically by what ``write`` writes: complete or not at all.
+
+    ``write(tmp)`` writes the whole file to ``tmp``, a temporary file psg-data creates beside
+    ``path`` (``.NAME.psg-tmp-PID``; an existing file of that name is left alone and another name
+    is chosen). The temporary file is fsynced and renamed over ``path`` (:func:`replace_file`); if
+    ``write`` raises (or is interrupted), it is removed and the previous file at ``path`` is left
+    exactly as it was. A symbolic link at ``path`` is replaced, its target left alone. Missing
+    parent folders are created.
+
+    Args:
+        path: the file to write (replaced if it exists).
+        write: called once with the temporary path; writes the complete file there.
+        inputs: paths ``path`` must not be, contain or lie inside (see :func:`check_not_input`).
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        UnsafeOutputError: ``path`` is, contains or lies inside an input (nothing is written), or no
+            free temporary name was found.
+    """
+    final = Path(path)
+    check_not_input(final, list(inputs))
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _claim_temp(final)
+    try:
+        write(tmp)
+        replace_file(tmp, final)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return final

@@ -20,9 +20,10 @@ from psg_data.errors import DatasetExistsError, UnsafeOutputError
 from psg_data.loaders import open_dataset
 from psg_data.schemas.validate import validate_dataset
 from psg_data.writers import DatasetWriter
-from psg_data.writers._safe_output import OUTPUT_MARKER, PARTIAL_MARKER, check_output, commit_tree, make_staging
+from psg_data.writers._safe_output import (OUTPUT_MARKER, PARTIAL_MARKER, check_output, commit_tree, make_staging,
+                                          write_atomically)
 from tests.conftest import write_tiny_dataset
-from tests.contract import assert_one_error, snapshot
+from tests.contract import assert_one_error, files_in, snapshot
 from tests.convert.conftest import write_bag
 
 SYNTH = ["--days", "1", "--frames-per-scan", "1", "--resolution", "32x24", "-q"]
@@ -140,6 +141,52 @@ def test_commit_puts_back_the_old_output_when_the_swap_fails(tmp_path: Path,
     with pytest.raises(OSError):
         commit_tree(tree, out)
     assert snapshot(out) == before
+
+
+def _write_then_fail(tmp: Path) -> None:
+    tmp.write_bytes(b"half of the new")
+    raise KeyboardInterrupt
+
+
+def test_write_atomically_keeps_the_previous_file_when_the_write_fails(tmp_path: Path) -> None:
+    out = tmp_path / "summary.csv"
+    out.write_bytes(b"the previous good file\n")
+    with pytest.raises(KeyboardInterrupt):
+        write_atomically(out, _write_then_fail)
+    assert out.read_bytes() == b"the previous good file\n"
+    assert files_in(tmp_path) == ["summary.csv"]  # no temporary file left
+    assert write_atomically(out, lambda tmp: tmp.write_bytes(b"new")) == out
+    assert out.read_bytes() == b"new" and files_in(tmp_path) == ["summary.csv"]
+    write_atomically(tmp_path / "sub" / "new.txt", lambda tmp: tmp.write_text("x"))  # parents created
+    assert (tmp_path / "sub" / "new.txt").read_text() == "x"
+
+
+def test_write_atomically_never_writes_into_an_input(tmp_path: Path) -> None:
+    ds = write_tiny_dataset(tmp_path / "ds", scans=1, frames=1)
+    before = snapshot(ds)
+    for out, msg in [(ds / "tables" / "objects.parquet", "lies inside the input"), (ds / "new" / "x.csv",
+                     "lies inside the input"), (ds, "is the input"), (tmp_path, "contains the input")]:
+        with pytest.raises(UnsafeOutputError, match=msg) as err:
+            write_atomically(out, lambda tmp: tmp.write_bytes(b"x"), inputs=[None, ds])
+        assert str(out) in str(err.value) and "expected" in str(err.value)
+    assert snapshot(ds) == before and files_in(tmp_path) == ["ds"]
+
+
+def test_write_atomically_leaves_a_foreign_file_of_its_temporary_name(tmp_path: Path) -> None:
+    out = tmp_path / "t.txt"
+    foreign = tmp_path / f".t.txt.psg-tmp-{os.getpid()}"
+    foreign.write_bytes(b"not psg-data's")
+    used: list[Path] = []
+
+    def write(tmp: Path) -> None:
+        used.append(tmp)
+        tmp.write_bytes(b"new")
+
+    write_atomically(out, write)
+    with pytest.raises(KeyboardInterrupt):
+        write_atomically(out, _write_then_fail)
+    assert used[0] != foreign and foreign.read_bytes() == b"not psg-data's"
+    assert out.read_bytes() == b"new" and files_in(tmp_path) == sorted([foreign.name, "t.txt"])
 
 
 # -- every command ----------------------------------------------------------------------------------------
