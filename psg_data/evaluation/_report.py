@@ -207,15 +207,22 @@ def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *,
     """Write ``results.json`` (the results schema), ``summary.csv``, ``table.txt``, ``results.csv`` (one row
     per estimator, seed, draw and edge), ``seeds.json`` and the breakdowns per object / receptacle /
     weekday / horizon (``by_*.csv``).
+
+    Replaces each of these files in ``out_dir`` atomically (an interrupted call leaves the previous
+    file as it was; other files are left alone).
     """
     import json
+    from functools import partial
+
+    from psg_data.writers._safe_output import write_atomically
 
     out = Path(out_dir)
     paths = save_results(persistence_results(result, roles=roles, info=info, title=title), out)
     extra = {"csv": out / "results.csv", "by_object": out / "by_object.csv", "by_receptacle": out / "by_receptacle.csv",
              "by_weekday": out / "by_weekday.csv", "by_horizon": out / "by_horizon.csv", "seeds": out / "seeds.json"}
-    result.to_frame().to_csv(extra["csv"], index=False)
+    write_atomically(extra["csv"], lambda tmp: result.to_frame().to_csv(tmp, index=False))
     for by in ("object", "receptacle", "weekday", "horizon"):
-        result.breakdown(by).to_csv(extra[f"by_{by}"], index=False)
-    extra["seeds"].write_text(json.dumps(result.to_dict()["seeds"], indent=1) + "\n", encoding="utf-8")
+        write_atomically(extra[f"by_{by}"], partial(result.breakdown(by).to_csv, index=False))
+    seeds = json.dumps(result.to_dict()["seeds"], indent=1) + "\n"
+    write_atomically(extra["seeds"], lambda tmp: tmp.write_text(seeds, encoding="utf-8"))
     return {**paths, **extra}

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -186,16 +187,34 @@ class EvalResults:
             raise EvaluationError(f"{where}: malformed results file ({type(exc).__name__}: {exc})") from None
 
 
-def save_results(results: EvalResults, out_dir: str | Path) -> dict[str, Path]:
-    """Write ``results.json``, ``summary.csv`` (the long table) and ``table.txt`` (the rendered tables)."""
-    from psg_data.evaluation._tables import format_results
+def save_results(results: EvalResults, out_dir: str | Path, *,
+                 inputs: Iterable[str | Path | None] = ()) -> dict[str, Path]:
+    """Write ``results.json``, ``summary.csv`` (the long table) and ``table.txt`` (the rendered tables).
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    Replaces each of these files in ``out_dir`` atomically (an interrupted call leaves the previous
+    file as it was; other files in ``out_dir`` are left alone); never inside ``inputs``.
+
+    Args:
+        results: the results to write.
+        out_dir: the folder (created if missing).
+        inputs: paths the files must not be or lie inside (the input dataset, when known).
+
+    Returns:
+        ``{"json": ..., "summary": ..., "table": ...}``, the paths written.
+
+    Raises:
+        UnsafeOutputError: ``out_dir`` is or lies inside one of ``inputs``; nothing is written.
+    """
+    from psg_data.evaluation._tables import format_results
+    from psg_data.writers._safe_output import write_atomically
+
+    out, inputs = Path(out_dir), list(inputs)
     paths = {"json": out / "results.json", "summary": out / "summary.csv", "table": out / "table.txt"}
-    paths["json"].write_text(json.dumps(results.to_dict(), indent=1, allow_nan=False) + "\n", encoding="utf-8")
-    results_frame(results).to_csv(paths["summary"], index=False)
-    paths["table"].write_text(format_results(results) + "\n", encoding="utf-8")
+    text = json.dumps(results.to_dict(), indent=1, allow_nan=False) + "\n"
+    write_atomically(paths["json"], lambda tmp: tmp.write_text(text, encoding="utf-8"), inputs=inputs)
+    write_atomically(paths["summary"], lambda tmp: results_frame(results).to_csv(tmp, index=False), inputs=inputs)
+    table = format_results(results) + "\n"
+    write_atomically(paths["table"], lambda tmp: tmp.write_text(table, encoding="utf-8"), inputs=inputs)
     return paths
 
 

@@ -20,6 +20,7 @@ from psg_data.evaluation import (
     results_frame,
     save_results,
 )
+from tests.contract import files_in, interrupt_partway
 
 
 def _results() -> EvalResults:
@@ -74,3 +75,32 @@ def test_the_renderer_orders_reference_rows_first_and_marks_the_best_non_ceiling
     zero = next(ln for ln in lines if ln.startswith("zero "))
     assert "0.000 " in zero and "0.000 ±" not in zero  # no interval: the estimate alone
     assert lines[-1] == "±: what it is" and "\x1b" not in text  # plain text, notes under the table
+
+
+def test_save_results_replaces_each_file_atomically(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import pandas as pd
+
+    save_results(EvalResults("persistence", []), tmp_path)
+    before = (tmp_path / "summary.csv").read_bytes()
+    interrupt_partway(monkeypatch, pd.DataFrame, "to_csv")  # Ctrl-C while summary.csv is written
+    with pytest.raises(KeyboardInterrupt):
+        save_results(_results(), tmp_path)
+    assert (tmp_path / "summary.csv").read_bytes() == before  # the previous good file, not half a new one
+    assert files_in(tmp_path) == ["results.json", "summary.csv", "table.txt"]
+
+
+def test_write_persistence_results_replaces_each_file_atomically(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    import pandas as pd
+
+    from psg_data.evaluation import write_persistence_results
+    from tests.evaluation.test_plots_figures import _result
+
+    res = _result()
+    paths = write_persistence_results(res, tmp_path, info={})
+    before = {n: p.read_bytes() for n, p in paths.items()}
+    interrupt_partway(monkeypatch, pd.DataFrame, "to_csv", only="by_receptacle")
+    with pytest.raises(KeyboardInterrupt):
+        write_persistence_results(res, tmp_path, info={"run": 2})
+    assert paths["by_receptacle"].read_bytes() == before["by_receptacle"]
+    assert files_in(tmp_path) == sorted(p.name for p in paths.values())
