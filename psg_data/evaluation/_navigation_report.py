@@ -196,17 +196,32 @@ def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[st
                              info: Mapping[str, Any] | None = None) -> dict[str, Path]:
     """Write the results schema (results.json, summary.csv, table.txt), records.parquet, per_seed.csv,
     results.csv (one row per method, every column of the summary) and sweep.csv (with a sweep).
+
+    Replaces each of these files in ``out_dir`` atomically (an interrupted call leaves the previous
+    file as it was; other files are left alone); never inside the input dataset (``res.env``'s).
+
+    Raises:
+        UnsafeOutputError: ``out_dir`` is or lies inside the input dataset; nothing is written.
     """
-    out = Path(out_dir)
-    paths = save_results(navigation_results(res, roles=roles, info=info), out)
+    from functools import partial
+
+    from psg_data.writers._safe_output import write_atomically
+
+    out, inputs = Path(out_dir), [input_dataset(getattr(res, "env", None))]
+    paths = save_results(navigation_results(res, roles=roles, info=info), out, inputs=inputs)
     extra = {"records": out / "records.parquet", "per_seed": out / "per_seed.csv", "csv": out / "results.csv"}
-    res.records.to_parquet(extra["records"], index=False)
-    res.per_seed.to_csv(extra["per_seed"], index=False)
-    res.summary.to_csv(extra["csv"], index=False)
+    write_atomically(extra["records"], partial(res.records.to_parquet, index=False), inputs=inputs)
+    write_atomically(extra["per_seed"], partial(res.per_seed.to_csv, index=False), inputs=inputs)
+    write_atomically(extra["csv"], partial(res.summary.to_csv, index=False), inputs=inputs)
     if res.sweep is not None:
         extra["sweep"] = out / "sweep.csv"
-        res.sweep.to_csv(extra["sweep"], index=False)
+        write_atomically(extra["sweep"], partial(res.sweep.to_csv, index=False), inputs=inputs)
     return {**paths, **extra}
+
+
+def input_dataset(env: Any) -> str | None:
+    """The folder of the dataset a navigation environment was built from (None: a synthetic lab or no env)."""
+    return None if env is None else env.extra.get("root")
 
 
 def choose_map_query(res: Any, methods: list[str] | None = None) -> tuple[int, int]:

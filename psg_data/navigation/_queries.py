@@ -237,15 +237,17 @@ def queries_from_frame(df: Any) -> list[Query]:
 
 
 def save_queries(queries: list[Query], path: str | Path) -> Path:
-    """Write queries to ``path`` (``.parquet`` or ``.json``)."""
+    """Write queries to ``path`` (``.parquet`` or ``.json``): replaces the file atomically (an
+    interrupted call leaves the previous one as it was).
+    """
+    from psg_data.writers._safe_output import write_atomically
+
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     df = queries_to_frame(queries)
     if p.suffix == ".json":
-        p.write_text(json.dumps(df.to_dict("records"), indent=1))
-    else:
-        df.to_parquet(p, index=False)
-    return p
+        text = json.dumps(df.to_dict("records"), indent=1)
+        return write_atomically(p, lambda tmp: tmp.write_text(text))
+    return write_atomically(p, lambda tmp: df.to_parquet(tmp, index=False))
 
 
 def load_queries(path: str | Path) -> list[Query]:

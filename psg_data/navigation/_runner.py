@@ -163,7 +163,8 @@ class NavigationResult:
     def save(self, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,
              info: Mapping[str, Any] | None = None) -> dict[str, Path]:
         """Write records.parquet, per_seed.csv, summary.csv and the results schema (results.json,
-        table.txt) to ``out_dir``.
+        table.txt) to ``out_dir`` (:func:`~psg_data.evaluation.write_navigation_results`): replaces
+        each file atomically; never inside the input dataset.
         """
         from psg_data.evaluation._navigation_report import write_navigation_results
 
@@ -391,6 +392,14 @@ def _resolve_options(options: NavigationOptions | None, overrides: dict[str, Any
         raise EvaluationError(f"run_navigation: {exc}") from None
 
 
+def _check_out_dir(out_dir: str | Path, env: NavigationEnv) -> None:
+    """Refuse an ``out_dir`` that is or lies inside the input dataset (its files would be written into it)."""
+    from psg_data.evaluation._navigation_report import input_dataset
+    from psg_data.writers._safe_output import check_not_input
+
+    check_not_input(Path(out_dir) / "results.json", [input_dataset(env)])
+
+
 def run_navigation(
     dataset_or_lab: Any,
     estimators: Any = BUILTIN_METHODS,
@@ -412,7 +421,8 @@ def run_navigation(
         options: the run settings (:class:`~psg_data.navigation.NavigationOptions`; default the
             ``sim`` protocol).
         out_dir: if given, query sets are loaded from / stored to ``out_dir/queries/`` (Parquet and
-            JSON) and the results are saved there.
+            JSON) and the results are saved there (:meth:`NavigationResult.save`); each file is
+            replaced atomically, never inside the input dataset.
         estimator_settings: name -> keyword settings for registry estimators.
         env_kwargs: extra arguments of :meth:`NavigationEnv.from_dataset`.
         door_modes: method name -> door belief (one of ``truth``, ``predicted``, ``last_map``,
@@ -424,6 +434,9 @@ def run_navigation(
 
     Returns:
         A :class:`NavigationResult`.
+
+    Raises:
+        UnsafeOutputError: ``out_dir`` is or lies inside the input dataset (checked before the run).
     """
     opts, hook = _resolve_options(options, overrides)
     cfg = AgentConfig(setting=opts.setting, delta=opts.delta, max_attempts=opts.max_attempts,
@@ -435,6 +448,8 @@ def run_navigation(
                                **dict(env_kwargs or {}))
     if isinstance(dataset_or_lab, NavigationEnv) and (opts.labels != env.labels):
         raise EvaluationError(f"labels {opts.labels!r}: the given environment was built with labels {env.labels!r}")
+    if out_dir is not None:
+        _check_out_dir(out_dir, env)
     cache = PlanningCache(env.grid, reach_m=opts.reach_m)
     methods = _methods(estimators)
     if not methods:

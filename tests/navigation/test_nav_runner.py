@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from psg_data.errors import EvaluationError
+from psg_data.errors import EvaluationError, UnsafeOutputError
 from psg_data.navigation import (
     METRICS,
     NavigationEnv,
@@ -20,6 +21,7 @@ from psg_data.navigation import (
     save_queries,
     score_records,
 )
+from tests.contract import files_in, interrupt_partway, snapshot
 
 
 def test_env_from_dataset(nav_env):
@@ -289,3 +291,70 @@ def test_plot_query_returns_a_figure_and_leaves_the_backend(nav_env, user_backen
     fig = plot_query(nav_env, q)
     assert isinstance(fig, Figure) and fig.axes[0].get_xlabel() == "x (m)"
     assert isinstance(res.plot("oracle", q.query_id), Figure)
+
+
+# -- nothing is lost: outputs are replaced atomically, never inside the input dataset ----------------------
+
+def test_run_navigation_never_writes_into_its_input_dataset(nav_dataset, tmp_path):
+    before = snapshot(nav_dataset)
+    for out in (nav_dataset, nav_dataset / "results"):
+        with pytest.raises(UnsafeOutputError, match="lies inside the input") as err:
+            run_navigation(nav_dataset, ["oracle"], seed=0, n_queries=5, out_dir=out)
+        assert str(out) in str(err.value) and "expected a path outside" in str(err.value)
+    assert snapshot(nav_dataset) == before
+
+
+def test_navigation_result_save_never_writes_into_the_input_dataset(nav_dataset):
+    from psg_data.evaluation import write_navigation_results
+
+    before = snapshot(nav_dataset)
+    res = run_navigation(nav_dataset, ["oracle"], seed=0, n_queries=5)
+    with pytest.raises(UnsafeOutputError, match="lies inside the input"):
+        res.save(nav_dataset)
+    with pytest.raises(UnsafeOutputError, match="lies inside the input"):
+        write_navigation_results(res, nav_dataset / "sub")
+    assert snapshot(nav_dataset) == before
+
+
+def test_run_navigation_out_dir_replaces_each_file_atomically(nav_dataset, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    run_navigation(nav_dataset, ["oracle"], seed=0, n_queries=5, out_dir=out)
+    before = snapshot(out)
+    interrupt_partway(monkeypatch, pd.DataFrame, "to_parquet", only="records")
+    with pytest.raises(KeyboardInterrupt):
+        run_navigation(nav_dataset, ["oracle", "last_seen_map"], seed=0, n_queries=5, out_dir=out)
+    after = snapshot(out)
+    assert after["records.parquet"] == before["records.parquet"] and set(after) == set(before)
+
+
+def test_navigation_result_save_replaces_each_file_atomically(nav_env, tmp_path, monkeypatch):
+    from psg_data.evaluation import write_navigation_results
+
+    res = run_navigation(nav_env, ["oracle", "last_seen_map"], seed=0, n_queries=5)
+    run_navigation(nav_env, ["oracle"], seed=0, n_queries=5).save(tmp_path)
+    before = snapshot(tmp_path)
+    interrupt_partway(monkeypatch, pd.DataFrame, "to_csv", only="per_seed")
+    with pytest.raises(KeyboardInterrupt):
+        res.save(tmp_path)
+    assert snapshot(tmp_path)["per_seed.csv"] == before["per_seed.csv"]
+    monkeypatch.undo()
+    interrupt_partway(monkeypatch, pd.DataFrame, "to_csv", only="results.csv")
+    with pytest.raises(KeyboardInterrupt):
+        write_navigation_results(res, tmp_path)
+    after = snapshot(tmp_path)
+    assert after["results.csv"] == before["results.csv"] and set(after) == set(before)
+
+
+def test_save_queries_replaces_the_file_atomically(nav_env, tmp_path, monkeypatch):
+    a, b = make_queries(nav_env, 5, seed=0), make_queries(nav_env, 8, seed=1)
+    out = tmp_path / "out"
+    for suffix, owner, name, arg in ((".json", Path, "write_text", 0), (".parquet", pd.DataFrame, "to_parquet", 1)):
+        p = save_queries(a, out / f"q{suffix}")
+        before = p.read_bytes()
+        with monkeypatch.context() as m:
+            interrupt_partway(m, owner, name, path_arg=arg)
+            with pytest.raises(KeyboardInterrupt):
+                save_queries(b, p)
+        assert p.read_bytes() == before
+    assert files_in(out) == ["q.json", "q.parquet"]
+
