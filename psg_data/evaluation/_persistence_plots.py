@@ -7,11 +7,15 @@
 - :func:`plot_metric_bars`: MAE / B-Acc / F1 per row with the stated interval, the value on each
   bar, reference rows hatched, the chance level as a line.
 - :func:`plot_horizon`: the three metrics by time since the edge's last observation.
+
+Each writes its figure to ``out_path`` when given (:func:`save_figure`: the file there is replaced
+atomically).
 """
 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,11 +33,20 @@ __all__ = ["plot_beliefs", "plot_metric_bars", "plot_horizon", "save_figure", "c
 
 
 def save_figure(fig: Figure, out_path: str | Path | None, dpi: int = 110) -> Figure:
-    """Write ``fig`` as a PNG at ``out_path`` when one is given; the figure either way."""
+    """Write ``fig`` as a PNG at ``out_path`` when one is given (another format by its suffix, as
+    ``savefig``); the figure either way.
+
+    Replaces the file atomically: an interrupted call leaves the previous file as it was.
+    """
     if out_path is not None:
+        from psg_data.writers._safe_output import write_atomically
+
         out = Path(out_path)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi, bbox_inches="tight")
+        fmt = os.path.splitext(out.name)[1][1:]
+        if not fmt:  # what savefig does with a name without suffix: the default format, its suffix appended
+            fmt = fig.canvas.get_default_filetype()
+            out = out.with_name(f"{out.name.rstrip('.')}.{fmt}")
+        write_atomically(out, lambda tmp: fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight"))
     return fig
 
 

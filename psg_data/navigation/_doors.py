@@ -537,7 +537,7 @@ def door_loop_world(door_ab_open: Callable[[float], bool], train_streams: Sequen
 def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, out_path: str | Path | None = None, *,
                     title: str | None = None, dpi: int = 120, baseline: DoorEpisode | None = None) -> Figure:
     """A figure like the paper's "Predictive Navigation" one: a ``matplotlib.figure.Figure``, written
-    as a PNG at ``out_path`` if given (no pyplot, the user's backend is left alone).
+    as a PNG at ``out_path`` if given (replaced atomically; no pyplot, the user's backend is left alone).
 
     Shows the grid (free light, obstacles dark), each door's cells coloured by the predicted
     P(open) (pink = low, teal = high; label with the value and the true state), the path the
@@ -608,8 +608,6 @@ def plot_door_query(world: DoorWorld, query: DoorQuery, episode: DoorEpisode, ou
     short = f"{episode.shortest_m:.1f} m" if math.isfinite(episode.shortest_m) else "none (no route is open)"
     ax.set_title(title or f"query {query.query_id} to {query.goal}\n{episode.method} walked {episode.walked_m:.1f} m; "
                           f"shortest with the true doors {short}", fontsize=10)
-    if out_path is not None:
-        out = Path(out_path)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi, bbox_inches="tight")
-    return fig
+    from psg_data.evaluation._persistence_plots import save_figure
+
+    return save_figure(fig, out_path, dpi)

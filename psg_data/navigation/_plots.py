@@ -49,7 +49,7 @@ def plot_query(
     Args:
         env: the environment.
         query: the query.
-        out_path: PNG path (None: do not write).
+        out_path: PNG path (None: do not write); the file there is replaced atomically.
         beliefs: receptacle_id -> belief at the query time.
         trail: flat cell indices of the walked path.
         cache: planning cache (only to reuse its grid); optional.
@@ -91,11 +91,9 @@ def plot_query(
     ax.set_aspect("equal")
     _query_legend(ax, door_p_open)
     ax.set_title(title or f"{query.object_id} ({query.category}), query {query.query_id}")
-    if out_path is not None:
-        out = Path(out_path)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi, bbox_inches="tight")
-    return fig
+    from psg_data.evaluation._persistence_plots import save_figure
+
+    return save_figure(fig, out_path, dpi)
 
 
 def _draw_free_space(ax: Any, grid: Any, query: Query) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from psg_data.estimators import EdgeStream
 from psg_data.navigation import (
@@ -16,6 +17,7 @@ from psg_data.navigation import (
     run_door_episode,
     run_door_navigation,
 )
+from tests.contract import files_in, interrupt_partway
 from tests.navigation.conftest import door_grid
 
 
@@ -130,3 +132,17 @@ def test_door_plot_returns_a_figure_and_leaves_the_backend(loop_world, user_back
     q = r.queries[0]
     fig = plot_door_query(loop_world, q, r.episodes["last_seen"][q.query_id])
     assert isinstance(fig, Figure) and fig.axes
+
+
+def test_door_plot_replaces_the_file_atomically(loop_world, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    from matplotlib.figure import Figure
+
+    r = run_door_navigation(loop_world, ["last_seen"], n_queries=3)
+    q = r.queries[0]
+    out = tmp_path / "doors.png"
+    plot_door_query(loop_world, q, r.episodes["last_seen"][q.query_id], out)
+    before = out.read_bytes()
+    interrupt_partway(monkeypatch, Figure, "savefig")
+    with pytest.raises(KeyboardInterrupt):
+        plot_door_query(loop_world, q, r.episodes["last_seen"][q.query_id], out, title="another title")
+    assert out.read_bytes() == before and files_in(tmp_path) == ["doors.png"]

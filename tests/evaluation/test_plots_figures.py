@@ -7,9 +7,11 @@ import ast
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from psg_data.estimators import EdgeStream
 from psg_data.evaluation import evaluate_persistence, plot_beliefs, plot_metric_bars
+from tests.contract import files_in, interrupt_partway
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -75,3 +77,19 @@ def test_belief_legend_lists_only_what_is_drawn(tmp_path: Path) -> None:
     fig = plot_beliefs([tr], tmp_path / "b.png")
     texts = [x.get_text() for leg in fig.legends for x in leg.get_texts()]
     assert texts and not any(x.startswith("cut:") or x.startswith("thin") for x in texts)
+
+
+def test_plots_replace_the_file_atomically_in_the_format_of_its_suffix(tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    from matplotlib.figure import Figure
+
+    res = _result()
+    plot_metric_bars(res, tmp_path / "poster.pdf")
+    plot_beliefs(res.traces, tmp_path / "belief")  # no suffix: savefig's default format, its suffix appended
+    before = (tmp_path / "poster.pdf").read_bytes()
+    assert before[:5] == b"%PDF-" and (tmp_path / "belief.png").read_bytes()[:4] == b"\x89PNG"
+    interrupt_partway(monkeypatch, Figure, "savefig")
+    with pytest.raises(KeyboardInterrupt):
+        plot_metric_bars(res, tmp_path / "poster.pdf")
+    assert (tmp_path / "poster.pdf").read_bytes() == before
+    assert files_in(tmp_path) == ["belief.png", "poster.pdf"]

@@ -358,3 +358,18 @@ def test_save_queries_replaces_the_file_atomically(nav_env, tmp_path, monkeypatc
         assert p.read_bytes() == before
     assert files_in(out) == ["q.json", "q.parquet"]
 
+
+def test_plot_query_replaces_the_file_atomically(nav_env, tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    res = run_navigation(nav_env, ["oracle"], seed=0, n_queries=3)
+    q = res.queries[0][0]
+    p = tmp_path / "out" / "map.png"
+    plot_query(nav_env, q, p)
+    before = p.read_bytes()
+    interrupt_partway(monkeypatch, Figure, "savefig")
+    with pytest.raises(KeyboardInterrupt):
+        plot_query(nav_env, q, p, title="another title")
+    with pytest.raises(KeyboardInterrupt):
+        res.plot("oracle", q.query_id, p)
+    assert p.read_bytes() == before and files_in(p.parent) == ["map.png"]
