@@ -189,14 +189,25 @@ def _row(scan_id: str, label: str, kind: str, center: Any, extent: Any, rotation
 def write_detections(dataset_or_lab: Any, path: str | Path, *, seed: int = 0, miss_rate: float = 0.1,
                      false_positive_rate: float = 0.05, centroid_noise_m: float = 0.03, confusion_rate: float = 0.05,
                      perfect: bool = False, receptacle_miss_rate: float = 0.0, min_pixels: int = 4) -> Path:
-    """Write :func:`detect`'s detections to ``path`` (``detections.parquet``, layout in the module doc)."""
+    """Write :func:`detect`'s detections to ``path`` (``detections.parquet``, layout in the module doc).
+
+    Replaces the file at ``path`` atomically (an interrupted call leaves the previous one as it
+    was); never inside the input dataset.
+
+    Raises:
+        UnsafeOutputError: ``path`` is, contains or lies inside the input dataset (checked before
+            anything is computed).
+    """
     import pyarrow.parquet as pq
 
+    from psg_data.writers._safe_output import check_not_input, write_atomically
+
+    path = Path(path)
+    inputs = [dataset_or_lab if isinstance(dataset_or_lab, (str, Path)) else getattr(dataset_or_lab, "root", None)]
+    check_not_input(path, inputs)
     table = detect(dataset_or_lab, seed=seed, miss_rate=miss_rate, false_positive_rate=false_positive_rate,
                    centroid_noise_m=centroid_noise_m, confusion_rate=confusion_rate, perfect=perfect,
                    receptacle_miss_rate=receptacle_miss_rate, min_pixels=min_pixels)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(table, path, compression="zstd")
+    write_atomically(path, lambda tmp: pq.write_table(table, tmp, compression="zstd"), inputs=inputs)
     log.info("wrote %d detections to %s", table.num_rows, path)
     return path

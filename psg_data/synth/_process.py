@@ -353,8 +353,13 @@ class StepProcess:
         return out
 
     def save(self, path: str | Path) -> None:
-        """Write the process as JSON to ``path``."""
-        Path(path).write_text(self.to_json(), encoding="utf-8")
+        """Write the process as JSON to ``path``: replaces the file atomically (an interrupted call
+        leaves the previous one as it was).
+        """
+        from psg_data.writers._safe_output import write_atomically
+
+        text = self.to_json()
+        write_atomically(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def load_process(source: Any) -> StepProcess:

@@ -97,3 +97,35 @@ def test_detections_seeded() -> None:
     assert a.equals(detect(lab, seed=4, miss_rate=0.2, false_positive_rate=0.2))
     assert not a.equals(detect(lab, seed=5, miss_rate=0.2, false_positive_rate=0.2))
     assert OBJECT_ID0 > RECEPTACLE_ID0
+
+
+def test_write_detections_never_writes_into_its_input(small_dataset_path: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from psg_data.errors import UnsafeOutputError
+    from psg_data.loaders import open_dataset
+    from tests.contract import snapshot
+
+    lab = tmp_path / "lab"
+    shutil.copytree(small_dataset_path, lab)  # a copy: a failing test must not damage the shared dataset
+    before = snapshot(lab)
+    for source in (lab, str(lab), open_dataset(lab)):
+        for path, msg in ((lab / "tables" / "objects.parquet", "lies inside the input"), (lab, "is the input"),
+                          (tmp_path, "contains the input")):
+            with pytest.raises(UnsafeOutputError, match=msg) as err:
+                write_detections(source, path)
+            assert str(path) in str(err.value)
+    assert snapshot(lab) == before
+
+
+def test_write_detections_replaces_the_file_atomically(small_dataset_path: Path, small_lab: LabModel, tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from tests.contract import files_in, interrupt_partway
+
+    out = tmp_path / "detections.parquet"
+    write_detections(small_lab, out)  # a LabModel: no input folder
+    good = out.read_bytes()
+    interrupt_partway(monkeypatch, pq, "write_table")  # Ctrl-C in the middle of the file
+    with pytest.raises(KeyboardInterrupt):
+        write_detections(small_dataset_path, out, seed=1)
+    assert out.read_bytes() == good and files_in(tmp_path) == ["detections.parquet"]

@@ -8,10 +8,12 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from psg_data.loaders import open_dataset
 from psg_data.schemas.validate import validate_dataset
 from psg_data.synth import PROCESS_FILE, LabConfig, LabModel, build_lab, load_process
+from tests.contract import files_in, interrupt_partway
 
 
 def test_manifest_names_every_parameter_and_the_model(small_dataset_path: Path, small_config: LabConfig) -> None:
@@ -66,3 +68,17 @@ def test_continuous_v1_datasets_have_no_model_and_rebuild(tmp_path: Path) -> Non
     a, b = LabModel(old).schedule, lab.schedule
     for o in a.object_ids:
         np.testing.assert_array_equal(a.objects[o].states, b.objects[o].states)
+
+
+def test_step_process_save_replaces_the_file_atomically(small_dataset_path: Path, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    proc = load_process(small_dataset_path)
+    out = tmp_path / "model.json"
+    out.write_text('{"my": "previous model"}\n', encoding="utf-8")
+    interrupt_partway(monkeypatch, Path, "write_text", path_arg=0)  # Ctrl-C in the middle of the file
+    with pytest.raises(KeyboardInterrupt):
+        proc.save(out)
+    assert out.read_bytes() == b'{"my": "previous model"}\n' and files_in(tmp_path) == ["model.json"]
+    monkeypatch.undo()
+    proc.save(out)
+    assert load_process(out).to_json() == proc.to_json() == out.read_text(encoding="utf-8")
