@@ -392,12 +392,13 @@ def _resolve_options(options: NavigationOptions | None, overrides: dict[str, Any
         raise EvaluationError(f"run_navigation: {exc}") from None
 
 
-def _check_out_dir(out_dir: str | Path, env: NavigationEnv) -> None:
+def _check_out_dir(out_dir: str | Path | None, env: NavigationEnv) -> None:
     """Refuse an ``out_dir`` that is or lies inside the input dataset (its files would be written into it)."""
     from psg_data.evaluation._navigation_report import input_dataset
     from psg_data.writers._safe_output import check_not_input
 
-    check_not_input(Path(out_dir) / "results.json", [input_dataset(env)])
+    if out_dir is not None:
+        check_not_input(Path(out_dir) / "results.json", [input_dataset(env)])
 
 
 def run_navigation(
@@ -448,8 +449,7 @@ def run_navigation(
                                **dict(env_kwargs or {}))
     if isinstance(dataset_or_lab, NavigationEnv) and (opts.labels != env.labels):
         raise EvaluationError(f"labels {opts.labels!r}: the given environment was built with labels {env.labels!r}")
-    if out_dir is not None:
-        _check_out_dir(out_dir, env)
+    _check_out_dir(out_dir, env)
     cache = PlanningCache(env.grid, reach_m=opts.reach_m)
     methods = _methods(estimators)
     if not methods:
