@@ -392,6 +392,22 @@ def _resolve_options(options: NavigationOptions | None, overrides: dict[str, Any
         raise EvaluationError(f"run_navigation: {exc}") from None
 
 
+def _checked_methods(estimators: Any, door_modes: Mapping[str, str] | None
+                     ) -> tuple[list[tuple[str, MethodSpec]], list[str], dict[str, str]]:
+    """(methods, their names, door modes by method) of :func:`run_navigation`, checked."""
+    methods = _methods(estimators)
+    if not methods:
+        raise EvaluationError("run_navigation: no methods")
+    names = [m for m, _ in methods]
+    if len(set(names)) != len(names):
+        raise EvaluationError(f"run_navigation: duplicate method names {names}")
+    modes = dict(door_modes or {})
+    bad = {m: v for m, v in modes.items() if m not in names or v not in DOOR_BELIEFS}
+    if bad:
+        raise EvaluationError(f"door_modes {bad}: expected method names {names} and modes {DOOR_BELIEFS}")
+    return methods, names, modes
+
+
 def _check_out_dir(out_dir: str | Path | None, env: NavigationEnv) -> None:
     """Refuse an ``out_dir`` that is or lies inside the input dataset (its files would be written into it)."""
     from psg_data.evaluation._navigation_report import input_dataset
@@ -451,20 +467,11 @@ def run_navigation(
         raise EvaluationError(f"labels {opts.labels!r}: the given environment was built with labels {env.labels!r}")
     _check_out_dir(out_dir, env)
     cache = PlanningCache(env.grid, reach_m=opts.reach_m)
-    methods = _methods(estimators)
-    if not methods:
-        raise EvaluationError("run_navigation: no methods")
-    names = [m for m, _ in methods]
-    if len(set(names)) != len(names):
-        raise EvaluationError(f"run_navigation: duplicate method names {names}")
+    methods, names, modes = _checked_methods(estimators, door_modes)
     qsets = _query_sets(env, opts, out_dir)
 
     import pandas as pd
 
-    modes = dict(door_modes or {})
-    bad = {m: v for m, v in modes.items() if m not in names or v not in DOOR_BELIEFS}
-    if bad:
-        raise EvaluationError(f"door_modes {bad}: expected method names {names} and modes {DOOR_BELIEFS}")
     run = _MethodRuns(env, cache, opts, cfg, qsets, hook)
     for name, spec in methods:
         t0 = time.perf_counter()
