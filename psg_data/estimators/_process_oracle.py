@@ -108,7 +108,7 @@ class ProcessOracleEstimator(BaseEstimator):
         self.output = output
 
     def _load(self) -> Any:
-        from psg_data.synth._process import load_process
+        from psg_data.schemas._generator_model import load_process
 
         source = self.model if self.model is not None else self.dataset
         if source is None:

@@ -39,7 +39,8 @@ def dataset_hints(ds: Any) -> dict[str, Any]:
     rel = extra.get("process_file")
     if extra.get("generator") != "psg_data.synth" or not rel or not (ds.root / rel).is_file():
         return {}
-    from psg_data.synth._process import llm_schedules, load_process
+    from psg_data.schemas._generator_model import load_process
+    from psg_data.synth._process import llm_schedules
 
     proc = load_process(ds.root)
     return {"dataset": str(ds.root), "schedules": {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}}

@@ -526,7 +526,7 @@ def _check_process_file(c: _Collector, root: Path, extra: dict[str, Any], cols: 
     if not path.is_file():
         c.add(MANIFEST_NAME, "extra.process_file", f"{rel!r} does not exist, expected the generator model file")
         return
-    from psg_data.synth._process import PROCESS_FORMAT, StepProcess
+    from psg_data.schemas._generator_model import PROCESS_FORMAT, StepProcess
 
     try:
         data = json.loads(path.read_text(encoding="utf-8"))

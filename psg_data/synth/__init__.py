@@ -10,6 +10,7 @@ Main entry points:
 
 from __future__ import annotations
 
+from psg_data.schemas._generator_model import PROCESS_FILE, EntityProcess, StepProcess, load_process
 from psg_data.synth._build import build_lab, object_description, rerender_frame
 from psg_data.synth._catalog import CONFUSABLE, FURNITURE, OBJECTS, FurnitureSpec, ObjectSpec
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
@@ -28,15 +29,7 @@ from psg_data.synth._layout import (
 )
 from psg_data.synth._model import GENERATORS, SYNTH_VERSION, LabConfig, LabModel, ScanPlan, camera_pose
 from psg_data.synth._perception import DETECTIONS_SCHEMA, detect, write_detections
-from psg_data.synth._process import (
-    PROCESS_FILE,
-    EntityProcess,
-    ForwardBelief,
-    StepProcess,
-    llm_schedules,
-    load_process,
-    sample_entity,
-)
+from psg_data.synth._process import ForwardBelief, llm_schedules, sample_entity
 from psg_data.synth._raw_export import RAW_EXPORT_FORMATS, export_raw
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, DenseSchedule, EntityModel, HourPattern, Timeline, WeekPattern

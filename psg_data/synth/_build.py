@@ -79,7 +79,7 @@ def build_lab(out: str | Path, config: LabConfig | None = None, *, overwrite: bo
         w.set_table("schedule", sched_rows)
         process = getattr(lab.schedule, "process", None)
         if process is not None:  # steps-v2: the exact generative model, for the Bayes ceiling
-            from psg_data.synth._process import PROCESS_FILE
+            from psg_data.schemas._generator_model import PROCESS_FILE
 
             w.add_file(PROCESS_FILE, process.to_json().encode("utf-8"))
     log.info("synthetic lab: %d scans, seed %d", len(lab.scans), cfg.seed)

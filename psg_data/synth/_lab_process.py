@@ -39,10 +39,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data.schemas._generator_model import EntityProcess, StepProcess
 from psg_data.synth._catalog import ObjectSpec
 from psg_data.synth._lab_schedule import DOOR_CLOSED, DOOR_OPEN, TimelineSchedule, _affinity, _pick
 from psg_data.synth._layout import LabLayout
-from psg_data.synth._process import EntityPath, EntityProcess, StepProcess, sample_entity
+from psg_data.synth._process import EntityPath, sample_entity
 from psg_data.synth._schedule import Timeline
 
 __all__ = ["ProcessParams", "lab_process", "StepSchedule"]

@@ -160,7 +160,7 @@ class LabConfig:
             for k in ("routine_strength", "day_patterns", "day_persistence", "max_dwell_steps"):
                 out.pop(k)
         else:
-            from psg_data.synth._process import PROCESS_FILE
+            from psg_data.schemas._generator_model import PROCESS_FILE
 
             out["process_file"] = PROCESS_FILE
         return out

@@ -14,7 +14,8 @@ from click.testing import CliRunner
 from psg_data.errors import EstimatorError
 from psg_data.estimators import EdgeStream, check_estimator, get_estimator
 from psg_data.synth import LabConfig, build_lab
-from psg_data.synth._process import ForwardBelief, StepProcess, observation_likelihood, sample_entity
+from psg_data.schemas._generator_model import StepProcess
+from psg_data.synth._process import ForwardBelief, observation_likelihood, sample_entity
 from tests.synth.test_process_exact import tiny_process
 
 P = 0.1  # label noise of the streams below (declared to the oracle)

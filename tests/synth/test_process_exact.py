@@ -14,13 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from psg_data.synth._process import (
-    EntityProcess,
-    ForwardBelief,
-    StepProcess,
-    llm_schedules,
-    observation_likelihood,
-)
+from psg_data.schemas._generator_model import EntityProcess, StepProcess
+from psg_data.synth._process import ForwardBelief, llm_schedules, observation_likelihood
 
 START = dt.date(2025, 3, 7)  # a Friday: day 1 is a Saturday (weekend mask)
 

@@ -13,6 +13,7 @@ import pytest
 from psg_data.loaders import open_dataset
 from psg_data.schemas.validate import validate_dataset
 from psg_data.synth import PROCESS_FILE, LabConfig, LabModel, build_lab, load_process
+from psg_data.synth._process import save_process
 from tests.contract import files_in, interrupt_partway
 
 
@@ -70,15 +71,15 @@ def test_continuous_v1_datasets_have_no_model_and_rebuild(tmp_path: Path) -> Non
         np.testing.assert_array_equal(a.objects[o].states, b.objects[o].states)
 
 
-def test_step_process_save_replaces_the_file_atomically(small_dataset_path: Path, tmp_path: Path,
+def test_save_process_replaces_the_file_atomically(small_dataset_path: Path, tmp_path: Path,
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     proc = load_process(small_dataset_path)
     out = tmp_path / "model.json"
     out.write_text('{"my": "previous model"}\n', encoding="utf-8")
     interrupt_partway(monkeypatch, Path, "write_text", path_arg=0)  # Ctrl-C in the middle of the file
     with pytest.raises(KeyboardInterrupt):
-        proc.save(out)
+        save_process(proc, out)
     assert out.read_bytes() == b'{"my": "previous model"}\n' and files_in(tmp_path) == ["model.json"]
     monkeypatch.undo()
-    proc.save(out)
+    save_process(proc, out)
     assert load_process(out).to_json() == proc.to_json() == out.read_text(encoding="utf-8")

@@ -13,7 +13,8 @@ from scipy import stats
 
 from psg_data.synth import LabConfig, LabModel, make_layout
 from psg_data.synth._lab_process import ProcessParams, lab_process
-from psg_data.synth._process import ForwardBelief, StepProcess, load_process, observation_likelihood, sample_entity
+from psg_data.schemas._generator_model import StepProcess, load_process
+from psg_data.synth._process import ForwardBelief, observation_likelihood, sample_entity
 
 START = dt.date(2025, 3, 3)
 TZ = "America/Toronto"
