@@ -2,6 +2,7 @@
 
 A dataset written by ``psg-data synth`` with the ``steps-v2`` generator stores its generative
 model (``generator/process.json``: every entity's hierarchical step process, see
+:mod:`psg_data.schemas._generator_model`; the forward algorithm is in
 :mod:`psg_data.synth._process`). Given an entity's observations, the posterior over its state
 (receptacle or absent; door open or closed) at any later step is computed exactly by the forward
 algorithm over (day pattern x state x remaining dwell); the prediction for edge (entity, label)
