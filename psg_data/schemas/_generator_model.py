@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 from psg_data.errors import PsgDataError
 
 __all__ = ["EntityProcess", "StepProcess", "StepClock", "PROCESS_FORMAT", "PROCESS_VERSION", "PROCESS_FILE",
-           "WEEKDAYS", "SATURDAY", "load_process"]
+           "WEEKDAYS", "SATURDAY", "load_process", "normalize_rows"]
 
 PROCESS_FORMAT = "psg-step-process"
 PROCESS_VERSION = 1
@@ -62,7 +62,8 @@ WEEKDAYS = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")
 SATURDAY = 5
 
 
-def _norm(p: NDArray[np.float64]) -> NDArray[np.float64]:
+def normalize_rows(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``p`` scaled to sum to 1 along its last axis; rows without mass become zeros."""
     s = p.sum(axis=-1, keepdims=True)
     return np.where(s > 0, p / np.where(s > 0, s, 1.0), 0.0)
 
@@ -298,13 +299,13 @@ class StepProcess:
         m = entity.pattern_transition * a[None, :]
         empty = m.sum(axis=1) <= 0
         m[empty] = a
-        return _norm(m)
+        return normalize_rows(m)
 
     def day_initial(self, entity: EntityProcess) -> NDArray[np.float64]:
         """The entity's day-pattern distribution on day 0 (its initial one, restricted to the allowed patterns)."""
         a = self.allowed(entity, 0).astype(np.float64)
         p = entity.pattern_initial * a
-        return _norm(p if p.sum() > 0 else a)
+        return normalize_rows(p if p.sum() > 0 else a)
 
     # -- serialisation ------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

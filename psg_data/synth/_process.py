@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import PsgDataError
-from psg_data.schemas._generator_model import WEEKDAYS, EntityProcess, StepProcess, _norm
+from psg_data.schemas._generator_model import WEEKDAYS, EntityProcess, StepProcess, normalize_rows
 
 __all__ = ["ForwardBelief", "sample_entity", "EntityPath", "llm_schedules", "observation_likelihood", "save_process"]
 
@@ -213,14 +213,14 @@ def weekday_pattern_marginals(process: StepProcess, entity: EntityProcess, weeks
     """(7, D) long-run P(pattern | weekday) of the day chain (unshifted calendar)."""
     D = entity.n_patterns
     acc = np.zeros((7, D))
-    p = _norm(entity.pattern_initial * entity.pattern_allowed[process.clock.weekday(0)])
+    p = normalize_rows(entity.pattern_initial * entity.pattern_allowed[process.clock.weekday(0)])
     plain = StepProcess(process.timezone, process.start_date, process.days, process.step_hours,
                         {entity.entity_id: entity})
     for day in range(1, 7 * weeks):
         p = p @ plain.day_matrix(entity, day)
         if day >= 7 * (weeks - 8):
             acc[plain.clock.weekday(day)] += p
-    return _norm(acc)
+    return normalize_rows(acc)
 
 
 def _hhmm(h: float) -> str:

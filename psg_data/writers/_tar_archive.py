@@ -9,8 +9,8 @@ image bytes padded to 512, then the end-of-archive zero blocks, padded with zero
 Members are gathered into batches of about 8 MiB (headers, the caller's bytes, padding); one writer
 thread joins each batch into one buffer, hashes it (SHA-256, for ``files.parquet``) and writes it
 with one ``write``, both without the GIL, while the caller goes on reading and encoding (hashing
-and writing piece by piece instead took the GIL back some 350 times per batch and was 1.09 times
-slower, BENCHMARKS.md). Read-only data (``bytes``, views of a memory-mapped recording) is not
+and writing piece by piece instead took the GIL back some 350 times per batch: converting took 1.14
+times as long, BENCHMARKS.md). Read-only data (``bytes``, views of a memory-mapped recording) is not
 copied until then; writable buffers are copied at once, since their owner may reuse them.
 
 Pages of the archive more than :data:`DROP_BEHIND_BYTES` behind its end are dropped from the page
