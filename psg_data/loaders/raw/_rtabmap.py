@@ -16,7 +16,6 @@ from __future__ import annotations
 import sqlite3
 import struct
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
@@ -270,6 +269,13 @@ def decode_depth(blob: bytes, where: str) -> NDArray[np.uint16] | None:
                           f"expected 16-bit PNG, RVL or 32-bit float depth")
 
 
+def _blob(value: object, where: str) -> bytes | None:
+    """A BLOB column's value (NULL -> None); anything else is refused."""
+    if value is None or isinstance(value, bytes):
+        return value
+    raise ConversionError(f"{where}: a {type(value).__name__} value; expected a BLOB")
+
+
 def _version(text: str | None, where: str) -> tuple[int, ...]:
     try:
         return tuple(int(p) for p in str(text).strip().split("."))
@@ -310,9 +316,10 @@ class RtabmapDatabase:
             self.con.close()
             raise
 
-    def _query(self, sql: str, what: str, args: tuple[object, ...] = ()) -> sqlite3.Cursor:
+    def _rows(self, sql: str, what: str, args: tuple[object, ...] = ()) -> list[tuple[object, ...]]:
+        """Every row of a query; an SQLite error (locked, malformed, ...) as a ConversionError."""
         try:
-            return self.con.execute(sql, args)
+            return self.con.execute(sql, args).fetchall()
         except sqlite3.Error as exc:
             raise self._error(exc, what) from None
 
@@ -325,17 +332,18 @@ class RtabmapDatabase:
                                f"RTAB-Map database")
 
     def _check_schema(self) -> None:
-        tables = {r[0] for r in self._query("SELECT name FROM sqlite_master WHERE type='table'", "sqlite_master")}
+        tables = {r[0] for r in self._rows("SELECT name FROM sqlite_master WHERE type='table'", "sqlite_master")}
         for table, cols in self._REQUIRED.items():
             if table not in tables:
                 raise ConversionError(f"{self.where}: table {table} missing; expected an RTAB-Map database with "
                                       f"tables {', '.join(self._REQUIRED)}")
-            have = {r[1] for r in self._query(f"PRAGMA table_info({table})", table)}
+            have = {r[1] for r in self._rows(f"PRAGMA table_info({table})", table)}
             missing = [c for c in cols if c not in have]
             if missing:
                 raise ConversionError(f"{self.where}: {table}.{missing[0]}: column missing; expected the RTAB-Map "
                                       f"schema of 0.17.0 or later")
-        row = self._query("SELECT version FROM Admin", "Admin.version").fetchone()
+        rows = self._rows("SELECT version FROM Admin", "Admin.version")
+        row = rows[0] if rows else None
         if row is None:
             raise ConversionError(f"{self.where}: Admin.version: no row; expected the database version")
         self.version_text = str(row[0])
@@ -343,7 +351,7 @@ class RtabmapDatabase:
         if self.version < MIN_VERSION:
             raise ConversionError(f"{self.where}: Admin.version {self.version_text}: expected an RTAB-Map database "
                                   f"of version 0.17.0 or later")
-        self.has_opt = {"opt_ids", "opt_poses"} <= {r[1] for r in self._query("PRAGMA table_info(Admin)", "Admin")}
+        self.has_opt = {"opt_ids", "opt_poses"} <= {r[1] for r in self._rows("PRAGMA table_info(Admin)", "Admin")}
 
     def __enter__(self) -> RtabmapDatabase:
         return self
@@ -357,9 +365,12 @@ class RtabmapDatabase:
     def nodes(self) -> list[RtabNode]:
         """Every node, by id (stamps: ``Node.stamp`` seconds to integer nanoseconds)."""
         out = []
-        for nid, map_id, stamp, pose, label in self._query(
+        for nid, map_id, stamp, pose, label in self._rows(
                 "SELECT id, map_id, stamp, pose, label FROM Node ORDER BY id", "Node"):
             where = f"{self.where}: node {nid}"
+            if not isinstance(nid, int) or not isinstance(map_id, int):
+                raise ConversionError(f"{where}: Node.id / Node.map_id {nid!r}, {map_id!r}; expected integers")
+            pose = _blob(pose, f"{where}: Node.pose")
             T = parse_transform(pose, f"{where}: Node.pose")
             if T is not None and not np.all(np.isfinite(T)):
                 raise ConversionError(f"{where}: Node.pose: NaN or infinite values; expected a finite 3x4 transform")
@@ -375,11 +386,14 @@ class RtabmapDatabase:
         RTAB-Map stores a link in both directions (the reverse with the inverse transform).
         """
         seen: dict[tuple[int, int, int], RtabLink] = {}
-        for a, b, typ, tf, info in self._query(
+        for a, b, typ, tf, info in self._rows(
                 "SELECT from_id, to_id, type, transform, information_matrix FROM Link ORDER BY from_id, to_id", "Link"):
-            if typ not in GRAPH_LINK_TYPES or a == b:
+            if not isinstance(typ, int) or typ not in GRAPH_LINK_TYPES or a == b:
                 continue
             where = f"{self.where}: link {a}->{b}"
+            if not isinstance(a, int) or not isinstance(b, int):
+                raise ConversionError(f"{where}: Link.from_id / to_id: expected node ids (integers)")
+            tf, info = _blob(tf, f"{where}: Link.transform"), _blob(info, f"{where}: Link.information_matrix")
             T = parse_transform(tf, f"{where}: Link.transform")
             if T is None or not np.all(np.isfinite(T)):
                 raise ConversionError(f"{where}: Link.transform: missing or non-finite; expected a 3x4 transform")
@@ -396,11 +410,13 @@ class RtabmapDatabase:
         """``Admin.opt_ids`` / ``opt_poses`` (the graph RTAB-Map optimised and saved on close); {} if absent."""
         if not self.has_opt:
             return {}
-        row = self._query("SELECT opt_ids, opt_poses FROM Admin", "Admin.opt_poses").fetchone()
+        rows = self._rows("SELECT opt_ids, opt_poses FROM Admin", "Admin.opt_poses")
+        row = rows[0] if rows else None
         if row is None or not row[0] or not row[1]:
             return {}
-        ids = uncompress_data(bytes(row[0]), f"{self.where}: Admin.opt_ids").ravel()
-        poses = uncompress_data(bytes(row[1]), f"{self.where}: Admin.opt_poses")
+        ids = uncompress_data(_blob(row[0], f"{self.where}: Admin.opt_ids") or b"", f"{self.where}: Admin.opt_ids")
+        poses = uncompress_data(_blob(row[1], f"{self.where}: Admin.opt_poses") or b"", f"{self.where}: Admin.opt_poses")
+        ids = ids.ravel()
         if ids.dtype != np.int32 or poses.dtype != np.float32 or poses.size != 12 * ids.size:
             raise ConversionError(f"{self.where}: Admin.opt_poses: {poses.size} {poses.dtype} values for {ids.size} "
                                   f"{ids.dtype} ids; expected 12 float32 per int32 id")
@@ -416,20 +432,18 @@ class RtabmapDatabase:
             out[int(nid)] = T
         return out
 
-    def data(self) -> Iterator[tuple[int, bytes | None, bytes | None, bytes | None]]:
-        """``(id, image, depth, calibration)`` of every ``Data`` row, by id (streamed)."""
-        cur = self._query("SELECT id, image, depth, calibration FROM Data ORDER BY id", "Data")
-        while True:
-            try:
-                rows = cur.fetchmany(16)
-            except sqlite3.Error as exc:
-                raise self._error(exc, "Data") from None
-            if not rows:
-                return
-            yield from rows
+    def node_data(self, node_id: int) -> tuple[bytes | None, bytes | None, bytes | None]:
+        """``(image, depth, calibration)`` of one node (Nones without a ``Data`` row)."""
+        rows = self._rows("SELECT image, depth, calibration FROM Data WHERE id = ?", f"node {node_id}: Data",
+                          (node_id,))
+        if not rows:
+            return None, None, None
+        row = rows[0]
+        w = f"{self.where}: node {node_id}: Data."
+        return _blob(row[0], w + "image"), _blob(row[1], w + "depth"), _blob(row[2], w + "calibration")
 
     def first_image(self) -> bytes | None:
         """The first non-empty ``Data.image`` (to choose the dataset's colour encoding)."""
-        row = self._query("SELECT image FROM Data WHERE image IS NOT NULL AND length(image) > 0 ORDER BY id LIMIT 1",
-                          "Data.image").fetchone()
-        return None if row is None else bytes(row[0])
+        rows = self._rows("SELECT image FROM Data WHERE image IS NOT NULL AND length(image) > 0 ORDER BY id LIMIT 1",
+                          "Data.image")
+        return _blob(rows[0][0], f"{self.where}: Data.image") if rows else None
