@@ -291,3 +291,17 @@ def test_input_never_modified(tmp_path: Path, small_db: Path) -> None:
     small_db.chmod(0o444)
     convert(small_db, tmp_path / "out", config=ConvertConfig(camera_id="d435"))
     assert small_db.read_bytes() == before and sorted(p.name for p in small_db.parent.iterdir()) == ["map.db", "out"]
+
+
+def test_nodes_out_of_id_order_are_written_in_stamp_order(tmp_path: Path, lab: Path) -> None:
+    db, _ = lab_database(lab, tmp_path / "m.db", "0.18.0", sessions=1)
+    con = sqlite3.connect(db)
+    (t3,) = con.execute("SELECT stamp FROM Node WHERE id = 3").fetchone()
+    con.execute("UPDATE Node SET stamp = ? WHERE id = 1", (t3 + 1.0,))  # node 1 is now the last in time
+    con.execute("DELETE FROM Data WHERE id = 2")
+    con.commit()
+    con.close()
+    rep = convert(db, tmp_path / "out", config=ConvertConfig(camera_id="d435"))
+    scan = open_dataset(tmp_path / "out").scan("m")
+    assert rep.skipped == {"no_image": 1} and len(scan) == 2 and np.all(np.diff(scan.stamps_ns) > 0)
+    assert abs(scan.stamps_ns[-1] / 1e9 - (t3 + 1.0)) < 1e-6
