@@ -34,7 +34,8 @@ from psg_data.cli._errors import ContractCommand, check_jobs
 @click.option("--side-dir", "side_dir", type=click.Path(path_type=str),
               help="Folder of side files (site.json, door_states.csv, schedule.csv, scans.csv); default: INPUT when "
                    "it is a directory of recordings (a single recording converts without side files).")
-@click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet", "rtabmap"]), default=None)
+@click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet", "rtabmap"]),
+              default=None)
 @click.option("--image-layout", type=click.Choice(["tar", "files"]), default=None,
               help="Images in one tar archive per scan (default) or one file per image.")
 @click.option("--jobs", "-j", type=int, default=1, show_default=True, callback=check_jobs,

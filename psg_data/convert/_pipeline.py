@@ -159,8 +159,8 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
         return "jpeg" if any((src / "color").glob("*.jpg")) else "png"
     if kind == "rtabmap":
         with RtabmapDatabase(src) as db:
-            first = db.first_image()
-        info = inspect_encoded(first) if first else None
+            image = db.first_image()
+        info = inspect_encoded(image) if image else None
         return "jpeg" if info is not None and info.kind == "jpeg" else "png"
     with RosRecording(src) as rec:
         topics = discover_topics(rec.topics, cfg, str(src))

@@ -47,7 +47,7 @@ def _spanning_poses(nodes: list[RtabNode], links: list[RtabLink]) -> dict[int, N
     adj: dict[int, list[tuple[int, NDArray[np.float64]]]] = defaultdict(list)
     for lk in links:
         adj[lk.from_id].append((lk.to_id, lk.transform))
-        adj[lk.to_id].append((lk.from_id, np.linalg.inv(lk.transform)))
+        adj[lk.to_id].append((lk.from_id, np.asarray(np.linalg.inv(lk.transform), np.float64)))
     root = nodes[0]
     assert root.pose is not None
     poses = {root.id: root.pose}
@@ -139,6 +139,7 @@ def _intrinsics(cam: RtabCamera, camera_id: str, where: str) -> CameraIntrinsics
 
     fx, fy, cx, cy = check_intrinsics((cam.fx, cam.fy, cam.cx, cam.cy), cam.width, cam.height, where)
     d = cam.distortion
+    coeffs: tuple[float, ...]
     if not any(d):
         model, coeffs = "none", ()
     elif len(d) in (4, 5, 8):

@@ -277,7 +277,7 @@ def _blob(value: object, where: str) -> bytes | None:
     raise ConversionError(f"{where}: a {type(value).__name__} value; expected a BLOB")
 
 
-def _version(text: str | None, where: str) -> tuple[int, ...]:
+def _version(text: str, where: str) -> tuple[int, ...]:
     try:
         return tuple(int(p) for p in str(text).strip().split("."))
     except ValueError:
@@ -348,7 +348,7 @@ class RtabmapDatabase:
         if row is None:
             raise ConversionError(f"{self.where}: Admin.version: no row; expected the database version")
         self.version_text = str(row[0])
-        self.version = _version(row[0], self.where)
+        self.version = _version(self.version_text, self.where)
         if self.version < MIN_VERSION:
             raise ConversionError(f"{self.where}: Admin.version {self.version_text}: expected an RTAB-Map database "
                                   f"of version 0.17.0 or later")
@@ -403,7 +403,7 @@ class RtabmapDatabase:
                                       f"expected 288 (6x6 float64)")
             I = np.frombuffer(info, "<f8").reshape(6, 6).copy()
             if a > b:
-                a, b, T = b, a, np.linalg.inv(T)
+                a, b, T = b, a, np.asarray(np.linalg.inv(T), np.float64)
             seen.setdefault((a, b, int(typ)), RtabLink(int(a), int(b), int(typ), T, I))
         return list(seen.values())
 
@@ -415,9 +415,9 @@ class RtabmapDatabase:
         row = rows[0] if rows else None
         if row is None or not row[0] or not row[1]:
             return {}
-        ids = uncompress_data(_blob(row[0], f"{self.where}: Admin.opt_ids") or b"", f"{self.where}: Admin.opt_ids")
-        poses = uncompress_data(_blob(row[1], f"{self.where}: Admin.opt_poses") or b"", f"{self.where}: Admin.opt_poses")
-        ids = ids.ravel()
+        w_ids, w_poses = f"{self.where}: Admin.opt_ids", f"{self.where}: Admin.opt_poses"
+        ids = uncompress_data(_blob(row[0], w_ids) or b"", w_ids).ravel()
+        poses = uncompress_data(_blob(row[1], w_poses) or b"", w_poses)
         if ids.dtype != np.int32 or poses.dtype != np.float32 or poses.size != 12 * ids.size:
             raise ConversionError(f"{self.where}: Admin.opt_poses: {poses.size} {poses.dtype} values for {ids.size} "
                                   f"{ids.dtype} ids; expected 12 float32 per int32 id")
