@@ -196,8 +196,9 @@ def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
 def _convert_session(db: RtabmapDatabase, members: list[RtabNode], poses: dict[int, NDArray[np.float64]],
                      sink: _ScanSink, cams: _Cameras, cid: str, labels: dict[str, dict[str, str]]) -> None:
     """Write the frames of one session's nodes (in stamp order), counting nodes without images."""
-    for n, (image, depth, calib) in zip(members, db.data_in_order([n.id for n in members])):
+    for n in members:
         where = f"{db.where}: node {n.id}"
+        image, depth, calib = db.node_data(n.id)
         if not image:
             sink.skipped["no_image"] += 1
             continue

@@ -16,7 +16,6 @@ from __future__ import annotations
 import sqlite3
 import struct
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
@@ -432,40 +431,6 @@ class RtabmapDatabase:
             T[:3, :] = M
             out[int(nid)] = T
         return out
-
-    def data_in_order(self, order: list[int]) -> Iterator[tuple[bytes | None, bytes | None, bytes | None]]:
-        """``(image, depth, calibration)`` of the nodes ``order`` names, in that order (Nones for a
-        node without a ``Data`` row).
-
-        When ``order`` is ascending (RTAB-Map numbers nodes in time order) the ``Data`` rows are
-        streamed in one pass in rowid order (no sort); else each node is looked up by id.
-        """
-        if any(b <= a for a, b in zip(order, order[1:])):
-            for nid in order:
-                yield self.node_data(nid)
-            return
-        want = iter(order)
-        nxt = next(want, None)
-        try:
-            cur = self.con.execute("SELECT id, image, depth, calibration FROM Data WHERE id >= ? AND id <= ? "
-                                   "ORDER BY id", (order[0], order[-1])) if order else None
-            while cur is not None and nxt is not None:
-                rows = cur.fetchmany(8)
-                if not rows:
-                    break
-                for nid, image, depth, calib in rows:
-                    while nxt is not None and nxt < nid:  # no Data row
-                        yield None, None, None
-                        nxt = next(want, None)
-                    if nxt == nid:
-                        w = f"{self.where}: node {nid}: Data."
-                        yield _blob(image, w + "image"), _blob(depth, w + "depth"), _blob(calib, w + "calibration")
-                        nxt = next(want, None)
-        except sqlite3.Error as exc:
-            raise self._error(exc, f"node {nxt}: Data") from None
-        while nxt is not None:
-            yield None, None, None
-            nxt = next(want, None)
 
     def node_data(self, node_id: int) -> tuple[bytes | None, bytes | None, bytes | None]:
         """``(image, depth, calibration)`` of one node (Nones without a ``Data`` row)."""
