@@ -182,6 +182,8 @@ def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
             for map_id in sorted(sessions):
                 members = sorted(sessions[map_id], key=lambda n: (n.stamp_ns, n.id))
                 sid = task.scan_id if len(sessions) == 1 else f"{task.scan_id}_{map_id:03d}"
+                if cfg.split is None and sid in task.skip_scans:
+                    continue  # complete from an interrupted run (kept by the pipeline)
                 sink._close_scan()  # with the session's own camera
                 sink.task, sink.k, sink.last_stamp, sink.camera = replace(task, scan_id=sid), 0, None, None
                 _convert_session(db, members, poses, sink, cams, cid, labels)

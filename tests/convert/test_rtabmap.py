@@ -170,7 +170,37 @@ def test_nodes_without_images_counted_and_split_gap(tmp_path: Path, lab: Path) -
     assert len(ds.scan_ids) > 2 and all(g <= 20 for g in gaps) and ds.scan_ids[0].startswith("m_000_")
 
 
-def test_directory_jobs_and_resume(tmp_path: Path, lab: Path) -> None:
+def test_resume_after_interruption_keeps_finished_sessions(tmp_path: Path, lab: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    import psg_data.convert._rtabmap as rt
+
+    from .conftest import dataset_bytes
+
+    db, _ = lab_database(lab, tmp_path / "m.db", "0.23.0")
+    cfg = ConvertConfig(camera_id="d435")
+    real = rt._convert_session
+    written: list[int] = []
+
+    def interrupted(db_, members, *a):  # type: ignore[no-untyped-def]
+        if members[0].map_id == 1:
+            raise KeyboardInterrupt
+        written.append(members[0].map_id)
+        return real(db_, members, *a)
+
+    monkeypatch.setattr(rt, "_convert_session", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        convert(db, tmp_path / "out", config=cfg)
+    assert not (tmp_path / "out").exists() and (tmp_path / "out.partial").is_dir()
+    monkeypatch.setattr(rt, "_convert_session", real)
+    rep = convert(db, tmp_path / "out", config=cfg)
+    assert rep.resumed == ["m_000"] and rep.scans == ["m_000", "m_001", "m_002"] and written == [0]
+    convert(db, tmp_path / "fresh", config=cfg)
+    assert dataset_bytes(tmp_path / "out") == dataset_bytes(tmp_path / "fresh")
+    assert open_dataset(tmp_path / "out").info.extra["convert"]["pose_sources"]["m_000"] == "optimized"
+
+
+@pytest.mark.slow
+def test_directory_of_databases_with_jobs(tmp_path: Path, lab: Path) -> None:
     d = tmp_path / "maps"
     d.mkdir()
     lab_database(lab, d / "a.db", "0.23.0", sessions=2)
