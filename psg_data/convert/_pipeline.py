@@ -182,7 +182,7 @@ def _resolve_side(path: Path, cfg: ConvertConfig) -> tuple[SideData, Path | None
         if not d.is_dir():  # type: ignore[union-attr]
             raise ConversionError(f"{cfg.side_dir}: side_dir: not a directory; expected the folder holding "
                                   f"site.json, door_states.csv, schedule.csv or scans.csv")
-    elif path.is_dir() and recording_format(path) is None and folder_format(path) is None:  # (a .db is a file)
+    elif path.is_dir() and recording_format(path) is None and folder_format(path) is None:
         d = path
     else:
         return SideData(), None

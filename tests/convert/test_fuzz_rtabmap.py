@@ -12,13 +12,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 
-from psg_data.cli.psg_data_cmd import main
-from tests.contract import assert_one_error
-
-from .test_fuzz_recordings import _mutate, damage
+from .test_fuzz_recordings import _mutate, converts_or_fails_cleanly, damage
 from .test_rtabmap import lab, lab_database  # noqa: F401  (the lab fixture)
 
 
@@ -38,10 +34,4 @@ def test_damaged_database_converts_or_fails_cleanly(tmp_path: Path, pristine: by
     work.mkdir()
     db = work / "map.db"
     db.write_bytes(_mutate(pristine, *d))
-    out = work / "out"
-    r = CliRunner().invoke(main, ["convert", str(db), str(out), "-q"])
-    if r.exit_code == 0:
-        assert out.is_dir() and "converted" in r.stdout, r.output
-    else:
-        assert_one_error(r)
-        assert sorted(p.name for p in work.iterdir()) == ["map.db"]  # no OUT, no OUT.partial
+    converts_or_fails_cleanly(db, "converted")
