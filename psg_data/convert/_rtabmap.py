@@ -178,6 +178,7 @@ def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
         sink.result_fields = lambda sid: {"pose_source": source, "node_labels": dict(labels.get(sid, {}))}
         if warning:
             sink.warnings.append(warning)  # reported with the first scan
+        ran = False
         try:
             for map_id in sorted(sessions):
                 members = sorted(sessions[map_id], key=lambda n: (n.stamp_ns, n.id))
@@ -187,8 +188,9 @@ def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
                 sink._close_scan()  # with the session's own camera
                 sink.task, sink.k, sink.last_stamp, sink.camera = replace(task, scan_id=sid), 0, None, None
                 _convert_session(db, members, poses, sink, cams, cid, labels)
+                ran = True
             sink.diagnosis.update(frame_span=sink.stamp_span)
-            results = sink.finish(Counter())
+            results = sink.finish(Counter()) if ran else []  # [] : every session was complete already
         except BaseException:
             sink.abort_scan()
             raise

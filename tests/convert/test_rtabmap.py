@@ -196,6 +196,20 @@ def test_resume_after_interruption_keeps_finished_sessions(tmp_path: Path, lab: 
     assert rep.resumed == ["m_000"] and rep.scans == ["m_000", "m_001", "m_002"] and written == [0]
     convert(db, tmp_path / "fresh", config=cfg)
     assert dataset_bytes(tmp_path / "out") == dataset_bytes(tmp_path / "fresh")
+    # interrupted once every session was written (before the dataset was committed): nothing is redone
+    monkeypatch.setattr(rt, "_convert_session", interrupted)
+    import psg_data.convert._pipeline as pl
+
+    real_adopt = pl._adopt_scans
+    monkeypatch.setattr(pl, "_adopt_scans", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
+    monkeypatch.setattr(rt, "_convert_session", real)
+    with pytest.raises(KeyboardInterrupt):
+        convert(db, tmp_path / "again", config=cfg)
+    monkeypatch.setattr(pl, "_adopt_scans", real_adopt)
+    monkeypatch.setattr(rt, "_convert_session", interrupted)  # a session converted again would raise
+    rep = convert(db, tmp_path / "again", config=cfg)
+    assert rep.resumed == ["m_000", "m_001", "m_002"]
+    assert dataset_bytes(tmp_path / "again") == dataset_bytes(tmp_path / "fresh")
     assert open_dataset(tmp_path / "out").info.extra["convert"]["pose_sources"]["m_000"] == "optimized"
 
 
