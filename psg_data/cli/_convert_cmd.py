@@ -22,6 +22,8 @@ from psg_data.cli._errors import ContractCommand, check_jobs
 @click.option("--poses", help="Pose source: tf:WORLD->FRAME, odom:/TOPIC or tum:FILE.")
 @click.option("--camera-frame", help="Optical frame of the camera (default: CameraInfo header.frame_id).")
 @click.option("--split", help="Split one long recording into scans: gap:SECONDS or slot:SECONDS.")
+@click.option("--split-gap", "split_gap", type=float, default=None, metavar="SECONDS",
+              help="Split recordings (RTAB-Map: each session) at time gaps over SECONDS; same as --split gap:SECONDS.")
 @click.option("--keyframes", help="Keep only keyframes: every:N or motion:METRES,DEGREES.")
 @click.option("--color-encoding", type=click.Choice(["auto", "png", "jpeg"]), default=None,
               help="Colour images in the dataset (auto: JPEG input is passed through as JPEG).")
@@ -32,7 +34,8 @@ from psg_data.cli._errors import ContractCommand, check_jobs
 @click.option("--side-dir", "side_dir", type=click.Path(path_type=str),
               help="Folder of side files (site.json, door_states.csv, schedule.csv, scans.csv); default: INPUT when "
                    "it is a directory of recordings (a single recording converts without side files).")
-@click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet"]), default=None)
+@click.option("--input-format", type=click.Choice(["auto", "ros1", "ros2", "mcap", "tum", "scannet", "rtabmap"]),
+              default=None)
 @click.option("--image-layout", type=click.Choice(["tar", "files"]), default=None,
               help="Images in one tar archive per scan (default) or one file per image.")
 @click.option("--jobs", "-j", type=int, default=1, show_default=True, callback=check_jobs,
@@ -55,7 +58,8 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     """Convert raw recordings in INPUT into the psg-dataset OUT.
 
     INPUT is a recording (ROS 1 .bag, ROS 2 bag directory with sqlite3 or MCAP storage, .mcap
-    file), a TUM RGB-D or ScanNet folder, or a directory of them with side files (site.json,
+    file), a TUM RGB-D or ScanNet folder, an RTAB-Map database (.db, one scan per session, poses
+    in the map's one frame), or a directory of them with side files (site.json,
     door_states.csv, schedule.csv, scans.csv; a single recording converts without them unless
     --side-dir is given). Frames are associated by header stamps; images and frames that cannot
     be (or whose images are damaged) are counted and reported. An interrupted conversion resumes
@@ -68,11 +72,17 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
       psg-data convert long.bag lab/ --split gap:60 --keyframes motion:0.1,10
       psg-data convert run.mcap lab/ --poses tf:map->camera_color_optical_frame -j 2
       psg-data convert rgbd_dataset_freiburg1_xyz/ fr1/ --config tum.yaml
+      psg-data convert ~/.ros/rtabmap.db lab/ --split-gap 600
     """
     setup_logging(quiet)
     from psg_data.convert import ConvertConfig, convert, load_config
 
     cfg = load_config(config_file) if config_file else ConvertConfig()
+    split_gap = opts.pop("split_gap", None)
+    if split_gap is not None:
+        if opts.get("split"):
+            raise click.UsageError("--split-gap and --split are the same setting; give one of them")
+        opts["split"] = f"gap:{split_gap:g}"
     cfg = cfg.merged(**opts)
     progress = Progress("convert", unit="frames", quiet=quiet)
     report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress,

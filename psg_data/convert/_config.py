@@ -22,7 +22,7 @@ class ConvertConfig:
     """Settings of a conversion (every field also a key of the config file).
 
     Attributes:
-        input_format: ``auto``, ``ros1``, ``ros2``, ``mcap``, ``tum`` or ``scannet``.
+        input_format: ``auto``, ``ros1``, ``ros2``, ``mcap``, ``tum``, ``scannet`` or ``rtabmap``.
         color_topic / depth_topic / camera_info_topic: topic overrides (default: discovered by type).
         poses: ``tf:WORLD->FRAME``, ``odom:/TOPIC`` or ``tum:FILE`` (default: TF ``map`` (else
             ``odom``) to the camera's optical frame, else the first nav_msgs/Odometry topic).
@@ -83,9 +83,9 @@ class ConvertConfig:
             raise ConversionError(f"config: image_check: expected none, structure or full, got {self.image_check!r}")
         if not isinstance(self.strict, bool):
             raise ConversionError(f"config: strict: expected true or false, got {self.strict!r}")
-        if self.input_format not in ("auto", "ros1", "ros2", "mcap", "tum", "scannet"):
-            raise ConversionError(f"config: input_format: expected auto, ros1, ros2, mcap, tum or scannet, got "
-                                  f"{self.input_format!r}")
+        if self.input_format not in ("auto", "ros1", "ros2", "mcap", "tum", "scannet", "rtabmap"):
+            raise ConversionError(f"config: input_format: expected auto, ros1, ros2, mcap, tum, scannet or rtabmap, "
+                                  f"got {self.input_format!r}")
         if self.color_encoding not in ("auto", "png", "jpeg"):
             raise ConversionError(f"config: color_encoding: expected auto, png or jpeg, got {self.color_encoding!r}")
         for name in ("sync_tolerance_s", "max_pose_gap_s", "pose_tolerance_s", "buffer_s", "fps"):

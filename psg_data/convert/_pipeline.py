@@ -31,6 +31,7 @@ from psg_data.errors import ConversionError, PsgDataError
 from psg_data.loaders.raw._bag import RosRecording, find_recordings, recording_format
 from psg_data.loaders.raw._folders import _list_file, folder_format
 from psg_data.loaders.raw._images import inspect_encoded
+from psg_data.loaders.raw._rtabmap import RtabmapDatabase, rtabmap_format
 from psg_data.loaders.raw._side import SideData, read_side_files
 from psg_data.writers._safe_output import check_output
 
@@ -43,7 +44,7 @@ log = logging.getLogger(__name__)
 
 _STATE_FILE = "state.json"
 _FORMAT_FAMILY = {"ros1": "ros1", "ros2-sqlite3": "ros2", "ros2-mcap": "ros2", "mcap": "mcap",
-                  "tum": "tum", "scannet": "scannet"}
+                  "tum": "tum", "scannet": "scannet", "rtabmap": "rtabmap"}
 
 
 @dataclass
@@ -101,27 +102,30 @@ def plan_sources(path: Path, cfg: ConvertConfig) -> list[tuple[Path, str]]:
     if not path.exists():
         raise ConversionError(f"{path}: input not found; expected a recording, a frame folder or a directory of them")
     if path.is_file() and path.stat().st_size == 0:
-        raise ConversionError(f"{path}: zero-byte file; expected a ROS 1 bag, ROS 2 bag or MCAP file")
-    fmt = recording_format(path) or folder_format(path)
+        raise ConversionError(f"{path}: zero-byte file; expected a ROS 1 bag, ROS 2 bag, MCAP file or RTAB-Map "
+                              f"database")
+    fmt = recording_format(path) or folder_format(path) or rtabmap_format(path)
     if fmt is not None:
         sources = [(path, fmt)]
     elif path.is_dir():
         recs = find_recordings(path)
         folders = [(p, f) for p in sorted(path.iterdir()) if (f := folder_format(p)) is not None]
-        if recs and folders:
+        dbs = [(p, "rtabmap") for p in sorted(path.iterdir()) if rtabmap_format(p)]
+        if sum(1 for group in (recs, folders, dbs) if group) > 1:
             raise ConversionError(f"{path}: directory mixes recording formats ({len(recs)} recordings, "
-                                  f"{len(folders)} frame folders); expected one format per directory")
+                                  f"{len(folders)} frame folders, {len(dbs)} RTAB-Map databases); expected one "
+                                  f"format per directory")
         fams = {_FORMAT_FAMILY[f] for _, f in folders}
         if len(fams) > 1:
             raise ConversionError(f"{path}: directory mixes recording formats ({', '.join(sorted(fams))} folders); "
                                   f"expected one format per directory")
-        sources = recs or folders
+        sources = recs or folders or dbs
         if not sources:
             raise ConversionError(f"{path}: no recordings found; expected .bag files, ROS 2 bag directories, .mcap "
-                                  f"files, TUM RGB-D or ScanNet folders")
+                                  f"files, TUM RGB-D or ScanNet folders, or RTAB-Map .db databases")
     else:
-        raise ConversionError(f"{path}: not a recording; expected a .bag, .mcap or .db3 file, a ROS 2 bag directory "
-                              f"or a TUM RGB-D / ScanNet folder")
+        raise ConversionError(f"{path}: not a recording; expected a .bag, .mcap or .db3 file, a ROS 2 bag directory, "
+                              f"a TUM RGB-D / ScanNet folder or an RTAB-Map .db database")
     want = cfg.input_format
     for p, f in sources:
         if want != "auto" and _FORMAT_FAMILY[f] != want:
@@ -153,6 +157,11 @@ def _auto_color_encoding(src: Path, kind: str, cfg: ConvertConfig) -> str:
         return "jpeg" if first and first[0][-1].lower().endswith((".jpg", ".jpeg")) else "png"
     if kind == "scannet":
         return "jpeg" if any((src / "color").glob("*.jpg")) else "png"
+    if kind == "rtabmap":
+        with RtabmapDatabase(src) as db:
+            image = db.first_image()
+        info = inspect_encoded(image) if image else None
+        return "jpeg" if info is not None and info.kind == "jpeg" else "png"
     with RosRecording(src) as rec:
         topics = discover_topics(rec.topics, cfg, str(src))
         if topics["color_type"] != "sensor_msgs/msg/CompressedImage":
@@ -342,6 +351,7 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
             "report": {"frames": report.frames, "skipped": report.skipped,
                        "keyframe_dropped": report.keyframe_dropped, "passthrough": report.passthrough},
         }
+        _record_scan_sources(writer.extra["convert"], report.scans, by_scan)
         shutil.rmtree(tmp / STATE_DIR, ignore_errors=True)
         writer.close()
     except KeyboardInterrupt as exc:
@@ -358,6 +368,16 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     report.seconds = time.perf_counter() - t_start
     _log_warnings(src, report, by_scan)
     return report
+
+
+def _record_scan_sources(extra: dict[str, Any], scans: list[str], by_scan: dict[str, ScanResult]) -> None:
+    """Per-scan facts an input offers (RTAB-Map: the pose source and ``Node.label``) in the manifest."""
+    sources = {s: by_scan[s].pose_source for s in scans if by_scan[s].pose_source}
+    labels = {s: by_scan[s].node_labels for s in scans if by_scan[s].node_labels}
+    if sources:
+        extra["pose_sources"] = sources
+    if labels:
+        extra["node_labels"] = labels
 
 
 def _can_resume(tmp: Path, state: dict[str, Any]) -> bool:

@@ -61,6 +61,7 @@ SKIP_REASONS = {
     "duplicate_stamp": "second colour frame with an already used header stamp",
     "out_of_order": "colour frame older than one already written",
     "corrupt_image": "frame whose colour or depth image is truncated or damaged (see image_check)",
+    "no_image": "RTAB-Map node without a colour image (no Data row, or Data.image empty)",
 }
 
 _IMAGE = "sensor_msgs/msg/Image"
@@ -103,6 +104,11 @@ class ScanResult:
     passthrough: dict[str, int]
     warnings: list[str] = field(default_factory=list)
     """Warnings about the scan (corrupt images skipped), printed when the whole conversion is done."""
+    pose_source: str = ""
+    """How the poses were obtained, where the input offers a choice (RTAB-Map: ``optimized``,
+    ``pose_graph`` or ``odometry``); recorded in the manifest."""
+    node_labels: dict[str, str] = field(default_factory=dict)
+    """RTAB-Map ``Node.label`` by frame stamp (nanoseconds, as text); recorded in the manifest."""
     record: dict[str, Any] | None = None
     """The scan as written (``scan``, ``frames``, ``files``; see DatasetWriter.scan_record); not in
     the state file, which a resumed run reads together with the writer's own scan record."""
@@ -172,12 +178,15 @@ def discover_topics(topics: dict[str, str], cfg: ConvertConfig, where: str) -> d
 
 
 class _Payload:
-    """A colour or depth image as it arrived: a message, encoded bytes (a view of the message) or a file."""
+    """A colour or depth image as it arrived: a message, encoded bytes (a view of the message), a
+    file, or an array decoded by the reader (``array``: RGB uint8 or uint16 millimetres); ``where``
+    names it in errors instead of the topic (e.g. an RTAB-Map node and field).
+    """
 
-    __slots__ = ("kind", "obj", "fmt")
+    __slots__ = ("kind", "obj", "fmt", "where")
 
-    def __init__(self, kind: str, obj: Any, fmt: str = "") -> None:
-        self.kind, self.obj, self.fmt = kind, obj, fmt
+    def __init__(self, kind: str, obj: Any, fmt: str = "", where: str = "") -> None:
+        self.kind, self.obj, self.fmt, self.where = kind, obj, fmt, where
 
 
 def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> CameraIntrinsics:
@@ -458,6 +467,8 @@ class _FrameWriter:
     def _where(self, topic: str, p: _Payload) -> str:
         if p.kind == "file":
             return str(p.obj)
+        if p.where:
+            return p.where
         where = self._wheres.get(topic)
         if where is None:
             where = self._wheres[topic] = f"{self.where}: {topic}"
@@ -490,8 +501,8 @@ class _FrameWriter:
 
     def color(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
         where = self._where(topic, p)
-        if p.kind == "msg":
-            arr = decode_color_image(p.obj, where)
+        if p.kind == "msg" or p.kind == "array":
+            arr = decode_color_image(p.obj, where) if p.kind == "msg" else p.obj
             return None, arr, (arr.shape[1], arr.shape[0])
         data = self._bytes(p, where)
         info = self._encoded("color", data, p.fmt or "file", where, "colour image")
@@ -503,8 +514,8 @@ class _FrameWriter:
 
     def depth(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
         where = self._where(topic, p)
-        if p.kind == "msg":
-            arr = decode_depth_image(p.obj, where, self.depth_scale_m)
+        if p.kind == "msg" or p.kind == "array":
+            arr = decode_depth_image(p.obj, where, self.depth_scale_m) if p.kind == "msg" else p.obj
             return None, arr, (arr.shape[1], arr.shape[0])
         fmt = p.fmt
         data = self._bytes(p, where)
@@ -556,6 +567,8 @@ class _ScanSink:
         """First and last stamp of the colour + depth pairs received."""
         self.diagnosis: dict[str, Any] = {"names": names}
         """What explains a conversion without frames (filled in by the runner)."""
+        self.result_fields: Callable[[str], dict[str, Any]] | None = None
+        """Extra :class:`ScanResult` fields of a scan, by scan id (set by runners that have them)."""
 
     def _scan_for(self, stamp: int) -> str:
         if self.split is None:
@@ -578,7 +591,8 @@ class _ScanSink:
             assert self.camera is not None
             res = ScanResult(self.scan_id, asdict(self.camera), self.sw.n_frames, dict(self.skipped),
                              self.kf_dropped, self.bytes_in - self.bytes_mark, self.task.source,
-                             time.perf_counter() - self.t0, dict(self.fw.passthrough), list(self.warnings))
+                             time.perf_counter() - self.t0, dict(self.fw.passthrough), list(self.warnings),
+                             **(self.result_fields(self.scan_id) if self.result_fields else {}))
             state = Path(self.w.tmp) / STATE_DIR
             state.mkdir(exist_ok=True)
             (state / f"{self.scan_id}.json").write_text(json.dumps(res.state()))
@@ -698,7 +712,7 @@ class _ScanSink:
 
 
 SKIP_KINDS = {"no_depth": "color", "duplicate_stamp": "color", "out_of_order": "color", "no_color": "depth",
-              "no_pose": "frames", "nonfinite_pose": "frames", "corrupt_image": "frames"}
+              "no_pose": "frames", "nonfinite_pose": "frames", "corrupt_image": "frames", "no_image": "frames"}
 """What each skip reason counts: colour images, depth images or (colour + depth) frames."""
 
 
@@ -727,6 +741,8 @@ def explain_nothing(skipped: Counter[str], cfg: ConvertConfig, diag: dict[str, A
                 f"raise max_pose_gap_s, pose_tolerance_s or buffer_s (now {cfg.buffer_s:g} s) with --config")
     elif main == "nonfinite_pose":
         hint = "every pose has NaN or infinite values; check the pose source (--poses)"
+    elif main == "no_image":
+        hint = "no node has a colour image in Data.image (a map saved without images?)"
     elif main == "corrupt_image":
         hint = (f"every frame has a damaged image (the first: {diag.get('first_corrupt', '?')}; --image-check "
                 f"sets the check)")
@@ -952,6 +968,10 @@ def run_task(task: ScanTask, progress: Callable[..., Any] | None = None, writer:
     try:
         if task.kind in ("tum", "scannet"):
             results = _run_folder(task, cfg, progress, writer)
+        elif task.kind == "rtabmap":
+            from psg_data.convert._rtabmap import run_rtabmap
+
+            results = run_rtabmap(task, cfg, progress, writer)
         else:
             results = _run_bag(task, cfg, progress, writer)
         if own:

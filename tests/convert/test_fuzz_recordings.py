@@ -80,10 +80,16 @@ def test_damaged_recording_converts_or_fails_cleanly(tmp_path: Path, pristine: d
     else:
         target = rec
     target.write_bytes(_mutate(data, *d))
-    out = work / "out"
+    converts_or_fails_cleanly(rec, "converted 1 scans")
+
+
+def converts_or_fails_cleanly(rec: Path, summary: str) -> None:
+    """``convert REC OUT`` (OUT beside REC) either writes OUT and prints ``summary``, or prints one
+    error line and leaves the folder holding only REC."""
+    work, out = rec.parent, rec.parent / "out"
     r = CliRunner().invoke(main, ["convert", str(rec), str(out), "-q"])
     if r.exit_code == 0:
-        assert out.is_dir() and "converted 1 scans" in r.stdout, r.output
+        assert out.is_dir() and summary in r.stdout, r.output
     else:
         assert_one_error(r)
         assert sorted(p.name for p in work.iterdir()) == [rec.name]  # no OUT, no OUT.partial
