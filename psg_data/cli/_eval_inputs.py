@@ -84,22 +84,21 @@ def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
     """``demo`` (default: the built-in lab, built once into the cache), ``persistence-benchmark``
     (the paper's Sec. V-A streams) or a dataset directory.
     """
-    if value in (None, DEMO):
-        from psg_data.cli._progress import Progress
-        from psg_data.datasets import demo
-        from psg_data.synth import LabConfig
+    from psg_data.datasets import BUILTIN
 
-        cfg = LabConfig()
-        with Progress("building the demo lab (once)", total=cfg.days * len(cfg.scan_hours), unit="scans",
-                      quiet=quiet) as prog:
-            root = demo(progress=prog)
-        return DatasetChoice("dataset", Path(root), "demo lab")
-    if value == BENCHMARK:
+    name = DEMO if value is None else value
+    if name == BENCHMARK:
         return DatasetChoice("benchmark", None, BENCHMARK)
-    path = Path(value)
+    entry = BUILTIN.get(name)
+    if entry is not None and entry.build is not None and not Path(name).is_dir():
+        from psg_data.cli._common import dataset_path
+
+        root = dataset_path(name, command="psg-eval --dataset", quiet=quiet)
+        return DatasetChoice("dataset", root, "demo lab" if name == DEMO else name)
+    path = Path(name)
     if not path.is_dir():
-        raise EvaluationError(f"--dataset {value!r}: not a directory; expected a psg-dataset path, "
-                              f"'{DEMO}' or '{BENCHMARK}'")
+        raise EvaluationError(f"--dataset {value!r}: not a directory; expected a psg-dataset path or one of "
+                              f"{', '.join(repr(n) for n in BUILTIN)}")
     return DatasetChoice("dataset", path, str(path))
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+from psg_data.cli._common import Progress, dataset_path, handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractCommand
 
 __all__ = ["view_cmd"]
@@ -41,11 +41,7 @@ def view_cmd(dataset: str, scans: tuple[str, ...], save: Path | None, frame_stri
     from psg_data.loaders import open_dataset
     from psg_data.viewer import log_dataset, recording
 
-    if dataset == "demo" and not Path(dataset).is_dir():
-        from psg_data.datasets import demo
-
-        dataset = str(demo())
-    ds = open_dataset(dataset)
+    ds = open_dataset(dataset_path(dataset, command="psg-data view", quiet=quiet))
     unknown = [s for s in scans if s not in set(ds.scan_ids)]
     if unknown:
         raise PsgDataError(f"--scan {unknown[0]}: no such scan in {dataset}; scans are "
