@@ -122,8 +122,10 @@ def available_hints(value: str | None) -> dict[str, Any]:
         return {}
 
 
-def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool) -> Any:
-    """The :class:`~psg_data.evaluation.PersistenceTask` of a dataset choice (the benchmark: its draw 0)."""
+def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool, label_seed: int = 0) -> Any:
+    """The :class:`~psg_data.evaluation.PersistenceTask` of a dataset choice (the benchmark: its draw 0);
+    ``label_seed``: the seed of the ``noisy:P`` flips.
+    """
     from psg_data.evaluation import persistence_task_from_benchmark, persistence_task_from_dataset
 
     if choice.kind == "benchmark":
@@ -137,7 +139,7 @@ def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool) -> 
     ds = open_dataset(choice.path)
     if labels.split(":", 1)[0] in ("privileged", "detections") and choice.label == "demo lab":
         _label_demo_if_needed(ds, labels, quiet)
-    task = persistence_task_from_dataset(ds, labels=labels)
+    task = persistence_task_from_dataset(ds, labels=labels, seed=label_seed)
     if choice.label == "demo lab":
         task.name = "the built-in lab (demo, lab seed 0)"
     return task
