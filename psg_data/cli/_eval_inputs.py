@@ -61,16 +61,49 @@ def _setting_names(factory: Any) -> list[str] | None:
 
 
 def check_estimators(specs: list[EstimatorSpec]) -> None:
-    """Build every estimator once so that unknown names and bad settings fail before any work."""
+    """Build every estimator once so that unknown names and bad settings fail before any work.
+
+    Settings an estimator does not declare (``_parameters``; a plugin's, typically) cannot be
+    checked by type: with such a setting the estimator also makes a short fit and prediction on
+    :func:`~psg_data.estimators.conformance_streams`, so that a bad value fails here, once, in one
+    line, and not on every edge of the run.
+    """
     from psg_data.estimators import get_estimator
+    from psg_data.estimators._params import declared
 
     for spec in specs:
         try:
-            get_estimator(spec.name, **dict(spec.settings))
+            est = get_estimator(spec.name, **dict(spec.settings))
         except EstimatorError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: {exc}") from None
         except TypeError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: bad settings ({exc})") from None
+        undeclared = [k for k, _ in spec.settings if k not in declared(est)]
+        if undeclared:
+            _trial_fit(spec, est, undeclared)
+
+
+def _trial_fit(spec: EstimatorSpec, est: Any, undeclared: list[str]) -> None:
+    """A short fit and prediction with the settings the estimator does not declare (one line if it fails)."""
+    import numpy as np
+
+    from psg_data.estimators import conformance_streams
+
+    streams = conformance_streams(days=3)
+    try:
+        est.fit(streams, timezone="UTC")
+        f = est.make_filter(streams[0].edge)
+        f.update_many(streams[0].t_s, streams[0].y)
+        p = np.asarray(f.predict(streams[0].t_s[-1:] + 3600.0), dtype=np.float64)
+    except Exception as exc:  # noqa: BLE001 - whatever the plugin raises, said once
+        text = " ".join(str(exc).split())
+        raise EstimatorError(f"--estimator {spec.label!r}: setting {', '.join(undeclared)} is not declared by "
+                             f"{spec.name} and a trial fit with it fails ({type(exc).__name__}: {text}); check its "
+                             "value (a plugin declares its settings in _parameters to have them checked by type)"
+                             ) from None
+    if not np.all(np.isfinite(p)):
+        raise EstimatorError(f"--estimator {spec.label!r}: setting {', '.join(undeclared)} is not declared by "
+                             f"{spec.name} and a trial fit with it predicts {p.tolist()}; check its value")
 
 
 @dataclass(frozen=True)
