@@ -109,8 +109,9 @@ def _lab_choice() -> Any:
 
 def _save_beliefs(result: Any, path: Path, overwrite: bool) -> None:
     """The --rerun hook: beliefs of every estimator over time, per scored edge, first seed."""
-    from psg_data.viewer import log_beliefs, recording
+    from psg_data.viewer import beliefs_blueprint, log_beliefs, recording
 
-    with recording(path, application_id="psg-eval", overwrite=overwrite) as rec:
+    with recording(path, application_id="psg-eval", overwrite=overwrite,
+                   blueprint=beliefs_blueprint(result.traces)) as rec:
         n = log_beliefs(rec, result.traces)
     click.echo(f"beliefs of {len(result.estimators)} estimators on {n} edges written to {path}")
