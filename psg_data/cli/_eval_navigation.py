@@ -96,7 +96,8 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
     info = provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path)})
     _, results = run_navigation_job(specs, choice.path, options, out, references=references, deltas=deltas,
                                     plots=not no_plots, info=info)
-    click.echo("")
+    if table_format == "text":
+        click.echo("")
     print_results(results, fmt=table_format)
     return True
 
@@ -112,6 +113,7 @@ def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Pat
     info = provenance({"task": "doors", "dataset_label": choice.label, "dataset": str(choice.path),
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
     _, results = run_door_job(specs, choice.path, options, out, references=references, plots=not no_plots, info=info)
-    click.echo("")
+    if table_format == "text":
+        click.echo("")
     print_results(results, fmt=table_format)
     return True

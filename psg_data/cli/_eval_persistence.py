@@ -92,7 +92,8 @@ def run_persistence(specs: list[Any], dataset: str | None, options: Any, labels:
     results = write_persistence_outputs(result, out, info=info, roles=roles, timezone=task.timezone, plots=not no_plots)
     if rerun_file is not None:
         _save_beliefs(result, rerun_file, overwrite)
-    click.echo("")
+    if table_format == "text":
+        click.echo("")
     print_results(results, fmt=table_format)
     if result.errors:
         click.echo(f"\n{len(result.errors)} problem(s) (see results.json 'errors'):", err=True)

@@ -230,7 +230,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
             out_dir.parent.rmdir()  # e.g. psg-eval-out/, created for this run
         raise
     commit_tree(tmp, out_dir, kind="results")
-    click.echo(f"results written to {out_dir}/")
+    click.echo(f"results written to {out_dir}/", err=table_format != "text")  # stdout: only the table
     if not ok:
         sys.exit(EXIT_PROBLEMS)
 

@@ -98,6 +98,7 @@ def test_format_markdown_prints_a_pipe_table_with_marks(full_run: Path, lab: Pat
     r = run("--dataset", str(lab), "-e", "last_seen", "--seeds", "1", "--out", str(tmp_path / "m"), "--no-plots",
             "-q", "--format", "markdown")
     assert r.exit_code == 0, r.output
+    assert r.stdout.startswith("**Persistence estimation") and "results written" not in r.stdout  # pastes as it is
     lines = r.stdout.splitlines()
     header = next(ln for ln in lines if ln.startswith("| Method"))
     assert "| MAE ↓ | B-Acc ↑ | F1 ↑ |" in header and "% of ceiling (B-Acc)" in header
