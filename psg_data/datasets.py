@@ -1,4 +1,10 @@
-"""Ready-made datasets: :func:`demo` builds the default synthetic lab once and caches it."""
+"""Ready-made datasets: :func:`demo` builds the default synthetic lab once and caches it.
+
+:data:`BUILTIN` is the one table of built-in dataset names that commands accept where they take a
+dataset (``psg-data info demo``, ``psg-eval --dataset persistence-benchmark``); :func:`resolve`
+turns a name or a path into a dataset directory, or refuses a name that is not one (saying which
+commands accept it). A new built-in dataset is one entry of :data:`BUILTIN`.
+"""
 
 from __future__ import annotations
 
@@ -6,10 +12,11 @@ import contextlib
 import logging
 import os
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["demo", "cache_dir", "DEMO_VERSION"]
+__all__ = ["demo", "cache_dir", "DEMO_VERSION", "BuiltinDataset", "BUILTIN", "resolve"]
 
 log = logging.getLogger(__name__)
 
@@ -82,3 +89,66 @@ def demo(*, rebuild: bool = False, progress: Callable[..., Any] | None = None) -
             log.info("building the demo dataset into %s", root)
             build_lab(root, LabConfig(), overwrite=True, progress=progress)
     return root
+
+
+@dataclass(frozen=True)
+class BuiltinDataset:
+    """A dataset name every command that takes a dataset knows.
+
+    Attributes:
+        name: what the user types (``demo``).
+        description: one line, for listings and refusals.
+        build: returns the dataset directory, building and caching it on first use (called as
+            ``build(progress=...)``); None for a built-in that is not a dataset directory
+            (observation streams drawn in memory), which only ``accepted_by`` reads.
+        accepted_by: the commands that take the name, in words (shown when another refuses it).
+        scans: scans a build makes (progress total); 0 when unknown or not built.
+    """
+
+    name: str
+    description: str
+    build: Callable[..., Path] | None
+    accepted_by: str
+    scans: int = 0
+
+
+BUILTIN: dict[str, BuiltinDataset] = {
+    "demo": BuiltinDataset(
+        "demo", "the built-in synthetic lab (3 rooms, 2 doors, 28 receptacles, 21 objects, 84 RGB-D scans; built "
+        "once into the cache)", demo, "every command that takes a dataset", scans=84),
+    "persistence-benchmark": BuiltinDataset(
+        "persistence-benchmark", "the paper's Sec. V-A simulation benchmark: observation streams drawn in memory, "
+        "no dataset directory", None, "psg-eval --dataset persistence-benchmark (the persistence task)"),
+}
+"""The built-in dataset names (name -> :class:`BuiltinDataset`)."""
+
+
+def resolve(dataset: str | os.PathLike[str], *, command: str = "this command",
+            progress: Callable[..., Any] | None = None) -> Path:
+    """The dataset directory of a path or a built-in name (:data:`BUILTIN`; a directory of that name wins).
+
+    Args:
+        dataset: a dataset directory, or a built-in name such as ``demo`` (built on first use).
+        command: the command asking, named in a refusal (``psg-data info``).
+        progress: passed to the built-in's ``build`` (called per scan built, only when it is built).
+
+    Returns:
+        The directory (not checked further: :func:`psg_data.open_dataset` reads it).
+
+    Raises:
+        PsgDataError: a built-in name that is not a dataset directory, naming the commands that take it.
+    """
+    path = Path(dataset)
+    entry = BUILTIN.get(str(dataset))
+    if entry is None or path.is_dir():
+        return path
+    if entry.build is None:
+        from psg_data.errors import PsgDataError
+
+        raise PsgDataError(f"{entry.name}: {entry.description}; {command} reads a dataset directory (a path, or "
+                           f"{_directory_names()}); {entry.name} is read by {entry.accepted_by}")
+    return entry.build(progress=progress)
+
+
+def _directory_names() -> str:
+    return " or ".join(n for n, e in BUILTIN.items() if e.build is not None)

@@ -106,5 +106,111 @@ def test_psg_eval_rerun_records_every_scored_edge(tmp_path: Path) -> None:
     n_edges = json.loads((tmp_path / "res" / "results.json").read_text())["config"]["n_edges"]
     assert len({e for e in rows if e.endswith("/last_seen")}) == n_edges
     assert len({e for e in rows if e.endswith("/ground_truth")}) == n_edges
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(out))
+    (blueprint,) = reader.blueprints()  # one panel per edge whose truth changes most
+    assert len({c.entity_path for c in reader.store(store=blueprint).stream() if c.entity_path.endswith("/ScalarAxis")}
+               ) == 4
     r = CliRunner().invoke(eval_main, ["--task", "doors", "--rerun", str(tmp_path / "d.rrd"), "-q"])
     assert r.exit_code == 1 and "--rerun: beliefs are recorded for --task persistence" in r.stderr
+
+
+def test_without_a_display_view_fails_at_once_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A server, a container, SSH: no window can open; the hint names --save and --web, before any work."""
+    from tests.contract import assert_one_error
+
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr("sys.platform", "linux")
+    line = assert_one_error(CliRunner().invoke(main, ["view", "/nonexistent"]), "no display to open the Rerun viewer")
+    assert "--save FILE.rrd" in line and "--web" in line  # and the dataset was not even opened
+
+
+def test_without_a_display_the_command_ends_in_one_line() -> None:
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")}
+    r = subprocess.run([sys.executable, "-c", "from psg_data.cli.psg_data_cmd import main; main()", "view", "demo"],
+                       capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 1 and r.stdout == ""
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("error: no display") and "--web" in r.stderr
+
+
+def test_recording_carries_a_blueprint_and_a_scan_timeline(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    from rerun.chunk import RrdReader
+
+    root = make_dataset(scans=3, frames=2)
+    out = tmp_path / "lab.rrd"
+    assert CliRunner().invoke(main, ["view", str(root), "--save", str(out), "-q"]).exit_code == 0
+    reader = RrdReader(str(out))
+    timelines: dict[str, set[str]] = {}
+    for chunk in reader.store().stream():
+        timelines.setdefault(chunk.entity_path, set()).update(chunk.timeline_names)
+    for entity in ("/world/camera", "/world/points", "/world/receptacles", "/labels/gt/redmug/table",
+                   "/labels/gt/doors/door1"):
+        assert {"time", "scan"} <= timelines[entity], entity
+    rows, batches = _read(out)
+    scan_col = next(n for n in batches["/labels/gt/redmug/table"][0].schema.names if n == "scan")
+    assert batches["/labels/gt/redmug/table"][0].column(scan_col).to_pylist() == [0, 1, 2]
+    (blueprint,) = reader.blueprints()
+    parts: dict[str, list] = {}  # type: ignore[type-arg]
+    for chunk in reader.store(store=blueprint).stream():
+        parts.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
+    panel = parts["/time_panel"][0]
+    assert panel.column(next(n for n in panel.schema.names if n.endswith(":timeline"))).to_pylist() == [["scan"]]
+    views = {p.rsplit("/", 1)[0] for p in parts if p.startswith("/view/") and p.count("/") == 3}
+    plots = {p.rsplit("/", 1)[0] for p in parts if p.endswith("/ScalarAxis")}
+    eye = [p for p in parts if p.endswith("/EyeControls3D")]
+    # the 3D world, colour, depth, one plot per changing object edge (redmug on table and desk, the spoon
+    # on the shelf) and one for the door
+    assert len(eye) == 1 and len(plots) == 4 and len(views) == 7
+
+
+def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[..., Path]) -> None:
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import urllib.request
+
+    from psg_data.viewer._web import _free_port
+
+    root = make_dataset(scans=2, frames=1)
+    port = _free_port("127.0.0.1")
+    proc = subprocess.Popen([sys.executable, "-c", "from psg_data.cli.psg_data_cmd import main; main()", "view",
+                             str(root), "--web", "--port", str(port), "-q"], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    try:
+        url = proc.stdout.readline().strip()
+        assert url.startswith(f"web viewer: http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A")
+        sent = proc.stdout.readline()
+        assert sent.startswith("sent to the web viewer (2 scans, 2 frames, ") and "until Ctrl-C" in sent
+        with urllib.request.urlopen(url.split(": ", 1)[1], timeout=20) as page:
+            assert page.status == 200 and b"<html" in page.read(4096).lower()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0
+        assert proc.stdout.read().strip() == "stopped"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
+    with socket.socket() as s:  # the server (and the viewer binary it ran) is gone: the port is free again
+        s.bind(("127.0.0.1", port))
+
+
+def test_web_viewer_port_in_use_is_one_line(make_dataset: Callable[..., Path]) -> None:
+    import socket
+
+    from tests.contract import assert_one_error
+
+    root = make_dataset(scans=1, frames=1)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        line = assert_one_error(CliRunner().invoke(main, ["view", str(root), "--web", "--port", str(port), "-q"]))
+    assert f"--port {port}: cannot listen on 127.0.0.1:{port}" in line

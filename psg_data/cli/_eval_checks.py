@@ -31,7 +31,8 @@ def parse_deltas(text: str, task: str) -> tuple[float, ...]:
     return values
 
 
-def persistence_options(*, setting: str, horizon: str, weighting: str, windows: str, seeds: int | None) -> Any:
+def persistence_options(*, setting: str, horizon: str, weighting: str, windows: str,
+                        seeds: tuple[int, ...] | None) -> Any:
     """The :class:`~psg_data.evaluation.PersistenceOptions` of the command line (syntax checked now; ``auto``
     decided by the dataset later).
     """
@@ -46,10 +47,10 @@ def persistence_options(*, setting: str, horizon: str, weighting: str, windows: 
         raise EvaluationError("--windows with --weighting reference: the plain trapezoid ignores scoring windows; "
                               "use --weighting windows (or auto)")
     return PersistenceOptions(setting=setting, horizon=horizon, weighting=weighting, windows=windows,
-                              seeds="auto" if seeds is None else tuple(range(seeds)))
+                              seeds="auto" if seeds is None else tuple(seeds))
 
 
-def check_lab_seeds(lab_seeds: int | None, dataset: str | None, task: str, labels: str) -> None:
+def check_lab_seeds(lab_seeds: tuple[int, ...] | None, dataset: str | None, task: str, labels: str) -> None:
     """``--lab-seeds`` regenerates a synthetic dataset: the demo lab (labels gt / noisy) or the benchmark."""
     if lab_seeds is None:
         return

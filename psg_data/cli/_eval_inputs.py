@@ -61,16 +61,49 @@ def _setting_names(factory: Any) -> list[str] | None:
 
 
 def check_estimators(specs: list[EstimatorSpec]) -> None:
-    """Build every estimator once so that unknown names and bad settings fail before any work."""
+    """Build every estimator once so that unknown names and bad settings fail before any work.
+
+    Settings an estimator does not declare (``_parameters``; a plugin's, typically) cannot be
+    checked by type: with such a setting the estimator also makes a short fit and prediction on
+    :func:`~psg_data.estimators.conformance_streams`, so that a bad value fails here, once, in one
+    line, and not on every edge of the run.
+    """
     from psg_data.estimators import get_estimator
+    from psg_data.estimators._params import declared
 
     for spec in specs:
         try:
-            get_estimator(spec.name, **dict(spec.settings))
+            est = get_estimator(spec.name, **dict(spec.settings))
         except EstimatorError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: {exc}") from None
         except TypeError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: bad settings ({exc})") from None
+        undeclared = [k for k, _ in spec.settings if k not in declared(est)]
+        if undeclared:
+            _trial_fit(spec, est, undeclared)
+
+
+def _trial_fit(spec: EstimatorSpec, est: Any, undeclared: list[str]) -> None:
+    """A short fit and prediction with the settings the estimator does not declare (one line if it fails)."""
+    import numpy as np
+
+    from psg_data.estimators import conformance_streams
+
+    streams = conformance_streams(days=3)
+    try:
+        est.fit(streams, timezone="UTC")
+        f = est.make_filter(streams[0].edge)
+        f.update_many(streams[0].t_s, streams[0].y)
+        p = np.asarray(f.predict(streams[0].t_s[-1:] + 3600.0), dtype=np.float64)
+    except Exception as exc:  # noqa: BLE001 - whatever the plugin raises, said once
+        text = " ".join(str(exc).split())
+        raise EstimatorError(f"--estimator {spec.label!r}: setting {', '.join(undeclared)} is not declared by "
+                             f"{spec.name} and a trial fit with it fails ({type(exc).__name__}: {text}); check its "
+                             "value (a plugin declares its settings in _parameters to have them checked by type)"
+                             ) from None
+    if not np.all(np.isfinite(p)):
+        raise EstimatorError(f"--estimator {spec.label!r}: setting {', '.join(undeclared)} is not declared by "
+                             f"{spec.name} and a trial fit with it predicts {p.tolist()}; check its value")
 
 
 @dataclass(frozen=True)
@@ -84,22 +117,21 @@ def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
     """``demo`` (default: the built-in lab, built once into the cache), ``persistence-benchmark``
     (the paper's Sec. V-A streams) or a dataset directory.
     """
-    if value in (None, DEMO):
-        from psg_data.cli._progress import Progress
-        from psg_data.datasets import demo
-        from psg_data.synth import LabConfig
+    from psg_data.datasets import BUILTIN
 
-        cfg = LabConfig()
-        with Progress("building the demo lab (once)", total=cfg.days * len(cfg.scan_hours), unit="scans",
-                      quiet=quiet) as prog:
-            root = demo(progress=prog)
-        return DatasetChoice("dataset", Path(root), "demo lab")
-    if value == BENCHMARK:
+    name = DEMO if value is None else value
+    if name == BENCHMARK:
         return DatasetChoice("benchmark", None, BENCHMARK)
-    path = Path(value)
+    entry = BUILTIN.get(name)
+    if entry is not None and entry.build is not None and not Path(name).is_dir():
+        from psg_data.cli._common import dataset_path
+
+        root = dataset_path(name, command="psg-eval --dataset", quiet=quiet)
+        return DatasetChoice("dataset", root, "demo lab" if name == DEMO else name)
+    path = Path(name)
     if not path.is_dir():
-        raise EvaluationError(f"--dataset {value!r}: not a directory; expected a psg-dataset path, "
-                              f"'{DEMO}' or '{BENCHMARK}'")
+        raise EvaluationError(f"--dataset {value!r}: not a directory; expected a psg-dataset path or one of "
+                              f"{', '.join(repr(n) for n in BUILTIN)}")
     return DatasetChoice("dataset", path, str(path))
 
 
@@ -123,8 +155,10 @@ def available_hints(value: str | None) -> dict[str, Any]:
         return {}
 
 
-def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool) -> Any:
-    """The :class:`~psg_data.evaluation.PersistenceTask` of a dataset choice (the benchmark: its draw 0)."""
+def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool, label_seed: int = 0) -> Any:
+    """The :class:`~psg_data.evaluation.PersistenceTask` of a dataset choice (the benchmark: its draw 0);
+    ``label_seed``: the seed of the ``noisy:P`` flips.
+    """
     from psg_data.evaluation import persistence_task_from_benchmark, persistence_task_from_dataset
 
     if choice.kind == "benchmark":
@@ -138,7 +172,7 @@ def persistence_task_for(choice: DatasetChoice, *, labels: str, quiet: bool) -> 
     ds = open_dataset(choice.path)
     if labels.split(":", 1)[0] in ("privileged", "detections") and choice.label == "demo lab":
         _label_demo_if_needed(ds, labels, quiet)
-    task = persistence_task_from_dataset(ds, labels=labels)
+    task = persistence_task_from_dataset(ds, labels=labels, seed=label_seed)
     if choice.label == "demo lab":
         task.name = "the built-in lab (demo, lab seed 0)"
     return task

@@ -13,13 +13,14 @@ __all__ = ["run_navigation_task", "run_doors_task", "navigation_options", "door_
 
 
 def navigation_options(protocol: str, *, labels: str, seeds: list[int], queries: int | None, setting: str,
-                       delta: float, reachable_only: bool, door_belief: str | None, windows: str = "auto") -> Any:
+                       delta: float, reachable_only: bool, door_belief: str | None, windows: str = "auto",
+                       label_seed: int = 0) -> Any:
     """The :class:`~psg_data.navigation.NavigationOptions` of the command line (checked before any work)."""
     from psg_data.errors import EvaluationError
     from psg_data.navigation import NavigationOptions
 
     over: dict[str, Any] = {"labels": labels, "seeds": tuple(seeds), "setting": setting, "delta": delta,
-                            "windows": _windows(windows)}
+                            "windows": _windows(windows), "label_seed": label_seed}
     if queries is not None:
         if protocol == "paper-real":
             raise EvaluationError("--queries: the paper-real protocol has 25 queries (10 static, 10 dynamic, 5 absent) "
@@ -41,7 +42,7 @@ def _windows(text: str) -> str:
 
 
 def door_task_options(*, labels: str, seeds: list[int], queries: int | None, setting: str = "adaptive",
-                      windows: str = "auto") -> Any:
+                      windows: str = "auto", label_seed: int = 0) -> Any:
     """The :class:`~psg_data.navigation.DoorTaskOptions` of the command line."""
     from psg_data.errors import EvaluationError, LabelingError
     from psg_data.labeling import parse_source
@@ -52,7 +53,7 @@ def door_task_options(*, labels: str, seeds: list[int], queries: int | None, set
     except LabelingError as exc:
         raise EvaluationError(str(exc)) from None
     return DoorTaskOptions(labels=labels, seeds=tuple(seeds), n_queries=queries or 250, setting=setting,
-                           windows=_windows(windows))
+                           windows=_windows(windows), label_seed=label_seed)
 
 
 def _dataset(dataset: str | None, labels: str, quiet: bool, task: str) -> Any:
@@ -84,7 +85,8 @@ def _require(specs: list[Any], choice: Any) -> None:
 
 
 def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out: Path, no_plots: bool,
-                        quiet: bool, *, references: bool = True, deltas: tuple[float, ...] = ()) -> bool:
+                        quiet: bool, *, references: bool = True, deltas: tuple[float, ...] = (),
+                        table_format: str = "text") -> bool:
     """Object navigation on a dataset: SR / SPL / AR / DIST per method (the paper's navigation tables)."""
     from psg_data.evaluation._navigation_job import run_navigation_job
     from psg_data.evaluation._tables import print_results
@@ -94,13 +96,14 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
     info = provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path)})
     _, results = run_navigation_job(specs, choice.path, options, out, references=references, deltas=deltas,
                                     plots=not no_plots, info=info)
-    click.echo("")
-    print_results(results)
+    if table_format == "text":
+        click.echo("")
+    print_results(results, fmt=table_format)
     return True
 
 
 def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Path, no_plots: bool,
-                   quiet: bool, *, references: bool = True) -> bool:
+                   quiet: bool, *, references: bool = True, table_format: str = "text") -> bool:
     """Door navigation on a dataset's own map, and objects behind predicted-closed doors."""
     from psg_data.evaluation._navigation_job import run_door_job
     from psg_data.evaluation._tables import print_results
@@ -110,6 +113,7 @@ def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Pat
     info = provenance({"task": "doors", "dataset_label": choice.label, "dataset": str(choice.path),
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
     _, results = run_door_job(specs, choice.path, options, out, references=references, plots=not no_plots, info=info)
-    click.echo("")
-    print_results(results)
+    if table_format == "text":
+        click.echo("")
+    print_results(results, fmt=table_format)
     return True

@@ -29,12 +29,12 @@ def _executor(jobs: int, scheduler: str | None) -> Any:
 
 
 def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int, scheduler: str | None,
-                 quiet: bool, references: bool, keep_all: bool) -> tuple[Any, Any, dict[str, Any]]:
+                 quiet: bool, references: bool, keep_all: bool, label_seed: int) -> tuple[Any, Any, dict[str, Any]]:
     from psg_data.cli._eval_inputs import persistence_task_for, require_hints
     from psg_data.evaluation._persistence_job import fit_counts, persistence_rows, run_persistence_rows
     from psg_data.evaluation._report import choose_plot_edges
 
-    task = persistence_task_for(choice, labels=labels, quiet=quiet)
+    task = persistence_task_for(choice, labels=labels, quiet=quiet, label_seed=label_seed)
     require_hints(specs, task.estimator_hints, choice.label)
     rows, roles = persistence_rows(specs, task.estimator_hints, references=references)
     total = fit_counts(rows, task, options) * len(task.ground_truth)
@@ -50,27 +50,29 @@ def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs:
     return result, task, roles
 
 
-def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_seeds: int, jobs: int,
-               scheduler: str | None, quiet: bool, references: bool) -> tuple[Any, Any, dict[str, Any]]:
+def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_seeds: tuple[int, ...], jobs: int,
+               scheduler: str | None, quiet: bool, references: bool,
+               label_seed: int) -> tuple[Any, Any, dict[str, Any]]:
     from psg_data.evaluation._persistence_job import draw_task, persistence_rows, run_lab_draws
 
     kind = "benchmark" if choice.kind == "benchmark" else "lab"
     hints = draw_task(kind, 0, labels).estimator_hints if kind == "lab" else {"schedules": {}}
     rows, roles = persistence_rows(specs, hints, references=references)
-    with Progress(f"evaluating {lab_seeds} regenerated {'labs' if kind == 'lab' else 'benchmark draws'}",
-                  total=lab_seeds, unit="draws", quiet=quiet) as prog, _executor(jobs, scheduler) as executor:
+    with Progress(f"evaluating {len(lab_seeds)} regenerated {'labs' if kind == 'lab' else 'benchmark draws'}",
+                  total=len(lab_seeds), unit="draws", quiet=quiet) as prog, _executor(jobs, scheduler) as executor:
         def progress(done: int, _total: int) -> None:
             prog.done = done
             prog.update(0)
 
-        result, task = run_lab_draws(kind, range(lab_seeds), labels, rows, options, executor=executor,
-                                     progress=progress)
+        result, task = run_lab_draws(kind, lab_seeds, labels, rows, options, executor=executor,
+                                     progress=progress, label_seed=label_seed)
     return result, task, roles
 
 
 def run_persistence(specs: list[Any], dataset: str | None, options: Any, labels: str, jobs: int, out: Path,
-                    no_plots: bool, quiet: bool, *, references: bool = True, lab_seeds: int | None = None,
-                    scheduler: str | None = None, rerun_file: Path | None = None, overwrite: bool = False) -> bool:
+                    no_plots: bool, quiet: bool, *, references: bool = True, lab_seeds: tuple[int, ...] | None = None,
+                    scheduler: str | None = None, rerun_file: Path | None = None, overwrite: bool = False,
+                    label_seed: int = 0, table_format: str = "text") -> bool:
     """Run, write the results schema and files, draw the figures, print the table; False when a row had errors."""
     from psg_data.cli._eval_inputs import resolve_dataset
     from psg_data.evaluation._persistence_job import write_persistence_outputs
@@ -78,19 +80,21 @@ def run_persistence(specs: list[Any], dataset: str | None, options: Any, labels:
 
     if lab_seeds is not None:
         choice = resolve_dataset(dataset, quiet=quiet) if dataset == "persistence-benchmark" else _lab_choice()
-        result, task, roles = _lab_draws(specs, choice, options, labels, lab_seeds, jobs, scheduler, quiet, references)
+        result, task, roles = _lab_draws(specs, choice, options, labels, lab_seeds, jobs, scheduler, quiet, references,
+                                         label_seed)
     else:
         choice = resolve_dataset(dataset, quiet=quiet)
         result, task, roles = _one_dataset(specs, choice, options, labels, jobs, scheduler, quiet, references,
-                                           keep_all=rerun_file is not None)
+                                           keep_all=rerun_file is not None, label_seed=label_seed)
     info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **task.info,
-                       "lab_seeds": lab_seeds,
+                       "lab_seeds": None if lab_seeds is None else list(lab_seeds),
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
     results = write_persistence_outputs(result, out, info=info, roles=roles, timezone=task.timezone, plots=not no_plots)
     if rerun_file is not None:
         _save_beliefs(result, rerun_file, overwrite)
-    click.echo("")
-    print_results(results)
+    if table_format == "text":
+        click.echo("")
+    print_results(results, fmt=table_format)
     if result.errors:
         click.echo(f"\n{len(result.errors)} problem(s) (see results.json 'errors'):", err=True)
         for e in result.errors[:20]:
@@ -106,8 +110,9 @@ def _lab_choice() -> Any:
 
 def _save_beliefs(result: Any, path: Path, overwrite: bool) -> None:
     """The --rerun hook: beliefs of every estimator over time, per scored edge, first seed."""
-    from psg_data.viewer import log_beliefs, recording
+    from psg_data.viewer import beliefs_blueprint, log_beliefs, recording
 
-    with recording(path, application_id="psg-eval", overwrite=overwrite) as rec:
+    with recording(path, application_id="psg-eval", overwrite=overwrite,
+                   blueprint=beliefs_blueprint(result.traces)) as rec:
         n = log_beliefs(rec, result.traces)
     click.echo(f"beliefs of {len(result.estimators)} estimators on {n} edges written to {path}")

@@ -3,36 +3,38 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import click
 
-from psg_data.cli._common import EXIT_PROBLEMS, handle_errors
+from psg_data.cli._common import DATASET_HELP, EXIT_PROBLEMS, dataset_path, handle_errors
 from psg_data.cli._errors import ContractCommand
 
 __all__ = ["validate_cmd", "info_cmd"]
 
 
-@click.command("validate", cls=ContractCommand)
-@click.argument("path", type=click.Path(path_type=Path))
+@click.command("validate", cls=ContractCommand, epilog=DATASET_HELP)
+@click.argument("dataset", metavar="DATASET")
 @click.option("--no-checksums", is_flag=True, help="Check file sizes only, not SHA-256 checksums (faster).")
 @click.option("--quick", is_flag=True,
               help="Check image headers only (default: every image checked whole and decoded).")
 @handle_errors
-def validate_cmd(path: Path, no_checksums: bool, quick: bool) -> None:
-    """Check a dataset: manifest, schemas, ids, value ranges, images and checksums.
+def validate_cmd(dataset: str, no_checksums: bool, quick: bool) -> None:
+    """Check DATASET: manifest, schemas, ids, value ranges, images and checksums.
 
     Every image is checked whole (PNG chunk CRCs, JPEG markers through EOI) and decoded, and its
     size and sample format compared with its camera; --quick reads image headers only.
 
-    Prints one line per problem (``file[:row]: field: what is wrong, what was expected``) and exits
-    1, or prints ``OK`` and exits 0.
+    Prints one line per problem (file[:row]: field: what is wrong, what was expected) and exits 1,
+    or prints OK and exits 0.
 
     \b
-    Example:
+    Examples:
       psg-data validate /tmp/lab
+      psg-data validate demo --quick
     """
     from psg_data.schemas.validate import validate_dataset
+
+    path = dataset_path(dataset, command="psg-data validate")
 
     problems = validate_dataset(path, checksums=not no_checksums, decode=not quick)
     if problems:
@@ -51,23 +53,24 @@ def _fmt_bytes(n: float) -> str:
     return f"{n:.1f} GB"  # pragma: no cover
 
 
-@click.command("info", cls=ContractCommand)
-@click.argument("path", type=click.Path(path_type=Path))
+@click.command("info", cls=ContractCommand, epilog=DATASET_HELP)
+@click.argument("dataset", metavar="DATASET")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @handle_errors
-def info_cmd(path: Path, as_json: bool) -> None:
-    """Summarise a dataset: scans, frames, time span, rooms, receptacles, objects, doors, size.
+def info_cmd(dataset: str, as_json: bool) -> None:
+    """Summarise DATASET: scans, frames, time span, rooms, receptacles, objects, doors, size.
 
     \b
-    Example:
+    Examples:
       psg-data info /tmp/lab
+      psg-data info demo --json
     """
     import json
 
     from psg_data.loaders import open_dataset
     from psg_data.loaders._summary import summarize
 
-    summary = summarize(open_dataset(path))
+    summary = summarize(open_dataset(dataset_path(dataset, command="psg-data info")))
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return

@@ -7,7 +7,7 @@ import json
 
 import click
 
-from psg_data.cli._common import handle_errors
+from psg_data.cli._common import dataset_path, handle_errors
 from psg_data.cli._errors import ContractCommand
 
 __all__ = ["lab_stats_cmd"]
@@ -19,8 +19,8 @@ __all__ = ["lab_stats_cmd"]
 @click.option("--routine-strength", type=click.FloatRange(0.0, 1.0), default=None,
               help="steps-v2 routine strength (default: the generator's).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Lab seed (as psg-data synth --seed).")
-@click.option("--dataset", default=None, metavar="PATH",
-              help="Also report what the privileged labels of this lab dataset see.")
+@click.option("--dataset", default=None, metavar="PATH|demo",
+              help="Also report what the privileged labels of this lab dataset see (demo: the built-in lab).")
 @click.option("--sim-weeks", type=click.IntRange(1), default=52, show_default=True,
               help="Simulated weeks for the time-of-week share.")
 @handle_errors
@@ -43,5 +43,5 @@ def lab_stats_cmd(generator: str, routine_strength: float | None, seed: int, dat
     if dataset:
         from psg_data.labeling import visibility_statistics
 
-        out.update(visibility_statistics(dataset))
+        out.update(visibility_statistics(dataset_path(dataset, command="psg-data lab-stats --dataset")))
     click.echo(json.dumps(out, indent=1))

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import click
 
-from psg_data.cli._common import Progress, handle_errors, quiet_option, setup_logging
+from psg_data.cli._common import DATASET_HELP, Progress, dataset_path, handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractCommand
 
 __all__ = ["label_cmd"]
 
 
-@click.command("label", cls=ContractCommand)
-@click.argument("path", type=click.Path())
+@click.command("label", cls=ContractCommand, epilog=DATASET_HELP)
+@click.argument("dataset", metavar="DATASET")
 @click.option("--source", "-s", required=True, metavar="SOURCE",
               help="gt | privileged | noisy:P[,P_F] | observed (door states read from the depth) | "
                    "detections:FILE (.parquet or .json).")
@@ -30,7 +30,7 @@ __all__ = ["label_cmd"]
               help="Replace labels of this source and recompute visibility (only tables psg-data wrote).")
 @quiet_option
 @handle_errors
-def label_cmd(path: str, source: str, seed: int, valid_file: str | None, observed: str, min_iou: float,
+def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, observed: str, min_iou: float,
               margin_m: float, doors: bool, overwrite: bool, quiet: bool) -> None:
     """Label a dataset: write tables/labels.parquet (and tables/visibility.parquet).
 
@@ -52,6 +52,7 @@ def label_cmd(path: str, source: str, seed: int, valid_file: str | None, observe
     from psg_data.loaders import open_dataset
     from psg_data.writers._safe_output import check_not_input
 
+    path = dataset_path(dataset, command="psg-data label", quiet=quiet)
     ds = open_dataset(path)
     read = [valid_file, source.split(":", 1)[1] if source.startswith("detections:") else None]
     for table in ("labels", "visibility"):  # what this command writes

@@ -19,12 +19,17 @@ from psg_data import __version__
 from psg_data._executors import SCHEDULER_HELP, check_scheduler
 from psg_data.cli._common import EXIT_PROBLEMS, handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractGroup, check_jobs
+from psg_data.cli._seeds import SeedsType
 
 __all__ = ["main"]
 
 log = logging.getLogger(__name__)
 
 DEFAULT_ESTIMATOR = "perpetua_star"
+TABLE_FORMATS = ("text", "markdown", "latex")
+"""``--format`` of the printed table (``psg_data.evaluation._table_formats``)."""
+COMPARE_FORMATS = ("text", "csv", "json", "markdown", "latex")
+"""``compare --format`` (``psg_data.evaluation._tables.COMPARE_FORMATS``)."""
 
 
 def _out_dir(out: Path | None, overwrite: bool, inputs: list[Path | None]) -> Path:
@@ -105,12 +110,17 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
                    "table).")
 @click.option("--door-belief", type=click.Choice(["truth", "predicted", "last-map", "all-open"]), default=None,
               help="Navigation: door states the agent plans with (default: truth for sim, predicted for paper-real).")
-@click.option("--seeds", type=click.IntRange(1, 100), default=None,
-              help="Persistence: estimator seeds 0..N-1 for estimators whose fit depends on the seed (default: 3 for "
-                   "those, 1 for the others). Navigation and doors: query sets (default 3).")
-@click.option("--lab-seeds", type=click.IntRange(1, 100), default=None,
-              help="Persistence: regenerate the synthetic dataset N times (the built-in lab: new layout and schedules, "
-                   "labels gt or noisy:P; the benchmark: new draws) and report the t-interval over the draws.")
+@click.option("--seeds", type=SeedsType(), default=None, metavar="N|S,S,...|A-B",
+              help="Persistence: estimator seeds for estimators whose fit depends on the seed (default: 3 for those, "
+                   "1 for the others). Navigation and doors: query sets (default 3). A count N means seeds 0..N-1; "
+                   "a list (0,3,5) or an inclusive range (3-7; one seed: 3-3) picks them.")
+@click.option("--lab-seeds", type=SeedsType(), default=None, metavar="N|S,S,...|A-B",
+              help="Persistence: regenerate the synthetic dataset with these seeds (a count N: 0..N-1; a list or "
+                   "range as for --seeds; the built-in lab: new layout and schedules, labels gt or noisy:P; the "
+                   "benchmark: new draws) and report the t-interval over the draws.")
+@click.option("--label-seed", type=click.IntRange(0), default=0, show_default=True,
+              help="Seed of the noisy:P flips (the noise draw; and of the navigation agent's sightings); recorded "
+                   "in results.json.")
 @click.option("--queries", type=click.IntRange(1), default=None,
               help="Navigation / door queries per seed (default 250; the paper-real protocol has 25).")
 @click.option("--delta", default="0.2", show_default=True, metavar="D|D1,D2,...",
@@ -132,15 +142,19 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
                                        "seed) as a Rerun recording (needs psg-data[viewer]).")
 @click.option("--list-estimators", is_flag=True, help="List registered estimators (built-ins and plugins) and exit.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@click.option("--format", "table_format", type=click.Choice(TABLE_FORMATS), default="text", show_default=True,
+              help="How the table is printed: text, or markdown / latex (booktabs) to paste into a paper. The files "
+                   "written (table.txt, results.json, CSV) are the same.")
 @quiet_option
 @click.version_option(__version__, prog_name="psg-eval")
 @click.pass_context
 @handle_errors
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
          setting: str, horizon: str, windows: str, weighting: str, labels: str, protocol: str,
-         door_belief: str | None, seeds: int | None, lab_seeds: int | None, queries: int | None, delta: str,
-         reachable_only: bool, out: Path | None, overwrite: bool, jobs: int, scheduler: str | None,
-         rerun_file: Path | None, list_estimators: bool, no_plots: bool, quiet: bool) -> None:
+         door_belief: str | None, seeds: tuple[int, ...] | None, lab_seeds: tuple[int, ...] | None,
+         label_seed: int, queries: int | None, delta: str, reachable_only: bool, out: Path | None, overwrite: bool,
+         jobs: int, scheduler: str | None, rerun_file: Path | None, list_estimators: bool, no_plots: bool,
+         table_format: str, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1) next to a ceiling, baselines
     and chance, with a stated interval; or navigation (SR, SPL, AR, DIST) and doors with them.
 
@@ -185,11 +199,12 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     if task in ("navigation", "doors"):
         from psg_data.cli._eval_navigation import door_task_options, navigation_options
 
-        q_seeds = list(range(seeds or 3))
+        q_seeds = list(seeds or range(3))
         nav_options = (navigation_options(protocol, labels=labels, seeds=q_seeds, queries=queries, setting=setting,
                                           delta=deltas[0], reachable_only=reachable_only, door_belief=door_belief,
-                                          windows=windows) if task == "navigation" else
-                       door_task_options(labels=labels, seeds=q_seeds, queries=queries, windows=windows))
+                                          windows=windows, label_seed=label_seed) if task == "navigation" else
+                       door_task_options(labels=labels, seeds=q_seeds, queries=queries, windows=windows,
+                                         label_seed=label_seed))
     from psg_data.writers._safe_output import commit_tree, make_staging
 
     out_dir = _out_dir(out, overwrite, _eval_inputs(dataset, labels))
@@ -201,35 +216,46 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     try:
         if task == "persistence":
             ok = run_persistence(specs, dataset, p_opts, labels, jobs, tmp, no_plots, quiet, references=references,
-                                 lab_seeds=lab_seeds, scheduler=scheduler, rerun_file=rerun_file, overwrite=overwrite)
+                                 lab_seeds=lab_seeds, scheduler=scheduler, rerun_file=rerun_file, overwrite=overwrite,
+                                 label_seed=label_seed, table_format=table_format)
         elif task == "doors":
-            ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references)
+            ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references,
+                                table_format=table_format)
         else:
             ok = run_navigation_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references,
-                                     deltas=deltas)
+                                     deltas=deltas, table_format=table_format)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         if new_parent and not any(out_dir.parent.iterdir()):
             out_dir.parent.rmdir()  # e.g. psg-eval-out/, created for this run
         raise
     commit_tree(tmp, out_dir, kind="results")
-    click.echo(f"results written to {out_dir}/")
+    click.echo(f"results written to {out_dir}/", err=table_format != "text")  # stdout: only the table
     if not ok:
         sys.exit(EXIT_PROBLEMS)
 
 
 @main.command("compare")
 @click.argument("dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--references/--no-references", default=True, show_default=True,
+              help="Keep the reference rows (ceiling, baselines, chance); --no-references shows only the methods.")
+@click.option("--metric", "metrics", multiple=True, metavar="KEY",
+              help="Only this metric's column (repeatable; a key or a label: mae, balanced_accuracy, F1, SR, ...).")
+@click.option("--format", "table_format", type=click.Choice(COMPARE_FORMATS), default="text", show_default=True,
+              help="text; csv or json (each metric's mean, interval ends and half-width per run and method); "
+                   "markdown or latex (booktabs) to paste into a paper.")
 @handle_errors
-def compare_cmd(dirs: tuple[Path, ...]) -> None:
+def compare_cmd(dirs: tuple[Path, ...], references: bool, metrics: tuple[str, ...], table_format: str) -> None:
     """Tabulate earlier psg-eval runs side by side (reads each DIR/results.json).
 
     Persistence, navigation and door runs may be mixed: each task gets its own table.
 
     \b
-    Example:
+    Examples:
       psg-eval compare psg-eval-out/run1 psg-eval-out/run2
+      psg-eval compare run1 run2 --no-references --metric mae --metric balanced_accuracy
+      psg-eval compare run1 --format latex > table.tex
     """
     from psg_data.cli._eval_compare import compare_runs
 
-    compare_runs(dirs)
+    compare_runs(dirs, fmt=table_format, metrics=metrics, references=references)

@@ -8,6 +8,11 @@ Built-ins (``list_estimators()``): ``perpetua_star`` (FreMEn switching prior; ``
 and may declare their settings (``_parameters = {"alpha": Real(0, 1)}``, see :class:`Param`) so
 that ``set_params`` and ``psg-eval -e NAME:alpha=...`` check them before any work.
 
+Writing a plugin: subclass :class:`BaseEstimator` (settings, ``get_params`` / ``set_params`` /
+``clone``, the fitted check) and :class:`BaseFilter` (time checks; implement ``_update_many``,
+``_predict`` and ``get_state``); ``examples/plugin/`` in the repository is a complete installable
+package, and :func:`check_estimator` names every member that is missing or wrong.
+
 Example::
 
     from psg_data.estimators import get_estimator
@@ -20,6 +25,7 @@ Example::
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream, PersistenceEstimator
 from psg_data.estimators._cadence import PAPER_SETTINGS, Cadence, training_cadence
 from psg_data.estimators._check import check_estimator, conformance_streams
+from psg_data.estimators._common import BaseEstimator, BaseFilter
 from psg_data.estimators._fremen import FremenComponents, FremenModel, LocalClock, fourier_sums
 from psg_data.estimators._fremen_estimator import FremenEstimator
 from psg_data.estimators._hmm import HmmFit, fit_error_hmm
@@ -66,6 +72,8 @@ __all__ = [
     "EdgeStream",
     "EdgeFilter",
     "PersistenceEstimator",
+    "BaseEstimator",
+    "BaseFilter",
     "get_estimator",
     "get_factory",
     "Param",

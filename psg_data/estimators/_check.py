@@ -12,10 +12,20 @@ from numpy.typing import NDArray
 from psg_data.errors import EstimatorError, NotFittedError
 from psg_data.estimators._base import EdgeStream, PersistenceEstimator
 
-__all__ = ["check_estimator", "conformance_streams"]
+__all__ = ["check_estimator", "conformance_streams", "ESTIMATOR_MEMBERS", "FILTER_MEMBERS"]
 
 _Fail = Callable[[str, str], NoReturn]
 _T0 = 1_704_085_200.0  # 2024-01-01 00:00 America/Toronto (a Monday)
+ESTIMATOR_MEMBERS = ("fit", "make_filter", "filter_from_state", "get_params")
+"""Methods a :class:`~psg_data.estimators.PersistenceEstimator` has."""
+FILTER_MEMBERS = ("update", "update_many", "predict", "get_state")
+"""Methods an :class:`~psg_data.estimators.EdgeFilter` has (and the ``last_t_s`` attribute)."""
+
+
+class _Stage:
+    """The check being run, so that an unexpected exception is reported under its name."""
+
+    name = "members"
 
 
 def conformance_streams(days: int = 10, seed: int = 0, start_s: float = _T0) -> list[EdgeStream]:
@@ -42,7 +52,10 @@ def check_estimator(estimator: PersistenceEstimator, *, streams: Sequence[EdgeSt
                     timezone: str = "America/Toronto") -> dict[str, str]:
     """Run the conformance checks on an (unfitted) estimator; raise on the first failure.
 
-    Checks: ``fit`` returns self; ``make_filter`` before ``fit`` raises NotFittedError; predictions
+    Checks: ``members`` (every method of :data:`ESTIMATOR_MEMBERS` exists; all missing ones are
+    named); ``get_params`` returns a dict and ``type(est)(**est.get_params())`` rebuilds it
+    (``clone``); ``filter_members`` (every method of :data:`FILTER_MEMBERS` and ``last_t_s``);
+    ``fit`` returns self; ``make_filter`` before ``fit`` raises NotFittedError; predictions
     have the query's shape, are finite and in [0, 1]; two fits with equal settings predict
     identically (determinism); ``get_state`` is JSON-serialisable and ``filter_from_state`` restores
     a filter predicting identically, also after further updates; ``update`` one at a time equals
@@ -59,34 +72,76 @@ def check_estimator(estimator: PersistenceEstimator, *, streams: Sequence[EdgeSt
         {check name: "ok"}.
 
     Raises:
-        EstimatorError: naming the failed check.
+        EstimatorError: naming the failed check (an exception an estimator raises where it should
+            not is reported under the name of the check that was running).
     """
-    def fail(check: str, msg: str) -> NoReturn:
-        raise EstimatorError(f"check_estimator({type(estimator).__name__}): {check}: {msg}")
+    where = f"check_estimator({type(estimator).__name__})"
+    stage = _Stage()
 
+    def fail(check: str, msg: str) -> NoReturn:
+        raise EstimatorError(f"{where}: {check}: {msg}")
+
+    try:
+        return _run_checks(estimator, streams, timezone, fail, stage)
+    except EstimatorError as exc:
+        if str(exc).startswith(where):
+            raise
+        raise EstimatorError(f"{where}: {stage.name}: raised {type(exc).__name__}: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 - a plugin's own bug, reported as the check it broke
+        raise EstimatorError(f"{where}: {stage.name}: raised {type(exc).__name__}: {exc}") from exc
+
+
+def _members(obj: Any, names: Sequence[str]) -> list[str]:
+    return [f"{n}()" for n in names if not callable(getattr(obj, n, None))]
+
+
+def _run_checks(estimator: PersistenceEstimator, streams: Sequence[EdgeStream] | None, timezone: str, fail: _Fail,
+                stage: _Stage) -> dict[str, str]:
+    missing = _members(estimator, ESTIMATOR_MEMBERS)
+    if missing:
+        fail("members", f"missing or not callable: {', '.join(missing)} (see psg_data.estimators.BaseEstimator)")
+    report: dict[str, str] = {"members": "ok"}
+    stage.name = "get_params"
+    params = estimator.get_params()
+    if not isinstance(params, dict):
+        fail("get_params", f"get_params() must return a dict, got {type(params).__name__}")
+    try:
+        type(estimator)(**params)
+    except TypeError as exc:
+        fail("get_params", f"type(est)(**est.get_params()) fails ({exc}); the constructor must take every setting "
+                           "get_params() returns as a keyword")
+    report["get_params"] = "ok"
     data = list(streams) if streams is not None else conformance_streams()
     train, test = _split(data)
-    report: dict[str, str] = {}
+    stage.name = "not_fitted"
     try:
         _fresh(estimator).make_filter(data[0].edge)
         fail("not_fitted", "make_filter before fit did not raise NotFittedError")
     except NotFittedError:
         report["not_fitted"] = "ok"
+    stage.name = "fit_returns_self"
     est = _fresh(estimator)
     if est.fit(train, val_streams=None, timezone=timezone) is not est:
         fail("fit_returns_self", "fit() must return self")
     report["fit_returns_self"] = "ok"
+    stage.name = "filter_members"
+    f0 = est.make_filter(train[0].edge)
+    missing = _members(f0, FILTER_MEMBERS) + ([] if hasattr(f0, "last_t_s") else ["last_t_s"])
+    if missing:
+        fail("filter_members", f"the filter ({type(f0).__name__}) misses {', '.join(missing)} "
+                               "(see psg_data.estimators.BaseFilter)")
+    report["filter_members"] = "ok"
+    stage.name = "determinism"
     est2 = _fresh(estimator).fit(train, val_streams=None, timezone=timezone)
     for tr, te in zip(train, test):
+        stage.name = "predictions"
         f, q, p = _check_predictions(est, est2, tr, fail)
+        stage.name = "state_roundtrip"
         _check_state(est, f, q, p, te, fail)
+        stage.name = "time_monotonicity"
         _check_monotonic(f, fail)
     report.update(shape="ok", range="ok", predict_pure="ok", determinism="ok", update_vs_update_many="ok",
                   state_json="ok", state_roundtrip="ok", time_monotonicity="ok", last_t_s="ok")
-    params: dict[str, Any] = estimator.get_params()
-    if not isinstance(params, dict):
-        fail("get_params", "get_params() must return a dict")
-    report["get_params"] = "ok"
     return report
 
 

@@ -42,7 +42,13 @@ def _same(a: Any, b: Any) -> bool:
 
 
 class BaseEstimator:
-    """scikit-learn style base: keyword-only settings stored unchanged, learned attributes end in ``_``.
+    """scikit-learn style base of an estimator: keyword-only settings stored unchanged, learned
+    attributes end in ``_``.
+
+    A subclass sets ``name``, takes its settings as keyword-only ``__init__`` arguments stored under
+    the same names, and implements ``fit`` (set ``self.fitted_ = True``, return self),
+    ``make_filter(edge)`` (call ``self._check_fitted()`` first) and ``filter_from_state(state)``
+    (``self._check_state(state)`` returns the edge).
 
     Subclasses declare their settings in ``_parameters`` (name -> :class:`~psg_data.estimators._params.Param`);
     :meth:`set_params` and :meth:`validate_params` check values against them, and ``psg-eval``
@@ -123,10 +129,13 @@ class BaseEstimator:
 
 
 class BaseFilter:
-    """Time bookkeeping shared by the built-in filters.
+    """Time bookkeeping shared by the built-in filters (an :class:`~psg_data.estimators.EdgeFilter`).
 
-    Subclasses implement ``_update_many(t, y)`` (validated, non-decreasing, >= last time) and
-    ``_predict(t)`` (t already clamped to >= the last observation time), and ``_state()``.
+    Subclasses implement ``_update_many(t, y)`` (observations already validated: finite times in
+    seconds, non-decreasing and not before the last one, values 0/1 as int8), ``_predict(t)`` (a
+    1-D array of times already clamped to >= the last observation time; return P(present) in
+    [0, 1], NaN is read as 0.5) and ``get_state()`` (a JSON-serialisable dict, restored by the
+    estimator's ``filter_from_state``; include ``last_t_s`` and restore it into ``_last_t``).
     """
 
     def __init__(self, edge: EdgeKey) -> None:
@@ -135,12 +144,17 @@ class BaseFilter:
 
     @property
     def last_t_s(self) -> float | None:
+        """Time (s) of the last observation applied, None before the first."""
         return self._last_t
 
     def update(self, t_s: float, y: int) -> None:
+        """Apply one observation ``y`` (1 seen present, 0 seen absent) at ``t_s`` (s)."""
         self.update_many(np.array([t_s], dtype=np.float64), np.array([y]))
 
     def update_many(self, t_s: ArrayLike, y: ArrayLike) -> None:
+        """Apply observations in time order (checked: equal lengths, finite times, 0/1 values,
+        non-decreasing and not before the last one; else :class:`EstimatorError`).
+        """
         t = np.asarray(t_s, dtype=np.float64).reshape(-1)
         yy = np.asarray(y).reshape(-1)
         if t.shape != yy.shape:

@@ -284,7 +284,8 @@ def persistence_task_from_dataset(dataset: Any, *, labels: str = "gt",
             dense = _lab_dense(LabModel.from_dataset(ds), windows)
     g = _Grids(gt, grid.codes, grid.source, masks, rule, end_ns)
     task = _task(ds.info.name, g, dense, ds.info.timezone,  # type: ignore[arg-type]
-                 {"dataset": str(ds.root), "format_version": ds.info.format_version, "labels_spec": labels})
+                 {"dataset": str(ds.root), "format_version": ds.info.format_version, "labels_spec": labels,
+                  "label_seed": int(seed)})
     task.windows, task.cadence_s, task.estimator_hints = windows, dataset_cadence_s(ds), dataset_hints(ds)
     return task
 
@@ -339,7 +340,7 @@ def persistence_task_from_lab(lab: Any, *, labels: str = "gt", seed: int = 0) ->
     g = _Grids(gt, grid.codes, grid.source, masks, rule, end_ns)
     task = _task(f"lab seed {cfg.seed}", g, _lab_dense(lab, windows), cfg.timezone,
                  {"dataset": f"synthetic lab, seed {cfg.seed} (no images)", "lab_seed": cfg.seed,
-                  "kind": "the built-in lab", "labels_spec": labels})
+                  "kind": "the built-in lab", "labels_spec": labels, "label_seed": int(seed)})
     step = sorted(cfg.scan_hours)
     task.windows, task.cadence_s = windows, float(np.median(np.diff(step)) * 3600.0) if len(step) > 1 else 86400.0
     proc = getattr(lab.schedule, "process", None)

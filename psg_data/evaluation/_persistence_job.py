@@ -70,8 +70,10 @@ def run_persistence_rows(specs: Sequence[EstimatorSpec], task: PersistenceTask, 
                                 progress=progress, keep_predictions=keep_predictions)
 
 
-def draw_task(kind: str, seed: int, labels: str) -> PersistenceTask:
-    """Draw ``seed`` of a synthetic dataset: ``lab`` (the built-in lab, no images) or ``benchmark``."""
+def draw_task(kind: str, seed: int, labels: str, label_seed: int = 0) -> PersistenceTask:
+    """Draw ``seed`` of a synthetic dataset: ``lab`` (the built-in lab, no images; ``label_seed``: the seed
+    of its ``noisy:P`` flips) or ``benchmark``.
+    """
     from psg_data.evaluation._dataset_task import persistence_task_from_benchmark, persistence_task_from_lab
 
     if kind == "benchmark":
@@ -81,15 +83,15 @@ def draw_task(kind: str, seed: int, labels: str) -> PersistenceTask:
         return persistence_task_from_benchmark(seed)
     from psg_data.synth import LabConfig
 
-    return persistence_task_from_lab(LabConfig(seed=int(seed)), labels=labels)
+    return persistence_task_from_lab(LabConfig(seed=int(seed)), labels=labels, seed=label_seed)
 
 
 def _draw_job(kind: str, seed: int, labels: str, specs: Sequence[EstimatorSpec], options: PersistenceOptions,
-              keep: bool) -> tuple[PersistenceResult, PersistenceTask | None]:
+              keep: bool, label_seed: int = 0) -> tuple[PersistenceResult, PersistenceTask | None]:
     """One draw, evaluated inline (runs in a worker process)."""
     from psg_data.evaluation._report import choose_plot_edges
 
-    task = draw_task(kind, seed, labels)
+    task = draw_task(kind, seed, labels, label_seed)
     kept = choose_plot_edges(task.ground_truth) if keep else ()
     res = run_persistence_rows(specs, task, options, keep_predictions=kept)
     return res, (task if keep else None)
@@ -97,8 +99,10 @@ def _draw_job(kind: str, seed: int, labels: str, specs: Sequence[EstimatorSpec],
 
 def run_lab_draws(kind: str, seeds: Sequence[int], labels: str, specs: Sequence[EstimatorSpec],
                   options: PersistenceOptions, *, executor: Executor | None = None,
-                  progress: Callable[[int, int], None] | None = None) -> tuple[PersistenceResult, PersistenceTask]:
-    """Evaluate the rows on every draw (``executor``: one job per draw; None: inline) and merge.
+                  progress: Callable[[int, int], None] | None = None,
+                  label_seed: int = 0) -> tuple[PersistenceResult, PersistenceTask]:
+    """Evaluate the rows on every draw (``executor``: one job per draw; None: inline) and merge
+    (``label_seed``: the seed of every draw's ``noisy:P`` flips).
 
     Returns:
         The merged result (summary: t-interval over the draws) and the first draw's task (its
@@ -111,12 +115,12 @@ def run_lab_draws(kind: str, seeds: Sequence[int], labels: str, specs: Sequence[
     first: PersistenceTask | None = None
     if executor is None:
         for k, s in enumerate(seeds):
-            res, task = _draw_job(kind, s, labels, specs, options, k == 0)
+            res, task = _draw_job(kind, s, labels, specs, options, k == 0, label_seed)
             results[s], first = res, first or task
             if progress is not None:
                 progress(k + 1, len(seeds))
     else:
-        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0): s
+        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0, label_seed): s
                 for k, s in enumerate(seeds)}
         from concurrent.futures import as_completed
 

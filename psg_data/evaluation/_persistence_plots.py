@@ -216,9 +216,9 @@ def plot_metric_bars(results: Any, out_path: str | Path | None = None) -> Figure
 
         results = persistence_results(results)
     table = results.table()
-    from psg_data.evaluation._tables import _ordered
+    from psg_data.evaluation._tables import ordered_rows
 
-    table = type(table)(table.name, table.title, table.metrics, _ordered(table.rows), table.notes, table.groups,
+    table = type(table)(table.name, table.title, table.metrics, ordered_rows(table.rows), table.notes, table.groups,
                         table.count_columns, table.primary)
     colours = _colours(table.rows)
     fig = Figure(figsize=(4.2 * len(table.metrics), 3.9))

@@ -408,6 +408,7 @@ def _config(run: _Run, opts: PersistenceOptions) -> dict[str, Any]:
         "n_test_observations": int(sum(j.test_t.size for j in run.jobs)),
         "edge_weighting": "time-integrated metrics: scored time; sample metrics: scored points",
         "cadence_s": task.cadence_s, "draws": [task.draw], "present_share": _present_share(run.jobs, opts),
+        "labels": task.info.get("labels_spec"), "label_seed": task.info.get("label_seed"),
     })
 
 

@@ -14,9 +14,11 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from psg_data.errors import EvaluationError
 from psg_data.evaluation._results import ROLES, EvalResults, ResultRow, ResultTable
 
-__all__ = ["render_table", "format_table", "format_results", "print_results", "format_compare", "cell_text"]
+__all__ = ["render_table", "format_table", "format_results", "print_results", "format_compare", "cell_text",
+           "best_marks", "ordered_rows", "format_as", "COMPARE_FORMATS"]
 
 _ARROW = {"lower": "↓", "higher": "↑"}
 
@@ -52,9 +54,26 @@ def _headers(table: ResultTable) -> list[str]:
     return out
 
 
-def _ordered(rows: Sequence[ResultRow]) -> list[ResultRow]:
+def ordered_rows(rows: Sequence[ResultRow]) -> list[ResultRow]:
+    """Rows in table order: ceiling, baselines, chance, then the methods (stable within a role)."""
     rank = {r: i for i, r in enumerate(ROLES)}
     return sorted(rows, key=lambda r: rank.get(r.role, len(ROLES)))
+
+
+def best_marks(table: ResultTable, rows: Sequence[ResultRow]) -> list[list[bool]]:
+    """Per row and metric of ``table``: whether the cell is the column's best among the non-ceiling
+    rows (equal at the shown digits).
+    """
+    best = _best(table)
+    out = []
+    for r in rows:
+        marks = []
+        for m in table.metrics:
+            s = r.values.get(m.key)
+            marks.append(r.role != "ceiling" and s is not None and m.key in best
+                         and abs(s.mean - best[m.key]) < 0.5 * 10 ** -m.digits / m.scale)
+        out.append(marks)
+    return out
 
 
 def render_table(table: ResultTable, *, run: str | None = None, show_title: bool = True) -> Any:
@@ -75,17 +94,13 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
         t.add_column(f"% of ceiling\n({table.metric(table.primary).label})", justify="right")
     for c in table.count_columns:
         t.add_column(c, justify="right")
-    best = _best(table)
-    rows = _ordered(table.rows)
+    rows = ordered_rows(table.rows)
+    marks = best_marks(table, rows)
     for i, r in enumerate(rows):
         cells = [] if run is None else [run]
         cells += [r.method, "" if r.role == "method" else r.role]
-        for m in table.metrics:
-            s = r.values.get(m.key)
-            text = cell_text(s, m.scale, m.digits)
-            mark = (r.role != "ceiling" and s is not None and m.key in best
-                    and abs(s.mean - best[m.key]) < 0.5 * 10 ** -m.digits / m.scale)
-            cells.append(text + ("*" if mark else " "))
+        for k, m in enumerate(table.metrics):
+            cells.append(cell_text(r.values.get(m.key), m.scale, m.digits) + ("*" if marks[i][k] else " "))
         if table.primary is not None:
             cells.append("-" if r.pct_of_ceiling is None or not math.isfinite(r.pct_of_ceiling)
                          else f"{r.pct_of_ceiling:.0f} %")
@@ -123,11 +138,15 @@ def format_results(results: EvalResults, *, width: int | None = WIDE) -> str:
     return "\n\n".join(format_table(t, width=width) for t in results.tables)
 
 
-def print_results(results: EvalResults, *, file: Any = None) -> None:
-    """Print every table and its notes to ``file`` (default stdout) through rich: styled in a
-    terminal, plain text (wide enough not to wrap) when redirected.
+def print_results(results: EvalResults, *, file: Any = None, fmt: str = "text") -> None:
+    """Print every table and its notes to ``file`` (default stdout): ``text`` through rich (styled in a
+    terminal, plain text wide enough not to wrap when redirected), or ``markdown`` / ``latex``
+    (:mod:`psg_data.evaluation._table_formats`, to paste into a paper).
     """
     out = file if file is not None else sys.stdout
+    if fmt != "text":
+        out.write(format_as(results.tables, fmt) + "\n")
+        return
     is_tty = hasattr(out, "isatty") and out.isatty()
     con = _console(out, None if is_tty else WIDE, not is_tty)
     for k, t in enumerate(results.tables):
@@ -139,34 +158,147 @@ def print_results(results: EvalResults, *, file: Any = None) -> None:
             con.print(line, markup=False, style="dim" if is_tty else None, overflow="ignore", crop=False)
 
 
-def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | None = WIDE) -> str:
-    """``psg-eval compare``: per task and table name, every run's rows in one table (same renderer)."""
-    by_key: dict[tuple[str, str], list[tuple[str, ResultTable, EvalResults]]] = {}
+def format_as(tables: Sequence[ResultTable], fmt: str) -> str:
+    """Tables with their notes in ``fmt``: ``text`` (as table.txt), ``markdown`` or ``latex``."""
+    from psg_data.evaluation._table_formats import latex_table, markdown_table, table_grid
+
+    if fmt == "text":
+        return "\n\n".join(format_table(t) for t in tables)
+    if fmt == "markdown":
+        return "\n\n".join(markdown_table(table_grid(t)) for t in tables)
+    if fmt == "latex":
+        return "\n\n".join(latex_table(table_grid(t), label=f"tab:{t.name}") for t in tables)
+    raise EvaluationError(f"format {fmt!r}: expected text, markdown or latex")
+
+
+COMPARE_FORMATS = ("text", "csv", "json", "markdown", "latex")
+"""What ``psg-eval compare --format`` writes."""
+
+
+def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | None = WIDE, fmt: str = "text",
+                   metrics: Sequence[str] | None = None, references: bool = True) -> str:
+    """``psg-eval compare``: per task and table name, every run's rows in one table.
+
+    Args:
+        items: (run name, its results) in the order to show.
+        width: console width of the text form.
+        fmt: one of :data:`COMPARE_FORMATS`: ``text`` (the text renderer), ``markdown`` / ``latex``
+            (as ``psg-eval --format``), ``csv`` (one row per run and method: each metric's mean,
+            interval ends and half-width) or ``json`` (the same, nested by table).
+        metrics: only these metric columns (keys or labels); default all.
+        references: keep the reference rows (ceiling, baselines, chance); False: only the methods.
+
+    Raises:
+        EvaluationError: an unknown format or metric.
+    """
+    from psg_data.evaluation._table_formats import select_table
+
+    if fmt not in COMPARE_FORMATS:
+        raise EvaluationError(f"format {fmt!r}: expected one of {', '.join(COMPARE_FORMATS)}")
+    groups: dict[tuple[str, str], list[tuple[str, ResultTable, EvalResults]]] = {}
     for run, res in items:
         for t in res.tables:
-            by_key.setdefault((res.task, t.name), []).append((run, t, res))
-    blocks = []
-    for (task, name), runs in by_key.items():
-        first = runs[0][1]
-        merged = ResultTable(name, f"[{task}] {first.title}", first.metrics, [], [], first.groups, first.count_columns,
-                             first.primary)
-        buf = io.StringIO()
-        con = _console(buf, width, True)
-        from rich import box
-        from rich.table import Table
-        from rich.text import Text
+            chosen = select_table(t, metrics=metrics, references=references)
+            groups.setdefault((res.task, t.name), []).append((run, chosen, res))
+    if fmt in ("csv", "json"):
+        return _compare_records(groups, fmt)
+    if fmt != "text":
+        return "\n\n".join(_compare_paper(task, runs, fmt) for (task, _), runs in groups.items())
+    return "\n\n".join(_compare_text(task, runs, width) for (task, _), runs in groups.items())
 
-        grid = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
-        for c in ("run", "Method", "ref", "setting", *(_headers(merged)), "±"):
-            grid.add_column(Text(c), justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right",
-                         no_wrap=True)
+
+_Runs = list[tuple[str, ResultTable, EvalResults]]
+
+
+def _interval_text(r: ResultRow) -> str:
+    iv = next((s for s in r.values.values()), None)
+    return f"{iv.method} over {iv.n} {iv.unit}" if iv is not None and iv.method != "none" else "-"
+
+
+def _compare_text(task: str, runs: _Runs, width: int | None) -> str:
+    from rich import box
+    from rich.table import Table
+    from rich.text import Text
+
+    first = runs[0][1]
+    merged = ResultTable(first.name, f"[{task}] {first.title}", first.metrics, [], [], first.groups,
+                         first.count_columns, first.primary)
+    grid = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
+    for c in ("run", "Method", "ref", "setting", *(_headers(merged)), "±"):
+        grid.add_column(Text(c), justify="left" if c in ("run", "Method", "ref", "setting", "±") else "right",
+                        no_wrap=True)
+    for run, table, res in runs:
+        for r in ordered_rows(table.rows):
+            cells = [run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
+                     *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], _interval_text(r)]
+            grid.add_row(*(Text(c) for c in cells))
+    buf = io.StringIO()
+    _console(buf, width, True).print(grid)
+    return "\n".join([merged.title, *(ln.rstrip() for ln in buf.getvalue().rstrip("\n").splitlines())])
+
+
+def _compare_paper(task: str, runs: _Runs, fmt: str) -> str:
+    """One Markdown / LaTeX table of every run's rows (a rule between runs; no best marks across runs)."""
+    from psg_data.evaluation._table_formats import latex_table, markdown_table, table_grid
+
+    blocks = []
+    for run, table, res in runs:
+        rows = ordered_rows(table.rows)
+        n = len(rows)
+        setting = str(res.config.get("setting_text", "-"))
+        blocks.append(table_grid(table, lead=[("run", [run] * n), ("setting", [setting] * n)],
+                                 tail=[("±", [_interval_text(r) for r in rows])], mark_best=False))
+    grid = blocks[0]
+    grid.title = f"[{task}] {grid.title}"
+    grid.rules = []
+    for b in blocks[1:]:
+        grid.rules.append(len(grid.rows) - 1)
+        grid.rows += b.rows
+    grid.notes = [n for n in grid.notes if n.startswith("±")] if len(runs) == 1 else \
+        ["±: each run's own interval, named in the ± column"]
+    refs = any(r.role != "method" for _, table, _ in runs for r in table.rows)
+    grid.legend = "; ".join(p for p in ("reference rows named in the ref column" if refs else "",
+                                        "a rule between runs" if len(runs) > 1 else "") if p)
+    return markdown_table(grid) if fmt == "markdown" else latex_table(grid, label=f"tab:compare-{runs[0][1].name}")
+
+
+def _compare_records(groups: dict[tuple[str, str], _Runs], fmt: str) -> str:
+    tables: list[dict[str, Any]] = []
+    for (task, name), runs in groups.items():
+        rows: list[dict[str, Any]] = []
         for run, table, res in runs:
-            for r in _ordered(table.rows):
-                iv = next((s for s in r.values.values()), None)
-                what = f"{iv.method} over {iv.n} {iv.unit}" if iv is not None and iv.method != "none" else "-"
-                cells = [run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
-                         *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], what]
-                grid.add_row(*(Text(c) for c in cells))
-        con.print(grid)
-        blocks.append("\n".join([merged.title, *(ln.rstrip() for ln in buf.getvalue().rstrip("\n").splitlines())]))
-    return "\n\n".join(blocks)
+            for r in ordered_rows(table.rows):
+                values = {m.key: {"mean": s.mean, "ci_low": s.ci_low, "ci_high": s.ci_high, "half_width": s.half_width,
+                                  "n": s.n, "interval": s.method, "unit": s.unit}
+                          for m in table.metrics if (s := r.values.get(m.key)) is not None}
+                rows.append({"run": run, "method": r.method, "role": r.role,
+                             "setting": res.config.get("setting_text"), "values": values,
+                             "pct_of_ceiling": r.pct_of_ceiling if table.primary is not None else None})
+        tables.append({"task": task, "table": name, "title": runs[0][1].title,
+                       "metrics": [m.to_dict() for m in runs[0][1].metrics], "rows": rows})
+    if fmt == "json":
+        import json
+
+        from psg_data.evaluation._persistence_types import clean_json
+
+        return json.dumps(clean_json({"tables": tables}), indent=1, allow_nan=False)
+    import csv
+
+    buf = io.StringIO()
+    fields: list[str] = ["task", "table", "run", "method", "role", "setting"]
+    recs: list[dict[str, Any]] = []
+    for t in tables:
+        for row in t["rows"]:
+            rec = {"task": t["task"], "table": t["table"], **{k: row[k] for k in fields[2:]}}
+            for key, v in row["values"].items():
+                rec.update({f"{key}{suffix}": v[part] for suffix, part in
+                            (("", "mean"), ("_ci_low", "ci_low"), ("_ci_high", "ci_high"),
+                             ("_half_width", "half_width"))})
+                rec.setdefault("interval", f"{v['interval']} over {v['n']} {v['unit']}")
+            recs.append(rec)
+    for rec in recs:
+        fields += [k for k in rec if k not in fields]
+    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    w.writeheader()
+    w.writerows(recs)
+    return buf.getvalue().rstrip("\n")

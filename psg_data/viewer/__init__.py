@@ -5,14 +5,20 @@
   objects and doors, on one ``time`` timeline (UTC). ``psg-data view DATASET``.
 - :func:`log_beliefs`: estimator beliefs over time per scored edge, beside the ground truth and
   the test observations. ``psg-eval ... --rerun FILE.rrd``.
-- :func:`recording`: a recording that is saved to an ``.rrd`` file (atomically) or shown in a
-  spawned viewer.
+- :func:`recording`: a recording that is saved to an ``.rrd`` file (atomically), shown in a
+  spawned viewer, or streamed to a :class:`WebViewer` (Rerun's web viewer served from this
+  machine, bound to 127.0.0.1 by default); :func:`display_problem` says why no native viewer can
+  open here (no display).
+- :func:`dataset_blueprint`, :func:`beliefs_blueprint`: the layouts sent with the recordings.
 
 README.md ("Looking at a dataset") lists the entities a recording holds.
 """
 
 from psg_data.viewer._beliefs import log_beliefs
-from psg_data.viewer._dataset_log import TIMELINE, log_dataset
-from psg_data.viewer._recording import recording
+from psg_data.viewer._blueprint import beliefs_blueprint, dataset_blueprint
+from psg_data.viewer._dataset_log import SCAN_TIMELINE, TIMELINE, log_dataset
+from psg_data.viewer._recording import display_problem, recording
+from psg_data.viewer._web import WebViewer
 
-__all__ = ["TIMELINE", "log_dataset", "log_beliefs", "recording"]
+__all__ = ["TIMELINE", "SCAN_TIMELINE", "log_dataset", "log_beliefs", "recording", "display_problem",
+           "dataset_blueprint", "beliefs_blueprint", "WebViewer"]

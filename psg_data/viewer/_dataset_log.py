@@ -1,6 +1,7 @@
 """A dataset into a Rerun recording: frames, trajectory, point clouds, boxes by state, label streams.
 
-Entities (world frame z up, metres; one ``time`` timeline of UTC timestamps):
+Entities (world frame z up, metres) on two timelines: ``time`` (UTC timestamps) and ``scan`` (the
+scan's index in the dataset, 0 for its first scan: one step per scan):
 
 - ``world/rooms/ROOM``: floor outline (static).
 - ``world/receptacles``, ``world/doors``: boxes logged at each scan's start, coloured by state
@@ -26,10 +27,12 @@ from numpy.typing import NDArray
 
 from psg_data.viewer._recording import import_rerun
 
-__all__ = ["TIMELINE", "log_dataset", "edge_path", "timestamps"]
+__all__ = ["TIMELINE", "SCAN_TIMELINE", "log_dataset", "edge_path", "timestamps"]
 
 TIMELINE = "time"
 """The timeline every entity is logged on: UTC timestamps."""
+SCAN_TIMELINE = "scan"
+"""The sequence timeline of a dataset recording: the scan's index in the dataset (steps scan by scan)."""
 _OCCUPIED, _EMPTY, _OPEN, _CLOSED = (255, 140, 0), (150, 150, 150), (40, 180, 60), (220, 40, 40)
 
 
@@ -77,7 +80,10 @@ def log_dataset(rec: Any, ds: Any, scan_ids: Sequence[str] | None = None, *, fra
     gt = _ground_truth(ds)
     doors = _door_states(ds)
     counts = {"scans": len(scans), "frames": 0, "points": 0, "label_streams": 0}
+    number = {sid: k for k, sid in enumerate(ds.scan_ids)}
+    counts["label_streams"] = _log_label_streams(rec, rr, ds, gt, doors)  # first: small, and plotted at once
     for scan in scans:
+        rec.set_time(SCAN_TIMELINE, sequence=number[scan.scan_id])  # with every time stamp of the scan below
         _log_boxes(rec, rr, ds, scan, gt, doors)
         pts: list[NDArray[np.float64]] = []
         cols: list[NDArray[np.float64]] = []
@@ -97,7 +103,6 @@ def log_dataset(rec: Any, ds: Any, scan_ids: Sequence[str] | None = None, *, fra
             counts["points"] += len(xyz)
         if progress is not None:
             progress(1)
-    counts["label_streams"] = _log_label_streams(rec, rr, ds, gt, doors)
     return counts
 
 
@@ -166,8 +171,16 @@ def _door_states(ds: Any) -> dict[str, dict[str, str]]:
     return out
 
 
+def _scan_numbers(ds: Any) -> Callable[[Any], NDArray[np.int64]]:
+    """Times (ns) -> the index of the scan that started last at or before each (0 before the first)."""
+    starts = np.array([ds.scan(s).start_stamp_ns for s in ds.scan_ids], dtype=np.int64)  # scan_ids: by start
+    return lambda t_ns: np.clip(np.searchsorted(starts, np.asarray(t_ns, np.int64), side="right") - 1, 0, None)
+
+
 def _log_label_streams(rec: Any, rr: Any, ds: Any, gt: Any, doors: dict[str, dict[str, str]]) -> int:
     from psg_data.labeling import grid_streams, load_label_streams
+
+    scan_of = _scan_numbers(ds)
 
     streams: list[tuple[str, Any]] = [("gt", s) for s in (grid_streams(gt) if gt is not None else [])]
     if ds.has_table("labels"):
@@ -181,14 +194,18 @@ def _log_label_streams(rec: Any, rr: Any, ds: Any, gt: Any, doors: dict[str, dic
             continue  # one stream per door (1 open); object edges that are ever present
         path = edge_path(f"labels/{rr.escape_entity_path_part(source)}",
                          ("doors", s.edge[0]) if is_door else s.edge)
-        rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, timestamp=timestamps(s.t_s))],
+        t = timestamps(s.t_s)
+        rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, timestamp=t),
+                                        rr.TimeColumn(SCAN_TIMELINE, sequence=scan_of(t.astype(np.int64)))],
                          columns=rr.Scalars.columns(scalars=s.y.astype(np.float64)))
         n += 1
     starts = {sc: ds.scan(sc).start_stamp_ns for sc in doors if sc in set(ds.scan_ids)}
     for did in sorted({d for st in doors.values() for d in st}):
         rows = sorted((starts[sc], st[did] == "open") for sc, st in doors.items() if did in st and sc in starts)
         t = np.array([r[0] for r in rows], dtype="datetime64[ns]")
-        rec.send_columns(edge_path("labels/gt", ("doors", did)), indexes=[rr.TimeColumn(TIMELINE, timestamp=t)],
+        rec.send_columns(edge_path("labels/gt", ("doors", did)),
+                         indexes=[rr.TimeColumn(TIMELINE, timestamp=t),
+                                  rr.TimeColumn(SCAN_TIMELINE, sequence=scan_of(t.astype(np.int64)))],
                          columns=rr.Scalars.columns(scalars=np.array([float(r[1]) for r in rows])))
         n += 1
     return n

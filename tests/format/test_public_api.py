@@ -96,3 +96,36 @@ def test_public_api_is_documented(name: str) -> None:
     pkg = importlib.import_module(f"psg_data.{name}")
     missing = [label for label, doc in _public_members(pkg) if not doc.strip()]
     assert not missing, f"public names without a docstring: {missing}"
+
+
+PUBLIC_SUBPACKAGES = ["datasets", "schemas", "loaders", "writers", "convert", "synth", "labeling", "estimators",
+                      "metrics", "evaluation", "navigation", "viewer", "errors"]
+
+
+def test_every_public_subpackage_is_an_attribute_after_import_psg_data() -> None:
+    """What README's snippets do in a fresh interpreter: ``import psg_data`` then ``psg_data.evaluation....``."""
+    import subprocess
+    import sys
+
+    code = ("import sys, psg_data\n"
+            "light = [m for m in ('numpy', 'pandas', 'pyarrow', 'cv2', 'open3d', 'click', 'rich') if m in sys.modules]\n"
+            "mods = [m for m in sys.modules if m.startswith('psg_data.')]\n"
+            f"subs = {PUBLIC_SUBPACKAGES!r}\n"
+            "print(light, mods)\n"
+            "print([type(getattr(psg_data, s)).__name__ for s in subs])\n"
+            "print(callable(psg_data.evaluation.load_results), callable(psg_data.viewer.log_dataset))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd="/")
+    assert out.returncode == 0, out.stderr
+    first, kinds, calls = out.stdout.strip().splitlines()
+    assert first == "[] []"  # nothing heavy and no subpackage imported by `import psg_data` itself
+    assert kinds == str(["module"] * len(PUBLIC_SUBPACKAGES))
+    assert calls == "True True"
+
+
+def test_dir_lists_the_public_api() -> None:
+    names = dir(psg_data)
+    assert set(psg_data.__all__) <= set(names) and set(PUBLIC_SUBPACKAGES) <= set(names)
+    assert not {"Any", "TYPE_CHECKING", "annotations", "logging", "importlib"} & set(names)
+    assert names == sorted(names)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        psg_data.nope  # noqa: B018

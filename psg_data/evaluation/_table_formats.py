@@ -1,0 +1,187 @@
+r"""Results tables as Markdown and LaTeX (booktabs), ready for a paper; and the table selection
+(``--metric``, ``--no-references``) that ``psg-eval compare`` applies before any format.
+
+The cells and marks are those of the text renderer (:mod:`psg_data.evaluation._tables`): a cell is
+``estimate ± half-width`` of its stated interval; the best row of a column that is not a ceiling is
+marked (bold here, ``*`` in text); reference rows (ceiling, baselines, chance) come first, name
+their role in the ``ref`` column and are set off by a rule (LaTeX ``\midrule``); the lines under the
+table (what each column measures, the chance level, what ``±`` is) follow it (LaTeX: the ``±``
+line in the caption, every line as a comment).
+"""
+
+from __future__ import annotations
+
+import math
+import unicodedata
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from psg_data.errors import EvaluationError
+from psg_data.evaluation._results import ResultRow, ResultTable
+
+__all__ = ["TABLE_FORMATS", "Grid", "table_grid", "markdown_table", "latex_table", "select_table"]
+
+TABLE_FORMATS = ("text", "markdown", "latex")
+"""What ``psg-eval --format`` prints."""
+
+_ARROW = {"lower": "↓", "higher": "↑"}
+
+
+@dataclass
+class Grid:
+    """A table as plain cells: what the Markdown and LaTeX writers lay out.
+
+    Attributes:
+        title: the table's title.
+        header: column names.
+        numeric: per column, whether it is right-aligned (numbers).
+        rows: per row, ``(text, best)`` per column (``best``: the column's best non-ceiling value).
+        rules: indices of the rows after which a rule goes (the last reference row).
+        notes: the lines under the table.
+        legend: what the rules and marks mean (the LaTeX caption says it after the title).
+    """
+
+    title: str
+    header: list[str]
+    numeric: list[bool]
+    rows: list[list[tuple[str, bool]]]
+    rules: list[int]
+    notes: list[str]
+    legend: str = ""
+
+
+def select_table(table: ResultTable, *, metrics: Sequence[str] | None = None, references: bool = True) -> ResultTable:
+    """``table`` with only the chosen metric columns (keys or labels, any case) and, without
+    ``references``, only the method rows.
+
+    Raises:
+        EvaluationError: a metric the table does not have (the message lists its metrics).
+    """
+    keep = list(table.metrics)
+    if metrics:
+        by_name = {**{m.key.lower(): m for m in table.metrics}, **{m.label.lower(): m for m in table.metrics}}
+        unknown = [k for k in metrics if k.lower() not in by_name]
+        if unknown:
+            names = ", ".join(f"{m.key} ({m.label})" for m in table.metrics)
+            raise EvaluationError(f"--metric {unknown[0]}: table {table.name!r} has no such metric; its metrics: "
+                                  f"{names}")
+        chosen = {by_name[k.lower()].key for k in metrics}
+        keep = [m for m in table.metrics if m.key in chosen]
+    keys = {m.key for m in keep}
+    rows = [r for r in table.rows if references or r.role == "method"]
+    groups = [(g, [k for k in ks if k in keys]) for g, ks in table.groups]
+    return replace(table, metrics=keep, rows=rows, groups=[(g, ks) for g, ks in groups if ks],
+                   primary=table.primary if table.primary in keys and references else None)
+
+
+def table_grid(table: ResultTable, *, lead: Sequence[tuple[str, Sequence[str]]] = (),
+               tail: Sequence[tuple[str, Sequence[str]]] = (), mark_best: bool = True) -> Grid:
+    """The cells of ``table`` (rows in table order).
+
+    Args:
+        table: the table.
+        lead: extra first text columns: (name, one value per row in table order).
+        tail: extra last text columns, likewise.
+        mark_best: mark each column's best non-ceiling cell.
+    """
+    from psg_data.evaluation._tables import best_marks, cell_text, ordered_rows
+
+    rows = ordered_rows(table.rows)
+    marks = best_marks(table, rows) if mark_best else [[False] * len(table.metrics) for _ in rows]
+    header = [name for name, _ in lead] + ["Method", "ref"]
+    header += [f"{m.label} {_ARROW.get(m.better, '')}".strip() for m in table.metrics]
+    if table.primary is not None:
+        header.append(f"% of ceiling ({table.metric(table.primary).label})")
+    header += list(table.count_columns)
+    numeric = [False] * (len(lead) + 2) + [True] * (len(header) - len(lead) - 2) + [False] * len(tail)
+    header += [name for name, _ in tail]
+    out: list[list[tuple[str, bool]]] = []
+    for i, r in enumerate(rows):
+        cells = [(str(values[i]), False) for _, values in lead]
+        cells += [(r.method, False), ("" if r.role == "method" else r.role, False)]
+        cells += [(cell_text(r.values.get(m.key), m.scale, m.digits), marks[i][k]) for k, m in enumerate(table.metrics)]
+        if table.primary is not None:
+            cells.append(("-" if r.pct_of_ceiling is None or not math.isfinite(r.pct_of_ceiling)
+                          else f"{r.pct_of_ceiling:.0f} %", False))
+        cells += [(str(r.counts.get(c, "-")), False) for c in table.count_columns]
+        cells += [(str(values[i]), False) for _, values in tail]
+        out.append(cells)
+    legend = "; ".join(p for p in (
+        "reference rows (ref: ceiling, baseline, chance) above the rule" if any(r.role != "method" for r in rows)
+        else "", "bold: the best row of a column that is not a ceiling" if mark_best else "") if p)
+    return Grid(table.title, header, numeric, out, _rules(rows), list(table.notes), legend)
+
+
+def _rules(rows: Sequence[ResultRow]) -> list[int]:
+    return [i for i, r in enumerate(rows) if r.role != "method" and i + 1 < len(rows) and rows[i + 1].role == "method"]
+
+
+# -- Markdown ------------------------------------------------------------------------------------
+def _md(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def markdown_table(grid: Grid) -> str:
+    """A GitHub / pandoc pipe table: the title in bold above it, best cells in bold, the notes below."""
+    lines = [f"**{_md(grid.title)}**", "", "| " + " | ".join(_md(h) for h in grid.header) + " |",
+             "|" + "|".join("---:" if n else "---" for n in grid.numeric) + "|"]
+    for cells in grid.rows:
+        lines.append("| " + " | ".join(f"**{_md(t)}**" if best and t else _md(t) for t, best in cells) + " |")
+    if grid.notes:
+        lines += ["", *(f"- {_md(n)}" for n in grid.notes)]
+    return "\n".join(lines)
+
+
+# -- LaTeX ---------------------------------------------------------------------------------------
+_TEX_CHARS = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{",
+              "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "<": r"\textless{}",
+              ">": r"\textgreater{}", "±": r"\ensuremath{\pm}", "↓": r"\ensuremath{\downarrow}",
+              "↑": r"\ensuremath{\uparrow}", "≥": r"\ensuremath{\geq}", "≤": r"\ensuremath{\leq}",
+              "×": r"\ensuremath{\times}", "→": r"\ensuremath{\rightarrow}", "−": "-", "–": "--", "—": "---",
+              "·": r"\ensuremath{\cdot}", "°": r"\ensuremath{^\circ}", "≈": r"\ensuremath{\approx}",
+              "Δ": r"\ensuremath{\Delta}", "δ": r"\ensuremath{\delta}", "γ": r"\ensuremath{\gamma}",
+              "α": r"\ensuremath{\alpha}", "µ": r"\ensuremath{\mu}", "σ": r"\ensuremath{\sigma}"}
+
+
+def tex_escape(text: str) -> str:
+    """``text`` as LaTeX that pdflatex sets without extra packages (other non-ASCII letters lose their accents)."""
+    out = []
+    for ch in text:
+        if ch in _TEX_CHARS:
+            out.append(_TEX_CHARS[ch])
+        elif ord(ch) < 128:
+            out.append(ch)
+        else:
+            out.append(unicodedata.normalize("NFKD", ch).encode("ascii", "ignore").decode() or "?")
+    return "".join(out)
+
+
+def _tex_cell(text: str, best: bool) -> str:
+    value, pm, half = text.partition(" ± ")
+    v = tex_escape(value)
+    v = rf"\textbf{{{v}}}" if best and value not in ("", "-") else v
+    return rf"{v} $\pm$ {tex_escape(half)}" if pm else v
+
+
+def latex_table(grid: Grid, *, label: str | None = None) -> str:
+    r"""A ``table`` float with a booktabs ``tabular`` (``\usepackage{booktabs}``), the rows and
+    rules of the text table, best cells in bold; the caption names the title, the marks and ``±``.
+    """
+    pm = next((n for n in grid.notes if n.startswith("±")), "")
+    said = "; ".join(p for p in (grid.legend, pm) if p)
+    caption = tex_escape(grid.title + (f". {said[:1].upper()}{said[1:]}" if said else "") + ".")
+    spec = "".join("r" if n else "l" for n in grid.numeric)
+    lines = ["% psg-eval table; needs \\usepackage{booktabs}", *(f"% {n}" for n in grid.notes),
+             r"\begin{table}[t]", r"\centering", r"\small", rf"\caption{{{caption}}}"]
+    if label:
+        lines.append(rf"\label{{{tex_escape(label)}}}")
+    lines += [rf"\begin{{tabular}}{{{spec}}}", r"\toprule",
+              " & ".join(tex_escape(h) for h in grid.header) + r" \\", r"\midrule"]
+    for i, cells in enumerate(grid.rows):
+        lines.append(" & ".join(_tex_cell(t, b) if grid.numeric[k] else tex_escape(t)
+                                for k, (t, b) in enumerate(cells)) + r" \\")
+        if i in grid.rules:
+            lines.append(r"\midrule")
+    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
+    return "\n".join(lines)
+
