@@ -72,8 +72,9 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     setup_logging(quiet)
     from psg_data.convert import ConvertConfig, convert, load_config
 
+    names = {p.name: p.opts[0] for p in click.get_current_context().command.params if p.name and p.opts}
     cfg = load_config(config_file) if config_file else ConvertConfig()
-    cfg = cfg.merged(**opts)
+    cfg = cfg.merged("command line", names, **opts)
     progress = Progress("convert", unit="frames", quiet=quiet)
     report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress,
                      scheduler=scheduler)
