@@ -168,3 +168,35 @@ def test_the_same_check_for_flag_and_key(tum: Path, tmp_path: Path) -> None:
     by_key = assert_one_error(_run([str(tum), str(tmp_path / "o1"), "--config", str(cfg)]))
     by_flag = assert_one_error(_run([str(tum), str(tmp_path / "o2"), "--sync-tolerance", "inf"]))
     assert by_key.split("sync_tolerance_s", 1)[1] == by_flag.split("sync_tolerance_s)", 1)[1]
+
+
+# -- the minor messages ---------------------------------------------------------------------------
+
+
+def test_groundtruth_with_only_a_comment_is_not_called_missing(tum: Path, tmp_path: Path) -> None:
+    (tum / "groundtruth.txt").write_text("# timestamp tx ty tz qx qy qz qw\n")
+    r = _run([str(tum), str(tmp_path / "out")])
+    assert_one_error(r, f"{tum / 'groundtruth.txt'}: lists no poses; expected 'timestamp tx ty tz qx qy qz qw'")
+
+
+def test_tum_folder_without_depth_list(tum: Path, tmp_path: Path) -> None:
+    (tum / "depth.txt").unlink()
+    assert_one_error(_run([str(tum), str(tmp_path / "out")]), f"{tum / 'depth.txt'}: missing; expected a TUM RGB-D")
+    assert_one_error(_run([str(tum.parent), str(tmp_path.parent / f"{tmp_path.name}-out")]),
+                     f"{tum / 'depth.txt'}: missing")
+
+
+def test_size_mismatch_names_the_file(tum: Path, tmp_path: Path) -> None:
+    first = sorted((tum / "depth").iterdir())[1]
+    cv2.imwrite(str(first), np.zeros((10, 12), np.uint16))
+    r = _run([str(tum), str(tmp_path / "out")])
+    assert_one_error(r, f"{first}: depth is 12x10 but colour is")
+
+
+def test_out_of_order_warning_names_buffer_s(tmp_path: Path) -> None:
+    from tests.convert.conftest import write_bag
+
+    bag = write_bag(tmp_path / "a.bag", n=40, late={5: 3_000_000_000})  # logged after frame ~35
+    r = CliRunner().invoke(psg_data, ["convert", str(bag), str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    assert "out_of_order" in r.stderr and "raise buffer_s with --config" in r.stderr, r.stderr
