@@ -17,11 +17,14 @@ Levels (``image_check`` of a conversion; ``psg-data validate`` runs ``decode``):
 and bit depth are compared with what the dataset says. A JPEG is decoded by libjpeg-turbo through
 ``simplejpeg`` in strict mode (libjpeg-turbo's stop-on-warning: "Corrupt JPEG data: premature end
 of data segment" and every other recoverable error is a damaged image, where OpenCV would fill the
-rest with grey and return it); a PNG is inflated here (zlib stream to its end, data size, every
-row's filter type) before OpenCV decodes it. Neither prints to the process's stderr: libjpeg-turbo
-reports to simplejpeg, which raises, and libpng, which prints its own errors to file descriptor 2,
-is only handed streams that already passed every check it would fail (see docs/FORMAT.md for the
-one limit: libpng warnings about ancillary chunks psg-data never writes). Redirecting descriptor 2
+rest with grey and return it). A PNG is inflated here (zlib stream to its end with its Adler-32,
+data size, every row's filter type); for a plain PNG (8 or 16 bits, not interlaced, no palette,
+no critical chunk but IHDR, IDAT, IEND: what psg-data writes) that is the whole decode, since
+unfiltering such data cannot fail and IHDR says the size and sample format; any other PNG is then
+also decoded by OpenCV. Neither prints to the process's stderr: libjpeg-turbo reports to
+simplejpeg, which raises, and libpng, which prints its own errors to file descriptor 2, is only
+handed streams that already passed every check it would fail (see docs/FORMAT.md for the one
+limit: libpng warnings about ancillary chunks of such other PNGs). Redirecting descriptor 2
 around a decode would capture every other thread's output too, so it is not done.
 
 A quantisation table with a zero entry (T.81 B.2.4.1 allows 1..255 / 1..65535) is refused at
@@ -67,8 +70,13 @@ def looks_like_image(data: Any) -> str | None:
     return None
 
 
-def check_png(data: Any, *, inflate: bool = False) -> None:
-    """Check a PNG's chunk structure and CRCs (and with ``inflate`` its zlib stream and data size).
+def check_png(data: Any, *, inflate: bool = False) -> bool:
+    """Check a PNG's chunk structure and CRCs (and with ``inflate`` its zlib stream, data size and
+    row filter types).
+
+    Returns:
+        Whether the PNG is plain: not interlaced, not a palette image, and no critical chunk but
+        IHDR, IDAT and IEND (its IHDR then says everything a decoder returns; see :func:`decode_check`).
 
     Raises:
         DamagedImage: what is wrong and at which byte.
@@ -81,6 +89,7 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
     parts: list[tuple[int, int]] = []  # (start, end) of each IDAT chunk's data
     run = 0  # IDAT run: 0 not started, 1 in it, 2 over
     o, ihdr = 8, None
+    other_critical = False
     while True:
         if o + 12 > n:
             raise DamagedImage(f"truncated: no IEND chunk ({n} bytes)" if o >= n else
@@ -106,8 +115,10 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
                 raise DamagedImage(f"IHDR: invalid image description {ihdr}")
         elif ctype == b"IEND":
             break
-        elif run == 1:
-            run = 2
+        else:
+            other_critical |= not ctype[0] & 0x20  # PLTE or a critical chunk unknown here
+            if run == 1:
+                run = 2
         o = end + 4
     if not parts:
         raise DamagedImage("no IDAT chunk (no image data)")
@@ -117,6 +128,7 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
         raise DamagedImage("image data does not start with a zlib header")
     if inflate:
         _inflate_png([mv[a:b] for a, b in parts], ihdr)
+    return not (other_critical or ihdr[3] == 3 or ihdr[6])
 
 
 _CRC_PIECE = 4096
@@ -408,7 +420,8 @@ def decode_check(data: Any, expect: ImageHeader) -> None:
     if expect.kind == "jpeg":
         img = _decode_jpeg_strict(data, expect)
     else:
-        check_png(data, inflate=True)
+        if check_png(data, inflate=True) and expect.bit_depth in (8, 16):
+            return  # a plain PNG whose data inflates whole with valid filters decodes to what IHDR says
         import cv2
 
         img = cv2.imdecode(np.frombuffer(memoryview(data).cast("B"), np.uint8), cv2.IMREAD_UNCHANGED)
