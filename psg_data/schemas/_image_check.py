@@ -116,7 +116,10 @@ def check_png(data: Any, *, inflate: bool = False) -> bool:
         elif ctype == b"IEND":
             break
         else:
-            other_critical |= not ctype[0] & 0x20  # PLTE or a critical chunk unknown here
+            if not ctype[0] & 0x20:  # critical: a decoder must refuse one it does not know
+                if ctype != b"PLTE":
+                    raise DamagedImage(f"unknown critical chunk {ctype.decode('latin-1')!r} at byte {o}")
+                other_critical = True
             if run == 1:
                 run = 2
         o = end + 4

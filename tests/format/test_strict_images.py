@@ -86,7 +86,13 @@ def _bad_stream(s: bytearray) -> bytes:
     return bytes(s)
 
 
+def _unknown_critical() -> bytes:
+    chunks = _png_chunks(cv2.imencode(".png", _smooth())[1].tobytes())
+    return _png([chunks[0], (b"ABCD", b"xyz"), *chunks[1:]])
+
+
 CASES = {
+    "png: unknown critical chunk": (_unknown_critical(), "unknown critical chunk 'ABCD'"),
     "jpeg: FF D9 pairs in the entropy-coded data": (_eoi_pairs(_jpeg()), "Corrupt JPEG data"),
     "jpeg: zeroed quantisation table": (_zero_quant(_jpeg()), "quantisation table 0 has a zero entry"),
     "png: row filter type 7 (CRCs valid)": (_png_with(raw_edit=_bad_filter), "row 60 has filter type 7"),
