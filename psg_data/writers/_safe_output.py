@@ -307,8 +307,8 @@ def commit_tree(tree: str | Path, out: str | Path, *, kind: str = "dataset") -> 
     (out / PARTIAL_MARKER).unlink(missing_ok=True)
     _fsync_path(str(out), directory=True)
     _fsync_path(str(parent), directory=True)
-    if _foreign(aside, kind) is None:  # the previous output (or one left by an earlier failed swap)
-        shutil.rmtree(aside, ignore_errors=not aside.exists())
+    if aside.is_dir() and _foreign(aside, kind) is None:  # the previous output (or one an earlier swap left)
+        shutil.rmtree(aside)
     return out
 
 
