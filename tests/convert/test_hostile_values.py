@@ -200,3 +200,12 @@ def test_out_of_order_warning_names_buffer_s(tmp_path: Path) -> None:
     r = CliRunner().invoke(psg_data, ["convert", str(bag), str(tmp_path / "out")])
     assert r.exit_code == 0, r.output
     assert "out_of_order" in r.stderr and "raise buffer_s with --config" in r.stderr, r.stderr
+
+
+def test_every_config_key_is_declared() -> None:
+    """A key added to ConvertConfig without a declaration would go unchecked: this keeps them together."""
+    from dataclasses import fields
+
+    from psg_data.convert import CONVERT_SETTINGS, ConvertConfig
+
+    assert {f.name for f in fields(ConvertConfig)} == set(CONVERT_SETTINGS)
