@@ -77,13 +77,14 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     setup_logging(quiet)
     from psg_data.convert import ConvertConfig, convert, load_config
 
+    names = {p.name: p.opts[0] for p in click.get_current_context().command.params if p.name and p.opts}
     cfg = load_config(config_file) if config_file else ConvertConfig()
     split_gap = opts.pop("split_gap", None)
     if split_gap is not None:
         if opts.get("split"):
             raise click.UsageError("--split-gap and --split are the same setting; give one of them")
         opts["split"] = f"gap:{split_gap:g}"
-    cfg = cfg.merged(**opts)
+    cfg = cfg.merged("command line", names, **opts)
     progress = Progress("convert", unit="frames", quiet=quiet)
     report = convert(input_path, out, config=cfg, overwrite=overwrite, jobs=jobs, progress=progress,
                      scheduler=scheduler)

@@ -21,8 +21,9 @@ __all__ = ["validate_cmd", "info_cmd"]
 def validate_cmd(dataset: str, no_checksums: bool, quick: bool) -> None:
     """Check DATASET: manifest, schemas, ids, value ranges, images and checksums.
 
-    Every image is checked whole (PNG chunk CRCs, JPEG markers through EOI) and decoded, and its
-    size and sample format compared with its camera; --quick reads image headers only.
+    Every image is checked whole (PNG chunk CRCs and data, JPEG headers and EOI) and decoded
+    strictly (a JPEG decoder warning such as "Corrupt JPEG data" is a problem), and its size and
+    sample format compared with its camera; --quick reads image headers only.
 
     Prints one line per problem (file[:row]: field: what is wrong, what was expected) and exits 1,
     or prints OK and exits 0.

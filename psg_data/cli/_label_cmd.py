@@ -47,18 +47,22 @@ def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, obse
       psg-data label /tmp/lab --source detections:/tmp/lab_detections.parquet
     """
     setup_logging(quiet)
+    from psg_data._settings import INT64_MAX, Integral, check_settings
+    from psg_data.errors import LabelingError
     from psg_data.labeling import AssociationParams, label_dataset
-    from psg_data.labeling._pipeline import _valid_from_file
+    from psg_data.labeling._pipeline import _valid_from_file, parse_source
     from psg_data.loaders import open_dataset
     from psg_data.writers._safe_output import check_not_input
 
+    check_settings({"seed": Integral(0, INT64_MAX)}, {"seed": seed}, "command line", LabelingError, {"seed": "--seed"})
+    parse_source(source)
+    assoc = AssociationParams(min_iou=min_iou, margin_m=margin_m, observed=observed)  # checked before any work
     path = dataset_path(dataset, command="psg-data label", quiet=quiet)
     ds = open_dataset(path)
     read = [valid_file, source.split(":", 1)[1] if source.startswith("detections:") else None]
     for table in ("labels", "visibility"):  # what this command writes
         check_not_input(ds.root / "tables" / f"{table}.parquet", read, what="table it writes")
     valid = _valid_from_file(valid_file) if valid_file else None
-    assoc = AssociationParams(min_iou=min_iou, margin_m=margin_m, observed=observed)
     prog = Progress("visibility", total=len(ds.scan_ids), unit="scans", quiet=quiet)
     summary = label_dataset(path, source, seed=seed, overwrite=overwrite, progress=prog, valid=valid,
                             association=assoc, doors=doors)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -39,8 +40,8 @@ def _resolution(_ctx: click.Context, _param: click.Parameter, value: str) -> tup
 @click.option("--routine-strength", type=click.FloatRange(0.0, 1.0), default=0.8, show_default=True,
               help="steps-v2: probability that the routine sets the state at a step (0 random walk, 1 clockwork).")
 @click.option("--overwrite", is_flag=True,
-              help="Replace OUT if psg-data synth wrote it (a psg-dataset, or recordings of --format ros1|...) or it "
-                   "is an empty folder; anything else is refused.")
+              help="Replace OUT if it is a psg-dataset psg-data wrote (by synth or convert; recordings psg-data synth "
+                   "wrote with --format ros1|...) or an empty folder; anything else is refused.")
 @quiet_option
 @handle_errors
 def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, resolution: tuple[int, int],
@@ -59,13 +60,26 @@ def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, r
       psg-data synth /tmp/small --days 2 --frames-per-scan 3 --resolution 80x60
       psg-data synth /tmp/clockwork --routine-strength 1
     """
-    from psg_data.synth import LabConfig, LabModel, build_lab
-    from psg_data.writers._safe_output import check_output, commit_tree, make_staging
+    from psg_data.synth import LabConfig
+    from psg_data.synth._model import check_memory
 
     setup_logging(quiet)
     config = LabConfig(seed=seed, days=days, frames_per_scan=frames_per_scan, width=resolution[0],
                        height=resolution[1], shift=None if shift == "none" else shift, generator=generator,
                        routine_strength=routine_strength)
+    check_memory(config)
+    try:
+        _synth(out, fmt, config, overwrite, quiet)
+    except OSError as exc:  # a full disk or a permission: name the output when the OS names no file
+        if exc.filename:
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), str(out)) from exc
+
+
+def _synth(out: Path, fmt: str, config: Any, overwrite: bool, quiet: bool) -> None:
+    from psg_data.synth import LabModel, build_lab
+    from psg_data.writers._safe_output import check_output, commit_tree, make_staging
+
     kind = "dataset" if fmt == "canonical" else "recordings"
     check_output(out, overwrite=overwrite, kind=kind)
     lab = LabModel(config)

@@ -1,7 +1,11 @@
 """Conversion settings: a dataclass settable from a YAML/JSON file and from the command line.
 
-The effective configuration is stored in the output manifest (``extra["convert"]["config"]``) so a
-conversion can be repeated exactly.
+Every key is declared once in :data:`CONVERT_SETTINGS` (type, finite, range with units, choices,
+IANA time zones, int64-nanosecond stamps, the structure of ``split`` / ``keyframes`` / ``poses`` /
+``static_transforms``): a config file and the command-line options go through the same checks
+before any input is read, and a bad value is one line naming the key, the value and what is
+allowed. The effective configuration is stored in the output manifest
+(``extra["convert"]["config"]``) so a conversion can be repeated exactly.
 """
 
 from __future__ import annotations
@@ -12,9 +16,25 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from psg_data._settings import (
+    DURATION_MAX_S,
+    STAMP_MAX_NS,
+    Boolean,
+    Integral,
+    Options,
+    Param,
+    Real,
+    Reals,
+    Records,
+    Text,
+    TimeZone,
+    check_settings,
+)
 from psg_data.errors import ConversionError
 
-__all__ = ["ConvertConfig", "load_config", "parse_pose_source", "parse_keyframes", "parse_split"]
+__all__ = ["ConvertConfig", "load_config", "parse_pose_source", "parse_keyframes", "parse_split", "CONVERT_SETTINGS",
+           "STAMP_MAX_NS", "DURATION_MAX_S"]
+
 
 
 @dataclass
@@ -77,31 +97,7 @@ class ConvertConfig:
     strict: bool = False
 
     def __post_init__(self) -> None:
-        if self.image_layout not in ("tar", "files"):
-            raise ConversionError(f"config: image_layout: expected tar or files, got {self.image_layout!r}")
-        if self.image_check not in ("none", "structure", "full"):
-            raise ConversionError(f"config: image_check: expected none, structure or full, got {self.image_check!r}")
-        if not isinstance(self.strict, bool):
-            raise ConversionError(f"config: strict: expected true or false, got {self.strict!r}")
-        if self.input_format not in ("auto", "ros1", "ros2", "mcap", "tum", "scannet", "rtabmap"):
-            raise ConversionError(f"config: input_format: expected auto, ros1, ros2, mcap, tum, scannet or rtabmap, "
-                                  f"got {self.input_format!r}")
-        if self.color_encoding not in ("auto", "png", "jpeg"):
-            raise ConversionError(f"config: color_encoding: expected auto, png or jpeg, got {self.color_encoding!r}")
-        for name in ("sync_tolerance_s", "max_pose_gap_s", "pose_tolerance_s", "buffer_s", "fps"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not v >= 0:
-                raise ConversionError(f"config: {name}: expected a number >= 0, got {v!r}")
-        if self.depth_scale_m is not None and not self.depth_scale_m > 0:
-            raise ConversionError(f"config: depth_scale_m: expected a number > 0, got {self.depth_scale_m!r}")
-        if self.poses is not None:
-            parse_pose_source(self.poses)
-        parse_keyframes(self.keyframes)
-        parse_split(self.split)
-        for i, st in enumerate(self.static_transforms):
-            if not isinstance(st, dict) or not {"parent", "child", "translation", "rotation_xyzw"} <= set(st):
-                raise ConversionError(f"config: static_transforms[{i}]: expected keys parent, child, translation, "
-                                      f"rotation_xyzw")
+        check_settings(CONVERT_SETTINGS, asdict(self), "config", ConversionError)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "config") -> ConvertConfig:
@@ -111,21 +107,26 @@ class ConvertConfig:
             ConversionError: an unknown key or a bad value, named with ``where``.
         """
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(set(data) - known, key=str)
         if unknown:
-            raise ConversionError(f"{where}: unknown keys {', '.join(unknown)}; expected some of "
+            raise ConversionError(f"{where}: unknown keys {', '.join(map(str, unknown))}; expected some of "
                                   f"{', '.join(sorted(known))}")
+        check_settings(CONVERT_SETTINGS, data, where, ConversionError)
         return cls(**data)
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as a plain dictionary (what the state file and the manifest store)."""
         return asdict(self)
 
-    def merged(self, **overrides: Any) -> ConvertConfig:
-        """A copy with every non-None override applied."""
+    def merged(self, where: str = "config", names: dict[str, str] | None = None, **overrides: Any) -> ConvertConfig:
+        """A copy with every non-None override applied (checked first, named as ``where`` and ``names``:
+        the command line and its option names).
+        """
+        given = {k: v for k, v in overrides.items() if v is not None}
+        check_settings(CONVERT_SETTINGS, given, where, ConversionError, names)
         data = self.to_dict()
-        data.update({k: v for k, v in overrides.items() if v is not None})
-        return ConvertConfig.from_dict(data)
+        data.update(given)
+        return ConvertConfig.from_dict(data, where)
 
 
 def load_config(path: str | Path) -> ConvertConfig:
@@ -156,6 +157,7 @@ def load_config(path: str | Path) -> ConvertConfig:
 
 
 _TF_RE = re.compile(r"^tf:([^\s>-][^\s>]*?)\s*->\s*([^\s]+)$")
+_POSES = "tf:WORLD_FRAME->CAMERA_FRAME, odom:/TOPIC or tum:FILE"
 
 
 def parse_pose_source(spec: str) -> tuple[str, str, str | None]:
@@ -176,7 +178,11 @@ def parse_pose_source(spec: str) -> tuple[str, str, str | None]:
         return "odom", spec[5:], None
     if spec.startswith("tum:") and len(spec) > 4:
         return "tum", spec[4:], None
-    raise ConversionError(f"--poses: {spec!r}: expected tf:FRAME_A->FRAME_B, odom:/TOPIC or tum:FILE")
+    raise ConversionError(f"--poses: {spec!r}: expected {_POSES}")
+
+
+_KEYFRAMES = "every:N (N an integer >= 1) or motion:METRES,DEGREES (finite numbers >= 0)"
+_EVERY_MAX = 10**9
 
 
 def parse_keyframes(spec: str | None) -> tuple[str, float, float] | None:
@@ -189,18 +195,22 @@ def parse_keyframes(spec: str | None) -> tuple[str, float, float] | None:
         kind, _, arg = spec.partition(":")
         if kind == "every":
             n = int(arg)
-            if n < 1:
+            if not 1 <= n <= _EVERY_MAX:
                 raise ValueError
             return "every", float(n), 0.0
         if kind == "motion":
             m, _, deg = arg.partition(",")
             dm, dd = float(m), float(deg or "inf")
-            if dm < 0 or dd < 0:
+            if not (math.isfinite(dm) and dm >= 0 and dd >= 0 and (math.isfinite(dd) or not deg)):
                 raise ValueError
             return "motion", dm, math.radians(dd)
     except ValueError:
         pass
-    raise ConversionError(f"--keyframes: {spec!r}: expected every:N (N >= 1) or motion:METRES,DEGREES")
+    raise ConversionError(f"--keyframes: {spec!r}: expected {_KEYFRAMES}")
+
+
+_SPLIT_MIN_S = 1e-3
+_SPLIT = f"gap:SECONDS or slot:SECONDS (SECONDS in [{_SPLIT_MIN_S:g}, {DURATION_MAX_S:g}])"
 
 
 def parse_split(spec: str | None) -> tuple[str, int] | None:
@@ -212,6 +222,72 @@ def parse_split(spec: str | None) -> tuple[str, int] | None:
         s = float(arg)
     except ValueError:
         s = -1.0
-    if kind not in ("gap", "slot") or not s > 0:
-        raise ConversionError(f"--split: {spec!r}: expected gap:SECONDS or slot:SECONDS (> 0)")
+    if kind not in ("gap", "slot") or not _SPLIT_MIN_S <= s <= DURATION_MAX_S:
+        raise ConversionError(f"--split: {spec!r}: expected {_SPLIT}")
     return kind, int(round(s * 1e9))
+
+
+def _form(parser: Any, expected: str) -> Any:
+    def form(value: Any) -> str | None:
+        try:
+            parser(value)
+        except ConversionError:
+            return expected
+        return None
+
+    return form
+
+
+_TRANSFORMS = ("a list of {parent: FRAME, child: FRAME, translation: [x, y, z] metres, rotation_xyzw: "
+               "[x, y, z, w] (a non-zero quaternion)}")
+
+
+def _static_transforms_problem(items: Any) -> str | None:
+    import math
+
+    for i, st in enumerate(items):
+        if not isinstance(st, dict) or set(st) != {"parent", "child", "translation", "rotation_xyzw"}:
+            return f"{_TRANSFORMS}; item {i} is not such a mapping"
+        for key in ("parent", "child"):
+            if not isinstance(st[key], str) or not st[key].strip("/"):
+                return f"{_TRANSFORMS}; item {i}: {key} is not a frame name"
+        for key, n in (("translation", 3), ("rotation_xyzw", 4)):
+            v = st[key]
+            if not Reals(n).is_valid(v):
+                return f"{_TRANSFORMS}; item {i}: {key} is not {n} finite numbers"
+        if not math.fsum(float(q) ** 2 for q in st["rotation_xyzw"]) > 1e-12:
+            return f"{_TRANSFORMS}; item {i}: rotation_xyzw is zero"
+    return None
+
+
+_FRAME_RATE = (1e-3, 1e6)
+
+CONVERT_SETTINGS: dict[str, Param] = {
+    "input_format": Options("auto", "ros1", "ros2", "mcap", "tum", "scannet", "rtabmap"),
+    "color_topic": Text(help="colour topic"),
+    "depth_topic": Text(help="depth topic"),
+    "camera_info_topic": Text(help="CameraInfo topic"),
+    "poses": Text(form=_form(parse_pose_source, _POSES), expected=_POSES, help="pose source"),
+    "camera_frame": Text(help="optical frame of the camera"),
+    "tum_frame": Text(help="frame of tum:FILE poses"),
+    "camera_id": Text(help="camera id in the output"),
+    "color_encoding": Options("auto", "png", "jpeg"),
+    "depth_scale_m": Real(1e-6, 1.0, none_ok=True, finite=True, help="metres per unit of 16-bit depth"),
+    "sync_tolerance_s": Real(0.0, DURATION_MAX_S, finite=True, help="seconds"),
+    "max_pose_gap_s": Real(0.0, DURATION_MAX_S, finite=True, help="seconds"),
+    "pose_tolerance_s": Real(0.0, DURATION_MAX_S, finite=True, help="seconds"),
+    "buffer_s": Real(0.0, DURATION_MAX_S, finite=True, help="seconds of log time"),
+    "split": Text(form=_form(parse_split, _SPLIT), expected=_SPLIT),
+    "keyframes": Text(form=_form(parse_keyframes, _KEYFRAMES), expected=_KEYFRAMES),
+    "static_transforms": Records(_static_transforms_problem, expected=_TRANSFORMS),
+    "intrinsics": Reals(4, help="fx, fy, cx, cy in pixels"),
+    "fps": Real(*_FRAME_RATE, finite=True, help="frames per second of a ScanNet folder"),
+    "start_stamp_ns": Integral(0, STAMP_MAX_NS, help="stamp of a ScanNet folder's frame 0, ns since the epoch"),
+    "side_dir": Text(help="folder of side files"),
+    "name": Text(help="dataset name"),
+    "timezone": TimeZone(help="IANA site time zone"),
+    "image_layout": Options("tar", "files"),
+    "image_check": Options("none", "structure", "full"),
+    "strict": Boolean(),
+}
+"""Every key of :class:`ConvertConfig`, declared (see :mod:`psg_data._settings`)."""

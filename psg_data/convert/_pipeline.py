@@ -120,6 +120,11 @@ def plan_sources(path: Path, cfg: ConvertConfig) -> list[tuple[Path, str]]:
             raise ConversionError(f"{path}: directory mixes recording formats ({', '.join(sorted(fams))} folders); "
                                   f"expected one format per directory")
         sources = recs or folders or dbs
+        tum_without_depth = [p for p in (path, *sorted(path.iterdir())) if (p / "rgb.txt").is_file()
+                             and not (p / "depth.txt").is_file()] if not sources else []
+        if tum_without_depth:
+            raise ConversionError(f"{tum_without_depth[0] / 'depth.txt'}: missing; expected a TUM RGB-D folder with "
+                                  f"rgb.txt and depth.txt (psg-data converts RGB-D recordings)")
         if not sources:
             raise ConversionError(f"{path}: no recordings found; expected .bag files, ROS 2 bag directories, .mcap "
                                   f"files, TUM RGB-D or ScanNet folders, or RTAB-Map .db databases")

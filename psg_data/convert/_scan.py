@@ -59,7 +59,8 @@ SKIP_REASONS = {
     "no_pose": "no pose sample near the frame stamp (or a gap above max_pose_gap_s)",
     "nonfinite_pose": "pose with NaN or infinite values",
     "duplicate_stamp": "second colour frame with an already used header stamp",
-    "out_of_order": "colour frame older than one already written",
+    "out_of_order": "colour frame older than one already written (it arrived more than buffer_s late; raise "
+                    "buffer_s with --config to sort such frames in)",
     "corrupt_image": "frame whose colour or depth image is truncated or damaged (see image_check)",
     "no_image": "RTAB-Map node without a colour image (no Data row, or Data.image empty)",
 }
@@ -187,6 +188,13 @@ class _Payload:
 
     def __init__(self, kind: str, obj: Any, fmt: str = "", where: str = "") -> None:
         self.kind, self.obj, self.fmt, self.where = kind, obj, fmt, where
+
+
+def _image_name(source: Any, payload: _Payload, topic: str, stamp: int) -> str:
+    """Where an image came from: its file (frame folders), else the recording, topic and stamp."""
+    if payload.kind == "file":
+        return str(payload.obj)
+    return f"{source}: {topic} at stamp {stamp} ns"
 
 
 def _camera_from_info(msg: Any, camera_id: str, frame_id: str, where: str) -> CameraIntrinsics:
@@ -663,12 +671,13 @@ class _ScanSink:
             ca = np.asarray(cv2.resize(ca, dsize, interpolation=cv2.INTER_AREA), dtype=np.uint8)
             csize = dsize
         if csize != dsize:
-            raise ConversionError(f"{self.task.source}: {self.names[1]}: depth is {dsize[0]}x{dsize[1]} but colour is "
-                                  f"{csize[0]}x{csize[1]}; expected depth registered to colour "
-                                  f"(aligned_depth_to_color)")
+            raise ConversionError(f"{_image_name(self.task.source, dp, self.names[1], stamp)}: depth is "
+                                  f"{dsize[0]}x{dsize[1]} but colour is {csize[0]}x{csize[1]}; expected depth "
+                                  f"registered to colour (aligned_depth_to_color)")
         if csize != (cam.width, cam.height):
-            raise ConversionError(f"{self.task.source}: {self.names[0]}: images are {csize[0]}x{csize[1]} but "
-                                  f"CameraInfo says {cam.width}x{cam.height}; expected the colour camera's camera_info")
+            raise ConversionError(f"{_image_name(self.task.source, cp, self.names[0], stamp)}: images are "
+                                  f"{csize[0]}x{csize[1]} but the camera is {cam.width}x{cam.height}; expected the "
+                                  f"colour camera's size (CameraInfo, or the first frame of a folder)")
         if type(T) is not np.ndarray or T.dtype != np.float64:
             T = np.asarray(T, dtype=np.float64)
         if cb is not None and db is not None:
@@ -921,7 +930,10 @@ def _run_folder(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
     poses = _PoseSource(cfg, tf, None, where)
     if poses.kind is None:
         if fr.format == "tum" and not fr.poses_tum:
-            raise ConversionError(f"{fr.path / 'groundtruth.txt'}: missing; expected poses (or pass --poses tum:FILE)")
+            gt = fr.path / "groundtruth.txt"
+            state = "lists no poses" if gt.is_file() else "missing"
+            raise ConversionError(f"{gt}: {state}; expected 'timestamp tx ty tz qx qy qz qw' lines (or pass --poses "
+                                  f"tum:FILE)")
         poses.kind = "tum"
         for s, t, q in fr.poses_tum:
             poses.series.add(s, t, q)

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data._settings import Options, Real, check_settings
 from psg_data.errors import LabelingError
 from psg_data.labeling._codes import LabelGrid
 from psg_data.labeling._detections import Detections
@@ -68,16 +69,25 @@ class AssociationParams:
     min_score: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.rule not in ("on_top", "centroid"):
-            raise LabelingError(f"association rule {self.rule!r}: expected 'on_top' or 'centroid'")
-        if self.observed not in ("matched", "visibility", "either"):
-            raise LabelingError(f"observed {self.observed!r}: expected 'matched', 'visibility' or 'either'")
-        if not 0 <= self.min_iou <= 1:
-            raise LabelingError(f"min_iou: {self.min_iou}, expected in [0, 1]")
+        check_settings(ASSOCIATION_SETTINGS, asdict(self), "association", LabelingError,
+                       {"min_iou": "--min-iou", "margin_m": "--margin", "observed": "--observed"})
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as a dictionary (stored with the labels)."""
         return asdict(self)
+
+
+ASSOCIATION_SETTINGS = {
+    "min_iou": Real(0.0, 1.0, finite=True),
+    "rule": Options("on_top", "centroid"),
+    "margin_m": Real(0.0, 10.0, finite=True, help="metres"),
+    "below_m": Real(0.0, 10.0, finite=True, help="metres"),
+    "above_m": Real(0.0, 10.0, finite=True, help="metres"),
+    "max_distance_m": Real(0.0, 100.0, finite=True, help="metres"),
+    "observed": Options("matched", "visibility", "either"),
+    "min_score": Real(0.0, 1.0, finite=True),
+}
+"""The declared settings of :class:`AssociationParams` (``label`` options; see :mod:`psg_data._settings`)."""
 
 
 def max_weight_matching(weights: NDArray[np.float64]) -> list[tuple[int, int]]:

@@ -13,8 +13,22 @@ Levels (``image_check`` of a conversion; ``psg-data validate`` runs ``decode``):
   pixels but no checksum: a decoder may still accept it, so no check catches every such flip.
 * ``none``: nothing checked.
 
-``decode_check`` is what the validator adds: OpenCV decodes the image and its size, channels and
-bit depth are compared with what the dataset says.
+``decode_check`` is what the validator adds: the image is decoded strictly and its size, channels
+and bit depth are compared with what the dataset says. A JPEG is decoded by libjpeg-turbo through
+``simplejpeg`` in strict mode (libjpeg-turbo's stop-on-warning: "Corrupt JPEG data: premature end
+of data segment" and every other recoverable error is a damaged image, where OpenCV would fill the
+rest with grey and return it). A PNG is inflated here (zlib stream to its end with its Adler-32,
+data size, every row's filter type); for a plain PNG (8 or 16 bits, not interlaced, no palette,
+no critical chunk but IHDR, IDAT, IEND: what psg-data writes) that is the whole decode, since
+unfiltering such data cannot fail and IHDR says the size and sample format; any other PNG is then
+also decoded by OpenCV. Neither prints to the process's stderr: libjpeg-turbo reports to
+simplejpeg, which raises, and libpng, which prints its own errors to file descriptor 2, is only
+handed streams that already passed every check it would fail (see docs/FORMAT.md for the one
+limit: libpng warnings about ancillary chunks of such other PNGs). Redirecting descriptor 2
+around a decode would capture every other thread's output too, so it is not done.
+
+A quantisation table with a zero entry (T.81 B.2.4.1 allows 1..255 / 1..65535) is refused at
+``structure``: a decoder multiplies every coefficient by it and silently returns a flat image.
 """
 
 from __future__ import annotations
@@ -56,8 +70,13 @@ def looks_like_image(data: Any) -> str | None:
     return None
 
 
-def check_png(data: Any, *, inflate: bool = False) -> None:
-    """Check a PNG's chunk structure and CRCs (and with ``inflate`` its zlib stream and data size).
+def check_png(data: Any, *, inflate: bool = False) -> bool:
+    """Check a PNG's chunk structure and CRCs (and with ``inflate`` its zlib stream, data size and
+    row filter types).
+
+    Returns:
+        Whether the PNG is plain: not interlaced, not a palette image, and no critical chunk but
+        IHDR, IDAT and IEND (its IHDR then says everything a decoder returns; see :func:`decode_check`).
 
     Raises:
         DamagedImage: what is wrong and at which byte.
@@ -70,6 +89,7 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
     parts: list[tuple[int, int]] = []  # (start, end) of each IDAT chunk's data
     run = 0  # IDAT run: 0 not started, 1 in it, 2 over
     o, ihdr = 8, None
+    other_critical = False
     while True:
         if o + 12 > n:
             raise DamagedImage(f"truncated: no IEND chunk ({n} bytes)" if o >= n else
@@ -95,8 +115,13 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
                 raise DamagedImage(f"IHDR: invalid image description {ihdr}")
         elif ctype == b"IEND":
             break
-        elif run == 1:
-            run = 2
+        else:
+            if not ctype[0] & 0x20:  # critical: a decoder must refuse one it does not know
+                if ctype != b"PLTE":
+                    raise DamagedImage(f"unknown critical chunk {ctype.decode('latin-1')!r} at byte {o}")
+                other_critical = True
+            if run == 1:
+                run = 2
         o = end + 4
     if not parts:
         raise DamagedImage("no IDAT chunk (no image data)")
@@ -106,6 +131,7 @@ def check_png(data: Any, *, inflate: bool = False) -> None:
         raise DamagedImage("image data does not start with a zlib header")
     if inflate:
         _inflate_png([mv[a:b] for a, b in parts], ihdr)
+    return not (other_critical or ihdr[3] == 3 or ihdr[6])
 
 
 _CRC_PIECE = 4096
@@ -123,19 +149,25 @@ def _crc(mv: memoryview, a: int, b: int) -> int:
 def _inflate_png(parts: list[memoryview], ihdr: tuple[int, ...]) -> None:
     w, h, bits, ctype, _, _, lace = ihdr
     d = zlib.decompressobj()
-    size = 0
+    pieces = []
     try:
         for p in parts:
-            size += len(d.decompress(p))
-        size += len(d.flush())
+            pieces.append(d.decompress(p))
+        pieces.append(d.flush())
     except zlib.error as exc:
         raise DamagedImage(f"image data: zlib stream is damaged ({exc})") from None
     if not d.eof:
         raise DamagedImage("image data: zlib stream ends early (truncated)")
+    size = sum(map(len, pieces))
     if not lace:
-        expect = h * (1 + (w * _PNG_CHANNELS[ctype] * bits + 7) // 8)
+        row = 1 + (w * _PNG_CHANNELS[ctype] * bits + 7) // 8
+        expect = h * row
         if size != expect:
             raise DamagedImage(f"image data inflates to {size} bytes, expected {expect} for {w}x{h}")
+        filters = np.frombuffer(b"".join(pieces), np.uint8)[::row]
+        bad = np.flatnonzero(filters > 4)
+        if bad.size:
+            raise DamagedImage(f"image data: row {int(bad[0])} has filter type {int(filters[bad[0]])}, expected 0-4")
 
 
 def check_jpeg(data: Any, *, scan: bool = False) -> None:
@@ -284,6 +316,9 @@ def _dqt(b: bytes, st: _Jpeg, _m: int) -> str | None:
         size = 1 + 64 * (prec + 1)
         if prec > 1 or tid > 3 or o + size > len(b):
             return f"quantisation table precision {prec} id {tid} does not fit the segment"
+        q = b[o + 1:o + size]
+        if 0 in (q if not prec else bytes(q[k] | q[k + 1] for k in range(0, 128, 2))):
+            return f"quantisation table {tid} has a zero entry (expected 1 and more: a zero erases the image)"
         st.quant.add(tid)
         o += size
     return None
@@ -365,9 +400,8 @@ def check_image(data: Any, level: str = "structure", kind: str | None = None,
 
 
 def verify_image(data: Any, header: ImageHeader) -> None:
-    """What ``psg-data validate`` checks of a stored image: ``structure`` and an OpenCV decode that
-    agrees with the header (the same checks the converter applies by default, plus the decode: a
-    dataset ``convert`` wrote validates).
+    """What ``psg-data validate`` checks of a stored image: ``structure`` and a strict decode that
+    agrees with the header (see :func:`decode_check`; a dataset ``convert`` wrote validates).
 
     Raises:
         DamagedImage: what is wrong.
@@ -377,14 +411,23 @@ def verify_image(data: Any, header: ImageHeader) -> None:
 
 
 def decode_check(data: Any, expect: ImageHeader) -> None:
-    """Decode with OpenCV and compare with ``expect`` (size, channels, 8 or 16 bits).
+    """Decode strictly and compare with ``expect`` (size, channels, 8 or 16 bits): a JPEG by
+    libjpeg-turbo with warnings as errors, a PNG inflated and checked here, then by OpenCV (see the
+    module docstring). Nothing is printed to stderr.
 
     Raises:
-        DamagedImage: OpenCV cannot decode it, or it decodes to another size or sample format.
+        DamagedImage: the decoder reports an error or a warning, or the image decodes to another
+            size or sample format.
     """
-    import cv2
+    img: np.ndarray | None
+    if expect.kind == "jpeg":
+        img = _decode_jpeg_strict(data, expect)
+    else:
+        if check_png(data, inflate=True) and expect.bit_depth in (8, 16):
+            return  # a plain PNG whose data inflates whole with valid filters decodes to what IHDR says
+        import cv2
 
-    img = cv2.imdecode(np.frombuffer(memoryview(data).cast("B"), np.uint8), cv2.IMREAD_UNCHANGED)
+        img = cv2.imdecode(np.frombuffer(memoryview(data).cast("B"), np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise DamagedImage(f"OpenCV cannot decode this {expect.kind.upper()}")
     h, w = img.shape[:2]
@@ -395,3 +438,29 @@ def decode_check(data: Any, expect: ImageHeader) -> None:
                                                                         ch != expect.channels):
         raise DamagedImage(f"decodes to {w}x{h} with {ch} channel(s) of {bits} bits, its header says "
                            f"{expect.width}x{expect.height} with {expect.channels} of {expect.bit_depth}")
+
+
+_JPEG_COLORSPACE = {1: "GRAY", 3: "BGR", 4: "CMYK"}
+
+
+def _decode_jpeg_strict(data: Any, expect: ImageHeader) -> np.ndarray:
+    """The JPEG decoded by libjpeg-turbo (``simplejpeg``, strict: a recoverable error is an error).
+
+    Raises:
+        DamagedImage: libjpeg-turbo's own message ("Corrupt JPEG data: ...", "Premature end of JPEG file").
+    """
+    import simplejpeg
+
+    space = _JPEG_COLORSPACE.get(expect.channels)
+    if space is None:
+        raise DamagedImage(f"a JPEG with {expect.channels} components; expected 1, 3 or 4")
+    try:
+        img = simplejpeg.decode_jpeg(bytes(memoryview(data).cast("B")), colorspace=space, strict=True)
+    except ValueError as exc:
+        raise DamagedImage(f"libjpeg-turbo: {_one_line(exc)}") from None
+    return img[:, :, 0] if space == "GRAY" and img.ndim == 3 else img
+
+
+def _one_line(exc: object) -> str:
+    """A decoder's message on one line."""
+    return " ".join(str(exc).split())

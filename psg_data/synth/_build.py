@@ -11,7 +11,7 @@ import numpy as np
 
 from psg_data.schemas._records import ObjectInfo
 from psg_data.synth._catalog import ObjectSpec
-from psg_data.synth._model import LabConfig, LabModel
+from psg_data.synth._model import LabConfig, LabModel, check_memory
 from psg_data.synth._render import RenderedFrame
 
 __all__ = ["build_lab", "rerender_frame", "object_description"]
@@ -46,7 +46,9 @@ def build_lab(out: str | Path, config: LabConfig | None = None, *, overwrite: bo
 
     Raises:
         DatasetExistsError: ``out`` exists and ``overwrite`` is False.
+        PsgDataError: the lab needs more memory than the machine has (see :func:`check_memory`).
     """
+    check_memory(config or LabConfig())
     from psg_data.writers import DatasetWriter
 
     lab = lab or LabModel(config or LabConfig())

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data._settings import INT64_MAX, Integral, Options, Real, TimeZone, check_settings
 from psg_data.errors import PsgDataError
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
@@ -31,7 +32,8 @@ from psg_data.synth._layout import RECEPTACLE_ID0, LabLayout, make_layout
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
 
-__all__ = ["LabConfig", "LabModel", "ScanPlan", "camera_pose", "SYNTH_VERSION", "GENERATORS"]
+__all__ = ["LabConfig", "LAB_SETTINGS", "memory_needed", "check_memory", "LabModel", "ScanPlan", "camera_pose",
+           "SYNTH_VERSION", "GENERATORS"]
 
 log = logging.getLogger(__name__)
 
@@ -95,27 +97,10 @@ class LabConfig:
     max_dwell_steps: int = 8
 
     def __post_init__(self) -> None:
-        if self.days < 1:
-            raise PsgDataError(f"days: expected >= 1, got {self.days}")
-        if self.frames_per_scan < 1:
-            raise PsgDataError(f"frames_per_scan: expected >= 1, got {self.frames_per_scan}")
-        if self.width < 8 or self.height < 8:
-            raise PsgDataError(f"resolution: expected at least 8x8, got {self.width}x{self.height}")
-        if self.shift is not None and self.shift not in SHIFTS:
-            raise PsgDataError(f"shift: expected one of {SHIFTS} or None, got {self.shift!r}")
+        check_settings(LAB_SETTINGS, asdict(self), "synth", PsgDataError)
         bad = [d for d in self.shift_weekdays if d not in WEEKDAYS]
         if bad:
             raise PsgDataError(f"shift_weekdays: unknown {bad}, expected names from {WEEKDAYS}")
-        if self.generator not in GENERATORS:
-            raise PsgDataError(f"generator: expected one of {GENERATORS}, got {self.generator!r}")
-        if not 0.0 <= float(self.routine_strength) <= 1.0:
-            raise PsgDataError(f"routine_strength: expected a number in [0, 1], got {self.routine_strength}")
-        if not 0.0 <= float(self.day_persistence) <= 1.0:
-            raise PsgDataError(f"day_persistence: expected a number in [0, 1], got {self.day_persistence}")
-        if not 1 <= int(self.day_patterns) <= 12:
-            raise PsgDataError(f"day_patterns: expected an integer in [1, 12], got {self.day_patterns}")
-        if int(self.max_dwell_steps) < 1:
-            raise PsgDataError(f"max_dwell_steps: expected >= 1, got {self.max_dwell_steps}")
         hours = list(self.scan_hours)
         if not hours or any(b <= a for a, b in zip(hours, hours[1:])) or hours[0] < 0 or hours[-1] >= 24:
             raise PsgDataError(f"scan_hours: expected increasing local hours in [0, 24), got {hours}")
@@ -181,6 +166,67 @@ class LabConfig:
         if "noise" in extra:
             kw["noise"] = DepthNoise(**extra["noise"])
         return LabConfig(**kw)
+
+
+MAX_SIDE_PX = 65535
+"""Largest image side (JPEG's limit; PNG's is larger)."""
+
+LAB_SETTINGS = {
+    "seed": Integral(0, INT64_MAX, help="seed of everything"),
+    "days": Integral(1, 366),
+    "train_days": Integral(0, 366, none_ok=True),
+    "frames_per_scan": Integral(1, 1000),
+    "width": Integral(8, MAX_SIDE_PX, help="pixels"),
+    "height": Integral(8, MAX_SIDE_PX, help="pixels"),
+    "shift": Options(*SHIFTS, none_ok=True),
+    "timezone": TimeZone(none_ok=False),
+    "generator": Options(*GENERATORS),
+    "routine_strength": Real(0.0, 1.0, finite=True),
+    "day_patterns": Integral(1, 12),
+    "day_persistence": Real(0.0, 1.0, finite=True),
+    "max_dwell_steps": Integral(1, 10**6),
+}
+"""The declared settings of :class:`LabConfig` (see :mod:`psg_data._settings`)."""
+
+_BASE_BYTES = 320 * 2**20
+_BYTES_PER_PIXEL = 420
+_BYTES_PER_STORED_PIXEL = 4
+"""Peak memory of ``synth``: measured 231, 334 and 660 MB at 160x120, 640x480 and 1280x960 (about
+365 bytes per pixel of the image size, the renderer's per-pixel buffers, over a 225 MB base; frames
+and days add about 1.5 bytes per pixel per frame), with a margin."""
+
+
+def memory_needed(cfg: LabConfig) -> int:
+    """Bytes ``synth`` needs at its peak for ``cfg`` (an estimate with a margin, see above)."""
+    px = int(cfg.width) * int(cfg.height)
+    return _BASE_BYTES + _BYTES_PER_PIXEL * px + _BYTES_PER_STORED_PIXEL * px * int(cfg.frames_per_scan)
+
+
+def check_memory(cfg: LabConfig, available: int | None = None) -> None:
+    """Refuse, before anything is allocated, a lab that needs more memory than the machine has.
+
+    Args:
+        cfg: the lab.
+        available: bytes of memory (default: the machine's physical memory).
+
+    Raises:
+        PsgDataError: one line with the estimate, the machine's memory and what to change.
+    """
+    need = memory_needed(cfg)
+    have = available if available is not None else _physical_memory()
+    if have is not None and need > have:
+        raise PsgDataError(f"resolution: {cfg.width}x{cfg.height} needs about {need / 2**30:.1f} GiB of memory, the "
+                           f"machine has {have / 2**30:.1f} GiB; expected a smaller --resolution (about "
+                           f"{_BYTES_PER_PIXEL} bytes per pixel)")
+
+
+def _physical_memory() -> int | None:
+    import os
+
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not on this system (Windows): no check
+        return None
 
 
 @dataclass

@@ -143,7 +143,7 @@ def _foreign(root: Path, kind: str) -> str | None:
         return "is a symbolic link"
     if not root.is_dir():
         return "is a file" if root.is_file() else "is not a folder"
-    present = _files_under(root)
+    present = [f for f in _files_under(root) if f != PARTIAL_MARKER]  # left by a crash right after a swap
     if not present:
         return None
     owned = owned_files(root, kind)
@@ -273,42 +273,53 @@ def commit_tree(tree: str | Path, out: str | Path, *, kind: str = "dataset") -> 
     """Publish the complete output ``tree`` at ``out``: fsync, swap by renames, old output removed last.
 
     ``out`` is checked again (see :func:`check_output`, with overwrite) right before the swap, so a
-    file added to it meanwhile is never deleted. ``tree`` loses its :data:`PARTIAL_MARKER`; outputs
-    other than datasets get their :data:`OUTPUT_MARKER`.
+    file added to it meanwhile is never deleted. ``tree`` keeps its :data:`PARTIAL_MARKER` until it
+    is in place (then the marker is removed from ``out``), so whichever step fails, ``tree`` is
+    still a staging folder a rerun may remove or resume, the previous output is either in place or
+    complete under ``.OUT.psg-replaced`` (put back or removed by the next commit), and a marker
+    left in ``out`` by a crash right after the swap is psg-data's own (see :func:`check_output`).
+    Outputs other than datasets get their :data:`OUTPUT_MARKER`.
 
     Raises:
         UnsafeOutputError: ``out`` became something psg-data may not replace.
+        OSError: a step failed (see above for what it leaves).
     """
     tree, out = Path(tree), Path(out)
-    (tree / PARTIAL_MARKER).unlink(missing_ok=True)
     if kind != "dataset":
         _write_marker(tree, kind)
     fsync_tree(tree)
     parent = out.parent
     parent.mkdir(parents=True, exist_ok=True)
+    aside = out.with_name(_REPLACED.format(name=out.name))
     if not out.exists() and not out.is_symlink():
         os.replace(tree, out)
-        _fsync_path(str(parent), directory=True)
-        return out
-    reason = _foreign(out, kind)
-    if reason is not None:
-        raise UnsafeOutputError(f"{out}: {reason} (changed while writing); refusing to replace it")
-    aside = out.with_name(_REPLACED.format(name=out.name))
-    if aside.exists() or aside.is_symlink():  # left by a crash during an earlier swap
-        stale = _foreign(aside, kind)
-        if stale is not None:
-            raise UnsafeOutputError(f"{aside}: {stale}; expected nothing of that name beside the output (move it "
-                                    f"away)")
-        shutil.rmtree(aside)
-    os.replace(out, aside)
-    try:
-        os.replace(tree, out)
-    except BaseException:
-        os.replace(aside, out)  # put the previous output back
-        raise
+    else:
+        reason = _foreign(out, kind)
+        if reason is not None:
+            raise UnsafeOutputError(f"{out}: {reason} (changed while writing); refusing to replace it")
+        _remove_stale(aside, kind)
+        os.replace(out, aside)
+        try:
+            os.replace(tree, out)
+        except BaseException:
+            os.replace(aside, out)  # put the previous output back
+            raise
+    (out / PARTIAL_MARKER).unlink(missing_ok=True)
+    _fsync_path(str(out), directory=True)
     _fsync_path(str(parent), directory=True)
-    shutil.rmtree(aside)
+    if aside.is_dir() and _foreign(aside, kind) is None:  # the previous output (or one an earlier swap left)
+        shutil.rmtree(aside)
     return out
+
+
+def _remove_stale(aside: Path, kind: str) -> None:
+    """Remove ``.OUT.psg-replaced`` (a previous output set aside by a swap), if psg-data's."""
+    if not aside.exists() and not aside.is_symlink():
+        return
+    stale = _foreign(aside, kind)
+    if stale is not None:
+        raise UnsafeOutputError(f"{aside}: {stale}; expected nothing of that name beside the output (move it away)")
+    shutil.rmtree(aside)
 
 
 def replace_file(tmp: str | Path, final: str | Path) -> None:

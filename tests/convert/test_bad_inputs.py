@@ -161,7 +161,7 @@ def test_output_exists(tmp_path: Path) -> None:
 
 def test_bad_options(tmp_path: Path) -> None:
     bag = write_bag(tmp_path / "a.bag")
-    assert_error(tmp_path, [str(bag), "--poses", "bogus"], "--poses: 'bogus': expected")
+    assert_error(tmp_path, [str(bag), "--poses", "bogus"], "--poses (poses): expected tf:WORLD_FRAME->CAMERA_FRAME, odom:/TOPIC or tum:FILE, got 'bogus'")
     assert_error(tmp_path, [str(bag), "--color-topic", "/nope"], "/nope: no such topic")
     assert_error(tmp_path, [str(bag), "--keyframes", "every:0"], "--keyframes")
     code, _, _ = run(str(bag), str(tmp_path / "out"), "--jobs", "0")

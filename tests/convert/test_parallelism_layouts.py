@@ -74,4 +74,4 @@ def test_cli_jobs_and_layout_options(tmp_path: Path, tiny_dataset: Path) -> None
     cfg = tmp_path / "c.yaml"
     cfg.write_text("image_layout: zip\n")
     r = CliRunner().invoke(main, ["convert", str(raw), str(tmp_path / "o3"), "--config", str(cfg), "-q"])
-    assert r.exit_code == 1 and "image_layout: expected tar or files, got 'zip'" in r.stderr
+    assert r.exit_code == 1 and "image_layout: expected one of tar, files, got 'zip'" in r.stderr

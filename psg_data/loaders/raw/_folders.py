@@ -23,18 +23,33 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data._settings import STAMP_MAX_NS, shown
 from psg_data.errors import ConversionError
+
+_STAMP_MAX_S = Decimal(STAMP_MAX_NS) / 1_000_000_000
 
 __all__ = ["FolderRecording", "folder_format", "read_tum_folder", "read_scannet_folder", "parse_stamp_s",
            "read_tum_poses", "check_intrinsics"]
 
 
+_STAMP_RANGE = f"a timestamp in seconds from 0 to {STAMP_MAX_NS / 1e9:.0f} (int64 nanoseconds)"
+
+
 def parse_stamp_s(text: str, where: str) -> int:
-    """Decimal seconds (as text) -> int nanoseconds, exactly."""
+    """Decimal seconds (as text) -> int nanoseconds, exactly.
+
+    Raises:
+        ConversionError: naming ``where`` (file and line): not a number, not finite (``nan``,
+            ``inf``), or outside ``[0, STAMP_MAX_NS]`` ns.
+    """
     try:
-        return int((Decimal(text) * 1_000_000_000).to_integral_value())
-    except InvalidOperation as exc:
-        raise ConversionError(f"{where}: expected a timestamp in seconds, got {text!r}") from exc
+        d = Decimal(text)
+        ok = d.is_finite() and 0 <= d <= _STAMP_MAX_S
+    except (InvalidOperation, ArithmeticError):
+        ok = False
+    if not ok:
+        raise ConversionError(f"{where}: expected {_STAMP_RANGE}, got {shown(text)}")
+    return int((d * 1_000_000_000).to_integral_value())
 
 
 @dataclass
@@ -233,7 +248,14 @@ def read_scannet_folder(path: str | Path, fps: float, start_stamp_ns: int, depth
         raise ConversionError(f"{p / 'color'}: no colour frames (N.jpg / N.png)")
     if not deps:
         raise ConversionError(f"{p / 'depth'}: no depth frames (N.png); expected a recording with depth")
-    period = 1e9 / fps if fps > 0 else 1e9 / 30
+    if not (isinstance(fps, (int, float)) and 0 < fps < float("inf")):
+        raise ConversionError(f"config: fps: expected a finite number > 0 (frames per second), got {fps!r}")
+    period = 1e9 / fps
+    last = max(max(cols), max(deps))
+    if not 0 <= start_stamp_ns + last * period <= STAMP_MAX_NS:
+        raise ConversionError(f"{p}: frame {last} would be stamped {start_stamp_ns} + {last} / {fps:g} s, beyond "
+                              f"{STAMP_MAX_NS} ns; expected start_stamp_ns and fps (config) that keep every stamp "
+                              f"within int64 nanoseconds")
     stamp = {i: int(start_stamp_ns + round(i * period)) for i in cols}
     exact: dict[int, NDArray[np.float64]] = {}
     for i, f in poses.items():

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from psg_data._geometry import yaw_rotation
+from psg_data._settings import Text, TimeZone, check_settings
 from psg_data.errors import ConversionError
 
 __all__ = ["SideData", "read_side_files", "SIDE_TABLES", "SITE_NAMES"]
@@ -136,6 +137,8 @@ def read_side_files(directory: str | Path | None) -> SideData:
         if not isinstance(site, dict):
             raise ConversionError(f"{path}: expected an object with keys name, timezone, rooms, receptacles, ...")
         side.files.append(path.name)
+        check_settings({"name": Text(), "timezone": TimeZone()}, {k: site.get(k) for k in ("name", "timezone")},
+                       str(path), ConversionError)
         side.name = site.get("name")
         side.timezone = site.get("timezone")
         for cam in site.get("cameras") or []:
