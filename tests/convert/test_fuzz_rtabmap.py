@@ -24,6 +24,7 @@ def pristine(tmp_path_factory: pytest.TempPathFactory, lab: Path) -> bytes:  # n
     return db.read_bytes()
 
 
+@pytest.mark.damaged_passthrough  # converts_or_fails_cleanly validates itself (passed-through damage allowed)
 @settings(max_examples=int(os.environ.get("PSG_FUZZ_EXAMPLES", "25")), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(d=damage)

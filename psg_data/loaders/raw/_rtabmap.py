@@ -83,6 +83,11 @@ class RtabCamera:
     distortion: tuple[float, ...] = ()
 
 
+_ROT_TOL_F32 = 4e-6
+"""Largest |R^T R - I| accepted in a stored rotation: float32 rounding gives ~2e-7; validate allows 1e-5
+for the camera poses, which are products of two such rotations."""
+
+
 def parse_transform(blob: bytes | None, where: str) -> NDArray[np.float64] | None:
     """A ``Transform`` blob (12 float32, 3x4 row-major) as a 4x4 float64 matrix; None for NULL."""
     if blob is None:
@@ -91,7 +96,18 @@ def parse_transform(blob: bytes | None, where: str) -> NDArray[np.float64] | Non
         raise ConversionError(f"{where}: {len(blob)} bytes; expected 48 (a 3x4 float32 transform)")
     T = np.eye(4)
     T[:3, :] = np.frombuffer(blob, "<f4").reshape(3, 4)
+    check_rotation(T, where)
     return T
+
+
+def check_rotation(T: NDArray[np.float64], where: str) -> None:
+    """Refuse a finite transform whose rotation is not proper to float32 precision (NaN / inf: the caller's message)."""
+    R = T[:3, :3]
+    if np.all(np.isfinite(R)):
+        err = float(np.abs(R.T @ R - np.eye(3)).max())
+        if err > _ROT_TOL_F32 or np.linalg.det(R) <= 0:
+            raise ConversionError(f"{where}: rotation is not orthonormal with det +1 (max |R^T R - I| = {err:.3g}); "
+                                  f"expected a proper rotation to float32 precision ({_ROT_TOL_F32:g})")
 
 
 def uncompress_data(blob: bytes, where: str) -> NDArray[np.generic]:
@@ -121,6 +137,7 @@ def _camera(fx: float, fy: float, cx: float, cy: float, w: int, h: int, local: N
     if not np.all(np.isfinite(vals)) or not np.all(np.isfinite(local)) or w < 0 or h < 0:
         raise ConversionError(f"{where}: non-finite or negative values (fx {fx}, fy {fy}, cx {cx}, cy {cy}, "
                               f"{w}x{h}); expected a camera calibration")
+    check_rotation(local, f"{where}: local transform")
     if cx == 0.0 and w > 0:  # CameraModel: a zero principal point means the image centre
         cx = w / 2.0 - 0.5
     if cy == 0.0 and h > 0:
@@ -429,6 +446,7 @@ class RtabmapDatabase:
         for nid, M in zip(ids.tolist(), P):
             T = np.eye(4)
             T[:3, :] = M
+            check_rotation(T, f"{self.where}: node {nid}: Admin.opt_poses")
             out[int(nid)] = T
         return out
 
