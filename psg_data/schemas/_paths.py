@@ -1,0 +1,71 @@
+"""Path containment: every path a dataset names stays inside the dataset (docs/SECURITY.md).
+
+A dataset is untrusted input. Its tables name files (``frames.color_path``, ``files.path``, the
+manifest's ``extra.process_file``) and its directory may hold symbolic links; one rule decides
+whether such a path may be opened: it is relative, has no ``..`` component (``/`` or ``\\`` as
+separator, so a Windows-style path is caught on every OS), and with every symbolic link followed it
+resolves to a location strictly inside the dataset root. The loader raises a
+:class:`~psg_data.errors.FormatError` through :func:`inside_dataset`; ``psg-data validate``
+reports :func:`path_problem` as one line.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path, PureWindowsPath
+
+from psg_data.errors import FormatError
+
+__all__ = ["path_problem", "inside_dataset", "real_root"]
+
+_SEP = re.compile(r"[/\\]")
+
+
+def real_root(root: str | Path) -> str:
+    """The dataset root with every symbolic link resolved (the containment reference)."""
+    return os.path.realpath(root)
+
+
+def path_problem(root: str, rel: object) -> str | None:
+    """What makes ``rel`` unsafe to open in the dataset at ``root`` (None: safe).
+
+    Args:
+        root: the dataset root as :func:`real_root` gives it.
+        rel: a path read from the dataset (a table cell, a manifest value).
+
+    Returns:
+        ``"is absolute"``, ``"has a '..' component"``, ``"resolves outside the dataset (to ...)"``,
+        ... or None when ``rel`` names a location inside ``root``.
+    """
+    if not isinstance(rel, str) or not rel:
+        return f"is {rel!r}, expected a non-empty string"
+    if "\x00" in rel:
+        return "contains a NUL character"
+    if rel.startswith(("/", "\\")) or PureWindowsPath(rel).drive:
+        return "is absolute"
+    if ".." in _SEP.split(rel):
+        return "has a '..' component"
+    real = os.path.realpath(os.path.join(root, rel))
+    if not real.startswith(root.rstrip(os.sep) + os.sep):
+        return f"resolves outside the dataset (to {real}; a symbolic link?)"
+    return None
+
+
+def inside_dataset(root: str, rel: object, where: str) -> str:
+    """``rel`` resolved inside the dataset ``root`` (:func:`real_root`), ready to open.
+
+    Args:
+        root: the dataset root as :func:`real_root` gives it.
+        rel: the path read from the dataset.
+        where: what named it, e.g. ``tables/frames.parquet:12: color_path``.
+
+    Raises:
+        FormatError: ``where: path 'REL' is absolute|has a '..' component|resolves outside the
+            dataset; expected a relative path inside the dataset``.
+    """
+    problem = path_problem(root, rel)
+    if problem is not None:
+        raise FormatError(f"{where}: path {rel!r} {problem}; expected a relative path inside the dataset "
+                          f"{root}")
+    return os.path.join(root, rel)  # type: ignore[arg-type]
