@@ -27,12 +27,14 @@ def real_root(root: str | Path) -> str:
     return os.path.realpath(root)
 
 
-def path_problem(root: str, rel: object) -> str | None:
+def path_problem(root: str, rel: object, *, resolve: bool = True) -> str | None:
     """What makes ``rel`` unsafe to open in the dataset at ``root`` (None: safe).
 
     Args:
         root: the dataset root as :func:`real_root` gives it.
         rel: a path read from the dataset (a table cell, a manifest value).
+        resolve: also follow symbolic links (``False``: the lexical rule only, for a raw recording's
+            folder, whose owner may link its image folders to another disk).
 
     Returns:
         ``"is absolute"``, ``"has a '..' component"``, ``"resolves outside the dataset (to ...)"``,
@@ -46,6 +48,8 @@ def path_problem(root: str, rel: object) -> str | None:
         return "is absolute"
     if ".." in _SEP.split(rel):
         return "has a '..' component"
+    if not resolve:
+        return None
     real = os.path.realpath(os.path.join(root, rel))
     if not real.startswith(root.rstrip(os.sep) + os.sep):
         return f"resolves outside the dataset (to {real}; a symbolic link?)"
