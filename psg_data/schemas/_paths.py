@@ -2,7 +2,7 @@
 
 A dataset is untrusted input. Its tables name files (``frames.color_path``, ``files.path``, the
 manifest's ``extra.process_file``) and its directory may hold symbolic links; one rule decides
-whether such a path may be opened: it is relative, has no ``..`` component (``/`` or ``\\`` as
+whether such a path may be opened: it is relative, has no ``..`` component (slash or backslash as
 separator, so a Windows-style path is caught on every OS), and with every symbolic link followed it
 resolves to a location strictly inside the dataset root. The loader raises a
 :class:`~psg_data.errors.FormatError` through :func:`inside_dataset`; ``psg-data validate``
@@ -72,4 +72,4 @@ def inside_dataset(root: str, rel: object, where: str) -> str:
     if problem is not None:
         raise FormatError(f"{where}: path {rel!r} {problem}; expected a relative path inside the dataset "
                           f"{root}")
-    return os.path.join(root, rel)  # type: ignore[arg-type]
+    return os.path.join(root, str(rel))
