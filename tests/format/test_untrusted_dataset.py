@@ -444,3 +444,30 @@ def test_bombs_cost_under_50_mb(crafted, name: str) -> None:
     assert int(loader) < 50 * 2**20, f"loader grew by {int(loader) / 2**20:.0f} MB"
     assert int(validate) < 50 * 2**20, f"validate grew by {int(validate) / 2**20:.0f} MB"
     assert int(problems) >= 1
+
+
+def test_a_dataset_linked_as_a_whole_is_read(tmp_path: Path) -> None:
+    """The root is resolved first: a dataset kept on another disk and linked to works as before."""
+    root = write_tiny_dataset(tmp_path / "disk" / "lab", scans=1, frames=2, image_layout="files")
+    link = tmp_path / "lab"
+    link.symlink_to(root)
+    fr = psg_data.open_dataset(link).scan("scan_000").frame(1)
+    assert fr.color.shape == (24, 32, 3)
+    assert validate_dataset(link) == []
+
+
+def test_forged_checksum_alone_is_a_validate_line(tmp_path: Path) -> None:
+    """A checksum that does not fit its file (content unchanged) is what validate's checksum check is
+    for; the loader does not hash (checksums detect accidents, not attacks: docs/SECURITY.md)."""
+    root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=1)
+    fp = root / "tables/files.parquet"
+    rows = pq.read_table(fp).to_pylist()
+    rows[0]["sha256"] = "f" * 64
+    pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
+    lines = [str(p) for p in validate_dataset(root)]
+    assert any(ln.startswith("tables/files.parquet: sha256: checksum") for ln in lines), lines
+    m = json.loads((root / "dataset.json").read_text())
+    m["files_sha256"] = sha256_file(fp)
+    (root / "dataset.json").write_text(json.dumps(m))
+    lines = [str(p) for p in validate_dataset(root)]
+    assert lines == [f"{rows[0]['path']}: sha256: checksum mismatch: content differs from tables/files.parquet"]
