@@ -14,6 +14,7 @@ from __future__ import annotations
 import bisect
 import logging
 import os
+import stat
 import threading
 from collections.abc import Iterator, Sequence
 from functools import cached_property
@@ -411,6 +412,21 @@ def _decode_rgb(cv2: Any, data: bytes) -> NDArray[np.uint8] | None:
     return None if rgb is None else np.asarray(rgb, dtype=np.uint8)
 
 
+def _open_regular(path: str) -> tuple[int, int]:
+    """A read descriptor of the regular file ``path`` and its size (a FIFO or device is refused
+    without blocking: ``O_NONBLOCK`` where the system has it)."""
+    flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        raise FormatError(exc.strerror or type(exc).__name__) from exc
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+        os.close(fd)
+        raise FormatError("not a regular file")
+    return fd, st.st_size
+
+
 class _UnsafePath(FormatError):
     """A path of the dataset leaves it (raised as it is, not as an unreadable image)."""
 
@@ -460,14 +476,11 @@ class _ImageFiles:
             FormatError: says why not (:class:`_UnsafePath` when ``rel`` leaves the dataset).
         """
         if offset < 0:
-            try:
-                with open(self._inside(rel, where), "rb") as fh:
-                    data = fh.read(limit + 1)
-            except OSError as exc:
-                raise FormatError(exc.strerror or type(exc).__name__) from exc
-            if len(data) > limit:
-                raise FormatError(f"file larger than the {limit} bytes an image of its camera may take")
-            return data
+            fd, fsize = _open_regular(self._inside(rel, where))
+            with open(fd, "rb") as fh:
+                if fsize > limit:
+                    raise FormatError(f"{fsize} bytes, more than the {limit} an image of its camera may take")
+                return fh.read(fsize + 1)
         fd, fsize = self._fd(rel, where)
         if offset + size > fsize:
             raise FormatError(f"{size} bytes at offset {offset} lie beyond the end of {rel} ({fsize} bytes; "
@@ -491,11 +504,7 @@ class _ImageFiles:
                 path = self._inside(rel, where)
                 if len(self._fds) >= self._MAX_OPEN:
                     os.close(self._fds.pop(next(iter(self._fds)))[0])
-                try:
-                    fd = os.open(path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
-                except OSError as exc:
-                    raise FormatError(exc.strerror or type(exc).__name__) from exc
-                entry = self._fds[rel] = (fd, os.fstat(fd).st_size)
+                entry = self._fds[rel] = _open_regular(path)
             return entry
 
     def close(self) -> None:

@@ -184,6 +184,18 @@ def _oversized_colour(root: Path) -> None:
     cv2.imwrite(str(p), np.zeros((48, 64, 3), np.uint8))  # 64x48 where the camera says 32x24
 
 
+def _fifo_image(root: Path) -> None:
+    p = _first_image(root)
+    p.unlink()
+    os.mkfifo(p)  # opening it for reading would block until a writer comes
+
+
+def _fifo_archive(root: Path) -> None:
+    p = root / "images/scan_000.tar"
+    p.unlink()
+    os.mkfifo(p)
+
+
 def _frame0(ds: psg_data.Dataset) -> object:
     return ds.scan("scan_000").frame(0)
 
@@ -218,7 +230,7 @@ CASES: dict[str, tuple[Craft, dict, Callable[[psg_data.Dataset], object], str, s
                           r"images/scan_000\.tar@\d+: missing or unreadable colour image \(1000000000000 bytes",
                           r"^tables/frames\.parquet:0: color_offset: byte range \[\d+, \d+\) is not inside"),
     "PNG bomb": (_png_bomb, {"image_layout": "files"}, _frame0,
-                 _IMG + r": missing or unreadable colour image \(file larger than the \d+ bytes",
+                 _IMG + r": missing or unreadable colour image \(\d+ bytes, more than the \d+ an image of its camera",
                  "^" + _IMG + r": size: 20000x20000 = 400000000 pixels, over the limit"),
     "JPEG bomb": (_jpeg_bomb, {"image_layout": "files", "color_encoding": "jpeg"}, _frame0,
                   _IMG + r": colour image header does not fit camera 'd435', refused before decoding: size 20000x20000",
@@ -230,6 +242,13 @@ CASES: dict[str, tuple[Craft, dict, Callable[[psg_data.Dataset], object], str, s
     "8-bit depth image": (_depth_8bit, {"image_layout": "files"}, _frame0,
                           r"depth/000000\.png: depth image header does not fit camera 'd435', refused before decoding",
                           r"^images/scan_000/depth/000000\.png: dtype: png uint8 with 1 channel\(s\), expected a 16-bit"),
+    "FIFO in place of an image": (_fifo_image, {"image_layout": "files"}, _frame0,
+                                  _IMG + r": missing or unreadable colour image \(not a regular file\)",
+                                  r"^tables/frames\.parquet:0: color_path: image images/scan_000/color/000000\.png "
+                                  r"does not exist"),
+    "FIFO in place of an archive": (_fifo_archive, {}, _frame0,
+                                    r"images/scan_000\.tar@\d+: missing or unreadable colour image \(not a regular",
+                                    r"^tables/frames\.parquet:0: color_path: image images/scan_000\.tar does not exist"),
     "colour image larger than its camera": (
         _oversized_colour, {"image_layout": "files"}, _frame0,
         _IMG + r": colour image header does not fit camera 'd435', refused before decoding: size 64x48, expected "
