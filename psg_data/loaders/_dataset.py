@@ -414,7 +414,8 @@ def _decode_rgb(cv2: Any, data: bytes) -> NDArray[np.uint8] | None:
 
 def _open_regular(path: str) -> tuple[int, int]:
     """A read descriptor of the regular file ``path`` and its size (a FIFO or device is refused
-    without blocking: ``O_NONBLOCK`` where the system has it)."""
+    without blocking: ``O_NONBLOCK`` where the system has it).
+    """
     flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0)
     try:
         fd = os.open(path, flags)
