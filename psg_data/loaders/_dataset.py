@@ -28,7 +28,7 @@ from psg_data.errors import FormatError
 from psg_data.loaders._checks import check_frames, check_image_bytes, check_image_header, checked_table
 from psg_data.schemas._image_headers import max_encoded_bytes
 from psg_data.schemas._manifest import DatasetInfo, read_manifest
-from psg_data.schemas._paths import inside_dataset, real_root
+from psg_data.schemas._paths import inside_dataset, open_inside, real_root
 from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import TABLES, table_path
 
@@ -412,22 +412,6 @@ def _decode_rgb(cv2: Any, data: bytes) -> NDArray[np.uint8] | None:
     return None if rgb is None else np.asarray(rgb, dtype=np.uint8)
 
 
-def _open_regular(path: str) -> tuple[int, int]:
-    """A read descriptor of the regular file ``path`` and its size (a FIFO or device is refused
-    without blocking: ``O_NONBLOCK`` where the system has it).
-    """
-    flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0)
-    try:
-        fd = os.open(path, flags)
-    except OSError as exc:
-        raise FormatError(exc.strerror or type(exc).__name__) from exc
-    st = os.fstat(fd)
-    if not stat.S_ISREG(st.st_mode):
-        os.close(fd)
-        raise FormatError("not a regular file")
-    return fd, st.st_size
-
-
 class _UnsafePath(FormatError):
     """A path of the dataset leaves it (raised as it is, not as an unreadable image)."""
 
@@ -444,6 +428,7 @@ class _ImageFiles:
     def __init__(self, root: Path) -> None:
         self.root = root
         self._fds: dict[str, tuple[int, int]] = {}  # rel -> (descriptor, file size)
+        self._dirs: set[str] = set()  # directories found inside the dataset
         self._lock = threading.Lock()
 
     def __getstate__(self) -> dict[str, Any]:
@@ -457,11 +442,22 @@ class _ImageFiles:
         """The dataset root, symbolic links resolved (what every path must stay inside)."""
         return real_root(self.root)
 
-    def _inside(self, rel: str, where: str) -> str:
+    def _open(self, rel: str, where: str) -> tuple[int, int]:
+        """A read descriptor of the regular file ``rel`` inside the dataset, and its size (a FIFO or
+        device is refused without blocking: ``O_NONBLOCK`` where the system has it).
+        """
+        flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0)
         try:
-            return inside_dataset(self.real_root, rel, where)
+            fd = open_inside(self.real_root, rel, where, flags, self._dirs)
         except FormatError as exc:
             raise _UnsafePath(str(exc)) from None
+        except OSError as exc:
+            raise FormatError(exc.strerror or type(exc).__name__) from exc
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            os.close(fd)
+            raise FormatError("not a regular file")
+        return fd, st.st_size
 
     def read(self, rel: str, offset: int, size: int, limit: int, where: str) -> bytes:
         """Bytes of the image stored at ``rel`` (``offset`` < 0: the whole file), at most ``limit``.
@@ -477,7 +473,7 @@ class _ImageFiles:
             FormatError: says why not (:class:`_UnsafePath` when ``rel`` leaves the dataset).
         """
         if offset < 0:
-            fd, fsize = _open_regular(self._inside(rel, where))
+            fd, fsize = self._open(rel, where)
             with open(fd, "rb") as fh:
                 if fsize > limit:
                     raise FormatError(f"{fsize} bytes, more than the {limit} an image of its camera may take")
@@ -502,10 +498,9 @@ class _ImageFiles:
         with self._lock:
             entry = self._fds.get(rel)
             if entry is None:
-                path = self._inside(rel, where)
                 if len(self._fds) >= self._MAX_OPEN:
                     os.close(self._fds.pop(next(iter(self._fds)))[0])
-                entry = self._fds[rel] = _open_regular(path)
+                entry = self._fds[rel] = self._open(rel, where)
             return entry
 
     def close(self) -> None:

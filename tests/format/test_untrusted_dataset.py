@@ -134,6 +134,15 @@ def _symlink_image(root: Path) -> Path:
     return sentinel
 
 
+def _symlink_image_folder(root: Path) -> Path:
+    folder = root / "images/scan_000/color"
+    target = _outside(root) / "color"
+    shutil.copytree(folder, target)
+    shutil.rmtree(folder)
+    folder.symlink_to(target, target_is_directory=True)
+    return target / "000000.png"
+
+
 def _symlink_archive(root: Path) -> Path:
     sentinel = _outside(root) / "sentinel.tar"
     _replace_with_link(root / "images/scan_000.tar", sentinel)
@@ -213,6 +222,11 @@ CASES: dict[str, tuple[Craft, dict, Callable[[psg_data.Dataset], object], str, s
                         r"outside the dataset",
                         r"^tables/frames\.parquet:0: color_path: path 'images/scan_000/color/000000\.png' resolves "
                         r"outside the dataset"),
+    "symlinked image folder": (_symlink_image_folder, {"image_layout": "files"}, _frame0,
+                               r"tables/frames\.parquet:0: color_path: path 'images/scan_000/color/000000\.png' "
+                               r"resolves outside the dataset",
+                               r"^tables/frames\.parquet:0: color_path: path 'images/scan_000/color/000000\.png' "
+                               r"resolves outside the dataset"),
     "symlinked archive": (_symlink_archive, {}, _frame0,
                           r"tables/frames\.parquet:0: color_path: path 'images/scan_000\.tar' resolves outside",
                           r"^tables/files\.parquet:0: path: 'images/scan_000\.tar' resolves outside the dataset"),
@@ -273,15 +287,17 @@ def crafted(tmp_path: Path) -> Callable[[str], tuple[Path, Path | None]]:
 # -- watching every open ----------------------------------------------------------------------------
 @pytest.fixture
 def opened(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
-    """Real paths of every file opened through Python, OpenCV's imread and pyarrow's Parquet readers."""
+    """Real paths of every file opened (the call succeeded: an ``O_NOFOLLOW`` open refused on a link
+    opened nothing) through Python, OpenCV's imread and pyarrow's Parquet readers."""
     seen: list[str] = []
 
     def watch(fn: Callable, pos: int = 0) -> Callable:
         def wrapper(*args: object, **kwargs: object) -> object:
+            out = fn(*args, **kwargs)
             arg = args[pos] if len(args) > pos else None
             if isinstance(arg, (str, bytes, os.PathLike)):
                 seen.append(os.path.realpath(os.fsdecode(arg)))
-            return fn(*args, **kwargs)
+            return out
         return wrapper
 
     monkeypatch.setattr(builtins, "open", watch(builtins.open))
