@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
 from psg_data.errors import FormatError, PsgDataError
 from psg_data.schemas._camera_checks import intrinsics_problems
-from psg_data.schemas._image_headers import header_problems, parse_image_header, read_image_header
+from psg_data.schemas._image_headers import header_problems, max_encoded_bytes, parse_image_header, read_image_header
 from psg_data.schemas._manifest import FORMAT_VERSION, DatasetInfo, manifest_from_dict, parse_format_version
 from psg_data.schemas._paths import path_problem, real_root
 from psg_data.schemas._tables import (
@@ -488,6 +488,10 @@ def _check_images(c: _Collector, root: Path, real: str, d: dict[str, list], cams
                         continue
                 w, h = (cam["width"], cam["height"]) if cam is not None else (hdr.width, hdr.height)
                 problems = header_problems(hdr, kind, w, h, "jpeg" if color_encoding == "jpeg" else "png")
+                nbytes, limit = (fsize if off is None else size), max_encoded_bytes(w, h, kind)
+                if nbytes > limit:
+                    problems.append(("size_bytes", f"{nbytes} bytes, more than the {limit} an image of its camera "
+                                                   "may take"))
                 for field, what in problems:
                     c.add(where, field, what)
                 if decode and not problems:  # never decode an image whose header does not fit: a bomb

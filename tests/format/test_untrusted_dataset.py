@@ -193,6 +193,11 @@ def _oversized_colour(root: Path) -> None:
     cv2.imwrite(str(p), np.zeros((48, 64, 3), np.uint8))  # 64x48 where the camera says 32x24
 
 
+def _padded_image(root: Path) -> None:
+    p = _first_image(root)
+    p.write_bytes(p.read_bytes() + bytes(3 << 20))  # a valid header, then 3 MB nobody should read
+
+
 def _fifo_image(root: Path) -> None:
     p = _first_image(root)
     p.unlink()
@@ -256,6 +261,10 @@ CASES: dict[str, tuple[Craft, dict, Callable[[psg_data.Dataset], object], str, s
     "8-bit depth image": (_depth_8bit, {"image_layout": "files"}, _frame0,
                           r"depth/000000\.png: depth image header does not fit camera 'd435', refused before decoding",
                           r"^images/scan_000/depth/000000\.png: dtype: png uint8 with 1 channel\(s\), expected a 16-bit"),
+    "image file larger than its camera allows": (
+        _padded_image, {"image_layout": "files"}, _frame0,
+        _IMG + r": missing or unreadable colour image \(\d+ bytes, more than the 1053184 an image of its camera",
+        "^" + _IMG + r": size_bytes: \d+ bytes, more than the 1053184 an image of its camera may take"),
     "FIFO in place of an image": (_fifo_image, {"image_layout": "files"}, _frame0,
                                   _IMG + r": missing or unreadable colour image \(not a regular file\)",
                                   r"^tables/frames\.parquet:0: color_path: image images/scan_000/color/000000\.png "
