@@ -137,7 +137,7 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
     _check_label_tables(c, cols, scan_bounds)
     _check_process_file(c, root, real, info.extra, cols)
     for name, t in tables.items():
-        if name in info.counts and info.counts[name] != t.num_rows:
+        if name in info.counts and info.counts[name] != t.num_rows and not c.has(MANIFEST_NAME, f"counts.{name}"):
             c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
     return c.problems
 
@@ -219,9 +219,9 @@ def _read_tables(c: _Collector, root: Path, real: str, info: DatasetInfo) -> dic
 
 
 def _table_fits(c: _Collector, p: Path, rel: str, real: str, listed_size: int | None, count: int | None) -> bool:
-    """Whether the table at ``p`` may be loaded: inside the dataset, of the size ``files.parquet``
-    lists, with the rows the manifest counts and at most :data:`MAX_TABLE_BYTES` uncompressed
-    (read from its footer); else the problem is reported.
+    """Checks of the table at ``p`` before it is loaded: its size against ``files.parquet`` and its
+    row count (Parquet footer) against the manifest are reported; it may be loaded (True) if it is
+    inside the dataset and declares at most :data:`MAX_TABLE_BYTES` uncompressed.
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -232,9 +232,8 @@ def _table_fits(c: _Collector, p: Path, rel: str, real: str, listed_size: int | 
         return False
     size = p.stat().st_size
     if listed_size is not None and size != listed_size:
-        c.add(rel, "size_bytes", f"file has {size} bytes, tables/files.parquet says {listed_size}; not loaded "
-                                 "(changed or truncated after writing?)")
-        return False
+        c.add(rel, "size_bytes", f"file has {size} bytes, tables/files.parquet says {listed_size} (changed or "
+                                 "truncated after writing?)")
     try:
         meta = pq.read_metadata(p)
     except (OSError, pa.ArrowException):
@@ -245,8 +244,7 @@ def _table_fits(c: _Collector, p: Path, rel: str, real: str, listed_size: int | 
                            "have; not loaded")
         return False
     if count is not None and meta.num_rows != count:
-        c.add(MANIFEST_NAME, f"counts.{p.stem}", f"{count}, but {rel} has {meta.num_rows} rows; not loaded")
-        return False
+        c.add(MANIFEST_NAME, f"counts.{p.stem}", f"{count}, but {rel} has {meta.num_rows} rows")
     return True
 
 

@@ -401,28 +401,39 @@ def test_files_table_listing_a_path_outside(tmp_path: Path, opened: list[str]) -
     assert os.path.realpath(sentinel) not in opened
 
 
-def test_table_size_checked_against_files_table_before_loading(tmp_path: Path, opened: list[str]) -> None:
-    root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=1)
+def test_table_size_and_rows_checked_before_loading(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=1)
     p = root / "tables/scans.parquet"
     p.write_bytes(p.read_bytes() + b"\0" * 4096)  # no longer the size files.parquet lists
-    opened.clear()
-    lines = [str(x) for x in validate_dataset(root)]
-    assert any(ln.startswith("tables/scans.parquet: size_bytes: file has") and "not loaded" in ln
-               for ln in lines), lines
-    assert sum(ln.startswith("tables/scans.parquet: size_bytes") for ln in lines) == 1, lines
-    assert os.path.realpath(p) not in opened
-
-
-def test_table_rows_checked_against_manifest_before_loading(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=1)
     m = json.loads((root / "dataset.json").read_text())
     m["counts"]["frames"] = 10**9
     (root / "dataset.json").write_text(json.dumps(m))
+    order: list[str] = []
+    read_table, read_metadata = pq.read_table, pq.read_metadata
+    monkeypatch.setattr(pq, "read_table", lambda p, *a, **k: order.append("load " + Path(p).name)
+                        or read_table(p, *a, **k))
+    monkeypatch.setattr(pq, "read_metadata", lambda p, *a, **k: order.append("footer " + Path(p).name)
+                        or read_metadata(p, *a, **k))
+    lines = [str(x) for x in validate_dataset(root)]
+    assert "dataset.json: counts.frames: 1000000000, but tables/frames.parquet has 2 rows" in lines
+    assert sum(ln.startswith("tables/scans.parquet: size_bytes: file has") for ln in lines) == 1, lines
+    assert sum("counts.frames" in ln for ln in lines) == 1, lines
+    assert order.index("footer frames.parquet") < order.index("load frames.parquet")
+    assert order[0] == "footer files.parquet"  # files first: it bounds the others
+
+
+def test_table_declaring_too_many_bytes_is_not_loaded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from psg_data.schemas import validate
+
+    root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=1)
+    declared = pq.read_metadata(root / "tables/frames.parquet").row_group(0).total_byte_size
+    monkeypatch.setattr(validate, "MAX_TABLE_BYTES", declared - 1)
     loaded: list[str] = []
     read_table = pq.read_table
     monkeypatch.setattr(pq, "read_table", lambda p, *a, **k: loaded.append(Path(p).name) or read_table(p, *a, **k))
     lines = [str(x) for x in validate_dataset(root)]
-    assert "dataset.json: counts.frames: 1000000000, but tables/frames.parquet has 2 rows; not loaded" in lines
+    assert f"tables/frames.parquet: file: declares {declared} bytes uncompressed, more than the {declared - 1} a " \
+           "table may have; not loaded" in lines
     assert "frames.parquet" not in loaded and "scans.parquet" in loaded
 
 
