@@ -5,10 +5,12 @@ file per image); the baseline decodes the files layout's files with ``cv2.imread
 
 Also measures ``import psg_data`` time in fresh interpreters. Run:
 
-    python bench/bench_loader.py [--quick]
+    python bench/bench_loader.py [--quick] [--baseline-ref main --repeat 5]
 
 Prints a table with the ratio loader / baseline measured in the same run (target >= 0.8x) and
-writes bench/out/loader.json.
+writes bench/out/loader.json. With ``--baseline-ref REF`` the loader of git revision REF reads the
+same datasets too, in child processes alternating with this tree's (``time ratio`` = this tree's
+time / REF's, median over the pairs: above 1 is slower).
 """
 
 from __future__ import annotations
@@ -70,6 +72,43 @@ def time_imread(root: Path) -> tuple[float, int]:
     return time.perf_counter() - t, n
 
 
+_CHILD = """
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+import psg_data
+out = {}
+for spec in sys.argv[2:]:
+    root, prefetch = spec.rsplit(":", 1)
+    def once():
+        scan = psg_data.open_dataset(root).scan("s0")
+        t = time.perf_counter()
+        for fr in scan.frames(prefetch=int(prefetch)):
+            pass
+        return time.perf_counter() - t
+    once()
+    out[spec] = min(once() for _ in range(3))
+print(json.dumps(out))
+"""
+
+
+def baseline_ratios(ref: str, specs: list[str], repeat: int) -> dict[str, dict[str, float]]:
+    """Loader time of this tree and of git revision ``ref`` on each ``ROOT:PREFETCH`` of ``specs``,
+    in alternating child processes; per spec the medians and the median ratio this / ref."""
+    here = Path(__file__).resolve().parents[1]
+    runs: dict[str, list[dict[str, float]]] = {"this": [], "base": []}
+    with tempfile.TemporaryDirectory(prefix="psg-loader-bench-") as tmp:
+        arc = subprocess.run(["git", "-C", str(here), "archive", ref, "psg_data"], capture_output=True, check=True)
+        subprocess.run(["tar", "-x", "-C", tmp], input=arc.stdout, check=True)
+        for _ in range(repeat):
+            for key, src in (("this", str(here)), ("base", tmp)):
+                out = subprocess.run([sys.executable, "-c", _CHILD, src, *specs], capture_output=True, text=True,
+                                     check=True, cwd=tmp)
+                runs[key].append(json.loads(out.stdout))
+    return {s: {"this_s": statistics.median(r[s] for r in runs["this"]),
+                "base_s": statistics.median(r[s] for r in runs["base"]),
+                "ratio": statistics.median(a[s] / b[s] for a, b in zip(runs["this"], runs["base"]))} for s in specs}
+
+
 def import_time(reps: int) -> float:
     times = []
     for _ in range(reps):
@@ -83,6 +122,8 @@ def import_time(reps: int) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer, smaller frames")
+    ap.add_argument("--baseline-ref", default=None, help="git revision whose loader reads the same datasets")
+    ap.add_argument("--repeat", type=int, default=5, help="alternating child pairs with --baseline-ref")
     args = ap.parse_args()
     frames, (w, h) = (20, (320, 240)) if args.quick else (60, (640, 480))
     with tempfile.TemporaryDirectory() as tmp:
@@ -97,6 +138,10 @@ def main() -> None:
             lf.append(time_loader(files_root)[0])
             im.append(time_imread(files_root)[0])
         t_lo, t_lo0, t_lf, t_im = min(lo), min(lo0), min(lf), min(im)
+        versus = {}
+        if args.baseline_ref:
+            specs = [f"{r}:{p}" for r in (root, files_root) for p in (2, 0)]
+            versus = baseline_ratios(args.baseline_ref, specs, args.repeat)
     imp = import_time(5)
     rows = [
         ("psg_data loader, tar layout", frames / t_lo, size_mb / t_lo),
@@ -110,12 +155,23 @@ def main() -> None:
     for name, fps, mbs in rows:
         print(f"{name:42s} {fps:10.1f} {mbs:8.1f} {fps / rows[1][1]:7.2f}x")
     print(f"import psg_data: {imp * 1000:.1f} ms (median of 5 fresh interpreters)")
+    if versus:
+        print(f"\nthis tree vs {args.baseline_ref} ({args.repeat} alternating child pairs, best of 3 passes each; "
+              f"load {Path('/proc/loadavg').read_text().split()[0] if Path('/proc/loadavg').exists() else '?'})")
+        print(f"{'loader':34s} {'this s':>8s} {'ref s':>8s} {'time ratio':>11s}")
+        for spec, v in versus.items():
+            layout = "files" if spec.rsplit(":", 1)[0].endswith("ds_files") else "tar"
+            name = f"{layout} layout, prefetch={spec.rsplit(':', 1)[1]}"
+            print(f"{name:34s} {v['this_s']:8.3f} {v['base_s']:8.3f} {v['ratio']:10.3f}x")
     out = Path(__file__).parent / "out"
     out.mkdir(exist_ok=True)
     (out / "loader.json").write_text(json.dumps({
         "frames": frames, "resolution": [w, h], "loader_fps": rows[0][1], "imread_fps": rows[1][1],
         "ratio": rows[0][1] / rows[1][1], "ratio_no_prefetch": rows[2][1] / rows[1][1],
-        "ratio_files_layout": rows[3][1] / rows[1][1], "import_s": imp}, indent=2))
+        "ratio_files_layout": rows[3][1] / rows[1][1], "import_s": imp,
+        "baseline_ref": args.baseline_ref, "versus_baseline": {
+            ("files" if k.rsplit(":", 1)[0].endswith("ds_files") else "tar") + ":prefetch=" + k.rsplit(":", 1)[1]: v
+            for k, v in versus.items()}}, indent=2))
 
 
 if __name__ == "__main__":

@@ -17,8 +17,10 @@ one file a notebook can load without psg-data internals, one loader that knows i
      "config": {...}, "info": {...}, "breakdowns": {"horizon": [...]}, "errors": [...], "ok": true}
 
 Values are fractions in [0, 1] (SR 0.84, not 84; ``scale`` 100 is for display) or metres; NaN is
-``null``. :func:`load_results` reads a file or a run folder and refuses unknown schemas with one
-line; :func:`results_frame` gives the long table (one row per method and metric) for pandas.
+``null``. :func:`load_results` reads a file or a run folder and refuses, with one line, unknown
+schemas, files larger than :data:`MAX_RESULTS_BYTES` and any field of the wrong type (a results
+folder is untrusted input, docs/SECURITY.md); :func:`results_frame` gives the long table (one row
+per method and metric) for pandas.
 """
 
 from __future__ import annotations
@@ -35,12 +37,68 @@ from psg_data.evaluation._aggregate import Summary
 from psg_data.evaluation._persistence_types import clean_json
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "MetricInfo", "ResultRow", "ResultTable", "EvalResults", "save_results",
-           "load_results", "results_frame", "ROLES"]
+           "load_results", "results_frame", "ROLES", "MAX_RESULTS_BYTES"]
 
 SCHEMA = "psg-eval-results"
 SCHEMA_VERSION = 1
 ROLES = ("ceiling", "baseline", "chance", "method")
 """Row roles in table order: reference rows (the best achievable, simple baselines, chance) first."""
+MAX_RESULTS_BYTES = 16 << 20
+"""Largest ``results.json`` :func:`load_results` reads (runs write tens of kilobytes)."""
+_MAX_ITEMS = 10_000
+"""Most tables, rows, metrics or values one results file may hold."""
+
+# The shape of results.json that the readers rely on: field -> (type, required). Types: "str",
+# "num" (a number or null), "int", "obj" (any object), "list" (any array), a dict (an object of
+# these fields), ("list", T) (an array of T), ("map", T) (an object whose values are T).
+_SUMMARY = {"mean": ("num", False), "std": ("num", False), "ci_low": ("num", False), "ci_high": ("num", False),
+            "n": ("int", False), "method": ("str", False), "unit": ("str", False)}
+_METRIC = {"key": ("str", True), "label": ("str", True), "better": ("str", True), "description": ("str", False),
+           "scale": ("num", False), "digits": ("int", False), "chance": ("num", False)}
+_ROW = {"method": ("str", True), "role": ("str", False), "description": ("str", False),
+        "values": (("map", _SUMMARY), False), "pct_of_ceiling": ("num", False), "counts": ("obj", False)}
+_TABLE = {"name": ("str", True), "title": ("str", False), "metrics": (("list", _METRIC), True),
+          "groups": (("list", "list"), False), "count_columns": (("list", "str"), False), "primary": ("str", False),
+          "rows": (("list", _ROW), True), "notes": (("list", "str"), False)}
+_RESULTS = {"task": ("str", True), "tables": (("list", _TABLE), True), "config": ("obj", False),
+            "info": ("obj", False), "interval": ("obj", False), "breakdowns": ("obj", False),
+            "errors": ("list", False)}
+_JSON_TYPES = {"str": (str,), "num": (int, float), "int": (int,), "obj": (dict,), "list": (list,)}
+_JSON_NAMES = {"str": "a string", "num": "a number or null", "int": "an integer", "obj": "an object",
+               "list": "an array"}
+
+
+def _check_shape(value: Any, spec: Any = None, where: str = "") -> None:
+    """``value`` (parsed ``results.json``) has the shape the readers rely on.
+
+    Raises:
+        EvaluationError: ``FIELD.PATH: expected TYPE, got ...`` for the first field that does not fit.
+    """
+    spec = _RESULTS if spec is None else spec
+    if isinstance(spec, str):
+        ok = isinstance(value, _JSON_TYPES[spec]) and not isinstance(value, bool) or (spec == "num" and value is None)
+        if spec == "num" and isinstance(value, float) and math.isinf(value):
+            ok = False
+        if not ok:
+            raise EvaluationError(f"{where}: expected {_JSON_NAMES[spec]}, got {type(value).__name__} "
+                                  f"{str(value)[:40]!r}")
+        return
+    if isinstance(spec, tuple):
+        kind, item = spec
+        _check_shape(value, "list" if kind == "list" else "obj", where)
+        if len(value) > _MAX_ITEMS:
+            raise EvaluationError(f"{where}: {len(value)} entries, expected at most {_MAX_ITEMS}")
+        pairs = enumerate(value) if kind == "list" else value.items()
+        for k, v in pairs:
+            _check_shape(v, item, f"{where}[{k}]" if kind == "list" else f"{where}.{k}")
+        return
+    _check_shape(value, "obj", where)
+    for key, (item, required) in spec.items():
+        if key in value and not (value[key] is None and not required):
+            _check_shape(value[key], item, f"{where}.{key}".lstrip("."))
+        elif required:
+            raise EvaluationError(f"{where}.{key}".lstrip(".") + ": missing, expected by results schema "
+                                  f"{SCHEMA_VERSION}")
 
 
 @dataclass(frozen=True)
@@ -179,11 +237,15 @@ class EvalResults:
             raise EvaluationError(f"{where}: results schema version {v!r}; this psg-data reads versions 1 to "
                                   f"{SCHEMA_VERSION} (upgrade psg-data to read newer files)")
         try:
+            _check_shape(d)
+        except EvaluationError as exc:
+            raise EvaluationError(f"{where}: malformed results file: {exc}") from None
+        try:
             return EvalResults(str(d["task"]), [ResultTable.from_dict(t) for t in d["tables"]],
                                dict(d.get("config") or {}),
                                dict(d.get("info") or {}), dict(d.get("interval") or {}),
                                dict(d.get("breakdowns") or {}), list(d.get("errors") or []), int(v))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
             raise EvaluationError(f"{where}: malformed results file ({type(exc).__name__}: {exc})") from None
 
 
@@ -228,13 +290,20 @@ def load_results(path: str | Path) -> EvalResults:
     if p.is_dir() or p.suffix != ".json":
         p = p / "results.json"
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+        with open(p, "rb") as fh:
+            raw = fh.read(MAX_RESULTS_BYTES + 1)
+        if len(raw) > MAX_RESULTS_BYTES:
+            raise EvaluationError(f"{p}: larger than {MAX_RESULTS_BYTES} bytes, expected a psg-eval results.json "
+                                  "(runs write tens of kilobytes)")
+        data = json.loads(raw.decode("utf-8"))
     except FileNotFoundError:
         raise EvaluationError(f"{p}: missing; expected a psg-eval output folder or its results.json") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise EvaluationError(f"{p}: cannot read ({exc})") from None
     except json.JSONDecodeError as exc:
         raise EvaluationError(f"{p}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except RecursionError:
+        raise EvaluationError(f"{p}: not a psg-eval results file (JSON nested too deeply)") from None
     if not isinstance(data, dict):
         raise EvaluationError(f"{p}: not a psg-eval results file (expected a JSON object)")
     return EvalResults.from_dict(data, str(p))

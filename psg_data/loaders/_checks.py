@@ -18,7 +18,9 @@ from psg_data.schemas._tables import TABLES, schema_for
 if TYPE_CHECKING:  # pragma: no cover
     import pyarrow as pa
 
-__all__ = ["checked_table", "check_frames", "check_image_bytes", "UNIQUE_KEY_TABLES"]
+    from psg_data.schemas._records import CameraIntrinsics
+
+__all__ = ["checked_table", "check_frames", "check_image_bytes", "check_image_header", "UNIQUE_KEY_TABLES"]
 
 UNIQUE_KEY_TABLES = ("cameras", "scans", "frames", "rooms", "receptacles", "doors", "objects")
 """Tables whose primary key the loader checks (records are looked up by it)."""
@@ -122,3 +124,24 @@ def check_image_bytes(data: bytes, where: object, what: str) -> None:
     except DamagedImage as exc:
         raise FormatError(f"{where}: missing or unreadable {what} image (corrupt: {exc}); psg-data validate lists "
                           f"every such image") from None
+
+
+def check_image_header(data: bytes, camera: CameraIntrinsics, kind: str, where: object) -> None:
+    """The header of a stored image fits its camera (size, 8-bit 3-channel colour, 16-bit
+    single-channel PNG depth, at most :data:`~psg_data.schemas._image_headers.MAX_IMAGE_PIXELS`), read
+    before any pixel is decoded: a decompression bomb or an image of another type is refused here.
+
+    Raises:
+        FormatError: ``where: colour/depth image header ...: what is wrong, what was expected``.
+    """
+    from psg_data.schemas._image_headers import header_problems, parse_image_header
+
+    what = "colour" if kind == "color" else "depth"
+    try:
+        hdr = parse_image_header(data)
+    except ValueError as exc:
+        raise FormatError(f"{where}: missing or unreadable {what} image ({exc})") from None
+    problems = header_problems(hdr, kind, camera.width, camera.height)
+    if problems:
+        raise FormatError(f"{where}: {what} image header does not fit camera {camera.camera_id!r}, refused before "
+                          f"decoding: " + "; ".join(f"{f} {m}" for f, m in problems))

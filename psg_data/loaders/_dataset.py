@@ -3,6 +3,10 @@
 Tables are read on first access and cached; images are decoded one frame at a time. An image is a
 whole file (``files`` layout, every 1.x dataset) or a byte range of its scan's tar archive (``tar``
 layout): reading frame *i* costs two ``pread`` calls either way, never a scan-wide read.
+
+A dataset is untrusted input (docs/SECURITY.md): every path it names is opened only if it stays
+inside the dataset (:mod:`psg_data.schemas._paths`), no image is read past the size its camera
+allows, and an image's header must fit its camera before a pixel is decoded.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import bisect
 import logging
 import os
+import stat
 import threading
 from collections.abc import Iterator, Sequence
 from functools import cached_property
@@ -20,8 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import FormatError
-from psg_data.loaders._checks import check_frames, check_image_bytes, checked_table
+from psg_data.loaders._checks import check_frames, check_image_bytes, check_image_header, checked_table
+from psg_data.schemas._image_headers import max_encoded_bytes
 from psg_data.schemas._manifest import DatasetInfo, read_manifest
+from psg_data.schemas._paths import inside_dataset, open_inside, real_root
 from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import TABLES, table_path
 
@@ -115,6 +122,7 @@ class Dataset:
             path = self.root / table_path(name)
             if not path.is_file():
                 raise FormatError(f"{path}: missing table {name!r}")
+            inside_dataset(self._images.real_root, table_path(name), f"{self.root}: table {name!r}")
             try:
                 table = pq.read_table(path)
             except (OSError, pa.ArrowException) as exc:
@@ -186,6 +194,7 @@ class Dataset:
         scan = np.asarray(t.column("scan_id").to_numpy(zero_copy_only=False))
         order = np.lexsort((t.column("frame_index").to_numpy(), scan))
         cols = {
+            "row": order,
             "frame_index": t.column("frame_index").to_numpy()[order],
             "stamp_ns": t.column("stamp_ns").to_numpy()[order],
             "camera_id": np.asarray(t.column("camera_id").to_numpy(zero_copy_only=False))[order],
@@ -272,8 +281,14 @@ class Scan:
     def _read(self, kind: str, i: int) -> bytes:
         f = self._f
         path, off = str(f[f"{kind}_path"][i]), int(f[f"{kind}_offset"][i])
+        cam = self.dataset.cameras[str(f["camera_id"][i])]
+        images = self.dataset._images
+        field = f"{table_path('frames')}:{int(f['row'][i])}: {kind}_path"
         try:
-            return self.dataset._images.read(path, off, int(f[f"{kind}_size"][i]))
+            return images.read(path, off, int(f[f"{kind}_size"][i]), max_encoded_bytes(cam.width, cam.height, kind),
+                               field)
+        except _UnsafePath:
+            raise
         except FormatError as exc:
             what = "colour" if kind == "color" else "depth"
             raise FormatError(f"{self._where(kind, i)}: missing or unreadable {what} image ({exc})") from exc
@@ -304,12 +319,14 @@ class Scan:
         rgb = np.zeros((0, 0, 3), np.uint8)
         dm = np.zeros((0, 0), np.float32)
         if color:
+            check_image_header(cbytes, cam, "color", self._where("color", i))
             check_image_bytes(cbytes, self._where("color", i), "colour")
             decoded = _decode_rgb(cv2, cbytes)
             if decoded is None:
                 raise FormatError(f"{self._where('color', i)}: missing or unreadable colour image (cannot decode)")
             rgb = decoded
         if depth:
+            check_image_header(dbytes, cam, "depth", self._where("depth", i))
             check_image_bytes(dbytes, self._where("depth", i), "depth")
             raw = cv2.imdecode(np.frombuffer(dbytes, np.uint8), cv2.IMREAD_UNCHANGED) if dbytes else None
             where = self._where("depth", i)
@@ -395,14 +412,23 @@ def _decode_rgb(cv2: Any, data: bytes) -> NDArray[np.uint8] | None:
     return None if rgb is None else np.asarray(rgb, dtype=np.uint8)
 
 
+class _UnsafePath(FormatError):
+    """A path of the dataset leaves it (raised as it is, not as an unreadable image)."""
+
+
 class _ImageFiles:
-    """Reads images: whole files, or byte ranges of archives kept open (``pread``, thread-safe)."""
+    """Reads images: whole files, or byte ranges of archives kept open (``pread``, thread-safe).
+
+    Every path is checked to stay inside the dataset before it is opened (an archive once, when
+    its descriptor is opened), and no read exceeds the ``limit`` its caller allows.
+    """
 
     _MAX_OPEN = 64
 
     def __init__(self, root: Path) -> None:
         self.root = root
-        self._fds: dict[str, int] = {}
+        self._fds: dict[str, tuple[int, int]] = {}  # rel -> (descriptor, file size)
+        self._dirs: set[str] = set()  # directories found inside the dataset
         self._lock = threading.Lock()
 
     def __getstate__(self) -> dict[str, Any]:
@@ -411,15 +437,53 @@ class _ImageFiles:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["root"])  # type: ignore[misc]
 
-    def read(self, rel: str, offset: int, size: int) -> bytes:
-        """Bytes of the image stored at ``rel`` (``offset`` < 0: the whole file). FormatError says why not."""
-        path = self.root / rel
+    @cached_property
+    def real_root(self) -> str:
+        """The dataset root, symbolic links resolved (what every path must stay inside)."""
+        return real_root(self.root)
+
+    def _open(self, rel: str, where: str) -> tuple[int, int]:
+        """A read descriptor of the regular file ``rel`` inside the dataset, and its size (a FIFO or
+        device is refused without blocking: ``O_NONBLOCK`` where the system has it).
+        """
+        flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0)
+        try:
+            fd = open_inside(self.real_root, rel, where, flags, self._dirs)
+        except FormatError as exc:
+            raise _UnsafePath(str(exc)) from None
+        except OSError as exc:
+            raise FormatError(exc.strerror or type(exc).__name__) from exc
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            os.close(fd)
+            raise FormatError("not a regular file")
+        return fd, st.st_size
+
+    def read(self, rel: str, offset: int, size: int, limit: int, where: str) -> bytes:
+        """Bytes of the image stored at ``rel`` (``offset`` < 0: the whole file), at most ``limit``.
+
+        Args:
+            rel: the path the ``frames`` table names, relative to the dataset root.
+            offset: byte offset of the image in the archive ``rel``; < 0 for the whole file.
+            size: bytes of the image in the archive (ignored for a whole file).
+            limit: most bytes the image may have (:func:`~psg_data.schemas._image_headers.max_encoded_bytes`).
+            where: the table cell naming ``rel``, for the error (``tables/frames.parquet:ROW: color_path``).
+
+        Raises:
+            FormatError: says why not (:class:`_UnsafePath` when ``rel`` leaves the dataset).
+        """
         if offset < 0:
-            try:
-                return path.read_bytes()
-            except OSError as exc:
-                raise FormatError(exc.strerror or type(exc).__name__) from exc
-        fd = self._fd(rel)
+            fd, fsize = self._open(rel, where)
+            with open(fd, "rb") as fh:
+                if fsize > limit:
+                    raise FormatError(f"{fsize} bytes, more than the {limit} an image of its camera may take")
+                return fh.read(fsize + 1)
+        fd, fsize = self._fd(rel, where)
+        if offset + size > fsize:
+            raise FormatError(f"{size} bytes at offset {offset} lie beyond the end of {rel} ({fsize} bytes; "
+                              "truncated?)")
+        if not 0 < size <= limit:
+            raise FormatError(f"{size} bytes, expected 1 to {limit} (the most an image of its camera may take)")
         data = os.pread(fd, size, offset) if hasattr(os, "pread") else self._seek_read(fd, size, offset)
         if len(data) != size:
             raise FormatError(f"{size} bytes at offset {offset} lie beyond the end of {rel} (truncated?)")
@@ -430,22 +494,18 @@ class _ImageFiles:
             os.lseek(fd, offset, os.SEEK_SET)
             return os.read(fd, size)
 
-    def _fd(self, rel: str) -> int:
+    def _fd(self, rel: str, where: str) -> tuple[int, int]:
         with self._lock:
-            fd = self._fds.get(rel)
-            if fd is None:
+            entry = self._fds.get(rel)
+            if entry is None:
                 if len(self._fds) >= self._MAX_OPEN:
-                    os.close(self._fds.pop(next(iter(self._fds))))
-                try:
-                    fd = os.open(self.root / rel, os.O_RDONLY | getattr(os, "O_BINARY", 0))
-                except OSError as exc:
-                    raise FormatError(exc.strerror or type(exc).__name__) from exc
-                self._fds[rel] = fd
-            return fd
+                    os.close(self._fds.pop(next(iter(self._fds)))[0])
+                entry = self._fds[rel] = self._open(rel, where)
+            return entry
 
     def close(self) -> None:
         with self._lock:
-            for fd in self._fds.values():
+            for fd, _ in self._fds.values():
                 os.close(fd)
             self._fds.clear()
 

@@ -49,6 +49,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import PsgDataError
+from psg_data.schemas._paths import inside_dataset, real_root
 
 __all__ = ["EntityProcess", "StepProcess", "StepClock", "PROCESS_FORMAT", "PROCESS_VERSION", "PROCESS_FILE",
            "WEEKDAYS", "SATURDAY", "load_process", "normalize_rows"]
@@ -370,6 +371,8 @@ def load_process(source: Any) -> StepProcess:
         return StepProcess.from_dict(source)
     root = Path(source.root) if hasattr(source, "table") else Path(source)  # a Dataset, or a path
     path = root / PROCESS_FILE if root.is_dir() else root
+    if root.is_dir() and path.is_file():
+        inside_dataset(real_root(root), PROCESS_FILE, f"{root}: generator model")
     if not path.is_file():
         raise PsgDataError(f"{root}: no generator process ({PROCESS_FILE}); the exact model is stored only by "
                            "psg-data synth (generator steps-v2) datasets")

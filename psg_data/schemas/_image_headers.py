@@ -11,12 +11,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ImageHeader", "parse_image_header", "parse_image_header_end", "read_image_header"]
+__all__ = ["ImageHeader", "parse_image_header", "parse_image_header_end", "read_image_header", "header_problems",
+           "MAX_IMAGE_PIXELS", "max_encoded_bytes"]
 
 _PNG_SIG = b"\x89PNG\r\n\x1a\n"
 _PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
 _HEAD_BYTES = 64 * 1024
 """Enough for the frame header of any JPEG short of one carrying a large EXIF thumbnail first."""
+MAX_IMAGE_PIXELS = 1 << 26
+"""Pixels an image of a dataset may have (8192 x 8192; 192 MiB as 8-bit RGB): the second line of the
+checks before decoding, after the camera's own size (docs/SECURITY.md)."""
 
 
 @dataclass(frozen=True)
@@ -113,3 +117,43 @@ def read_image_header(path: str | Path, offset: int = 0, size: int | None = None
                 raise
             fh.seek(offset)
             return parse_image_header(fh.read(size))
+
+
+def header_problems(hdr: ImageHeader, kind: str, width: int, height: int, color_format: str | None = None
+                    ) -> list[tuple[str, str]]:
+    """``(field, what is wrong and what was expected)`` for each way a stored image's header does not
+    fit its camera (empty: it fits); the loader refuses such an image before decoding a pixel.
+
+    Args:
+        hdr: the parsed header.
+        kind: ``color`` (8-bit, 3 channels) or ``depth`` (16-bit single-channel PNG).
+        width: the camera's image width, pixels.
+        height: the camera's image height, pixels.
+        color_format: ``png`` or ``jpeg`` for a colour image when the format matters too (the
+            dataset's ``color_encoding``); None accepts either.
+    """
+    out: list[tuple[str, str]] = []
+    pixels = hdr.width * hdr.height
+    if pixels > MAX_IMAGE_PIXELS:
+        out.append(("size", f"{hdr.width}x{hdr.height} = {pixels} pixels, over the limit of {MAX_IMAGE_PIXELS} "
+                            "pixels per image"))
+    if (hdr.width, hdr.height) != (width, height):
+        out.append(("size", f"{hdr.width}x{hdr.height}, expected the camera's {width}x{height}"))
+    if kind == "depth" and (hdr.kind != "png" or hdr.bit_depth != 16 or hdr.channels != 1):
+        out.append(("dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), "
+                             "expected a 16-bit single-channel PNG (uint16 millimetres)"))
+    if kind == "color":
+        want = color_format or hdr.kind
+        if hdr.kind != want or hdr.bit_depth != 8 or hdr.channels != 3:
+            out.append(("dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected an 8-bit "
+                                 f"3-channel {color_format or 'PNG or JPEG'}"
+                                 f"{' (dataset color_encoding)' if color_format else ''}"))
+    return out
+
+
+def max_encoded_bytes(width: int, height: int, kind: str) -> int:
+    """Most bytes a stored image of a ``width`` x ``height`` camera may take: twice its raw pixels
+    plus 1 MiB (PNG of noise and JPEG at quality 100 stay far below); the loader reads no more.
+    """
+    per_pixel = 3 if kind == "color" else 2
+    return 2 * max(width, 0) * max(height, 0) * per_pixel + (1 << 20)

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from psg_data.errors import FormatError
+from psg_data.schemas._paths import inside_dataset, real_root
 
 __all__ = ["DatasetInfo", "FORMAT_NAME", "FORMAT_VERSION", "read_manifest", "manifest_from_dict", "format_major",
            "parse_format_version"]
@@ -145,6 +146,7 @@ def read_manifest(root: str | Path) -> DatasetInfo:
     path = Path(root) / "dataset.json"
     if not path.is_file():
         raise FormatError(f"{path}: missing manifest; is {root} a psg-dataset directory?")
+    inside_dataset(real_root(root), "dataset.json", f"{root}: manifest")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

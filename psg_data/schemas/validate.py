@@ -19,8 +19,9 @@ if TYPE_CHECKING:
 
 from psg_data.errors import FormatError, PsgDataError
 from psg_data.schemas._camera_checks import intrinsics_problems
-from psg_data.schemas._image_headers import parse_image_header, read_image_header
+from psg_data.schemas._image_headers import header_problems, max_encoded_bytes, parse_image_header, read_image_header
 from psg_data.schemas._manifest import FORMAT_VERSION, DatasetInfo, manifest_from_dict, parse_format_version
+from psg_data.schemas._paths import path_problem, real_root
 from psg_data.schemas._tables import (
     DOOR_STATES,
     LABEL_CODES,
@@ -37,6 +38,9 @@ log = logging.getLogger(__name__)
 
 _ROT_TOL = 1e-5
 _MAX_PER_CHECK = 20  # problems reported per check before summarising
+MAX_TABLE_BYTES = 1 << 30
+"""Uncompressed bytes a table may declare (Parquet footer) before the validator refuses to load it."""
+_OUTSIDE = "expected a relative path inside the dataset"
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,10 @@ class _Collector:
             self.problems.append(Problem(file, field, message, row))
         elif n == _MAX_PER_CHECK + 1:
             self.problems.append(Problem(file, field, "more problems of this kind not shown"))
+
+    def has(self, file: str, field: str) -> bool:
+        """Whether a problem of ``file`` and ``field`` was reported."""
+        return (file, field) in self._counts
 
 
 def _rows_where(mask: np.ndarray) -> list[int]:
@@ -113,8 +121,9 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
         c.add(MANIFEST_NAME, "format_version", f"{info.format_version} is newer than this psg-data validates "
                                                f"({FORMAT_VERSION}); upgrade psg-data to validate it")
         return c.problems
-    tables = _read_tables(c, root, info.major)
-    _check_files(c, root, info, tables, checksums)
+    real = real_root(root)
+    tables = _read_tables(c, root, real, info)
+    _check_files(c, root, real, info, tables, checksums)
     cols: dict[str, dict[str, list[Any]]] = {n: t.to_pydict() for n, t in tables.items() if n != "files"}
     _check_keys(c, cols)
     cams = _check_cameras(c, cols)
@@ -124,11 +133,11 @@ def validate_dataset(path: str | Path, *, checksums: bool = True, images: bool =
     if "frames" in tables and tables["frames"].num_rows:
         _check_frames(c, tables["frames"], scan_bounds)
         if images:
-            _check_images(c, root, cols["frames"], cams, info.color_encoding, decode)
+            _check_images(c, root, real, cols["frames"], cams, info.color_encoding, decode)
     _check_label_tables(c, cols, scan_bounds)
-    _check_process_file(c, root, info.extra, cols)
+    _check_process_file(c, root, real, info.extra, cols)
     for name, t in tables.items():
-        if name in info.counts and info.counts[name] != t.num_rows:
+        if name in info.counts and info.counts[name] != t.num_rows and not c.has(MANIFEST_NAME, f"counts.{name}"):
             c.add(MANIFEST_NAME, f"counts.{name}", f"{info.counts[name]}, but {table_path(name)} has {t.num_rows} rows")
     return c.problems
 
@@ -139,6 +148,8 @@ def _read_manifest(c: _Collector, root: Path) -> DatasetInfo | None:
     mpath = root / MANIFEST_NAME
     if not mpath.is_file():
         c.add(MANIFEST_NAME, "file", "missing manifest, expected dataset.json at the dataset root")
+    elif (outside := path_problem(real_root(root), MANIFEST_NAME)) is not None:
+        c.add(MANIFEST_NAME, "path", f"{outside}, expected the manifest inside the dataset")
     else:
         try:
             info = manifest_from_dict(json.loads(mpath.read_text(encoding="utf-8")), MANIFEST_NAME,
@@ -154,19 +165,26 @@ def _read_manifest(c: _Collector, root: Path) -> DatasetInfo | None:
     return info
 
 
-def _read_tables(c: _Collector, root: Path, major: int) -> dict[str, pa.Table]:
-    """Every table of the format that is present, readable and of its schema."""
+def _read_tables(c: _Collector, root: Path, real: str, info: DatasetInfo) -> dict[str, pa.Table]:
+    """Every table of the format that is present, inside the dataset, of the size ``files.parquet``
+    and the manifest say (checked before it is loaded), readable and of its schema.
+    """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    major = info.major
     tables: dict[str, pa.Table] = {}
-    for name, spec in TABLES.items():
+    listed: dict[str, int] = {}
+    for name in sorted(TABLES, key=lambda n: n != "files"):  # files first: it bounds the others
+        spec = TABLES[name]
         rel = table_path(name)
         p = root / rel
         schema = schema_for(name, major)
         if not p.is_file():
             if spec.required:
                 c.add(rel, "file", f"missing table '{name}', expected a Parquet file with columns {schema.names}")
+            continue
+        if not _table_fits(c, p, rel, real, listed.get(rel), info.counts.get(name)):
             continue
         try:
             t = pq.read_table(p)
@@ -195,10 +213,43 @@ def _read_tables(c: _Collector, root: Path, major: int) -> dict[str, pa.Table]:
             c.add(rel, n, f"unknown column, expected only {schema.names} (format {major}.x)")
         if ok:
             tables[name] = t
+            if name == "files":
+                listed = dict(zip(t.column("path").to_pylist(), t.column("size_bytes").to_pylist()))
     return tables
 
 
-def _check_files(c: _Collector, root: Path, info: DatasetInfo, tables: dict[str, pa.Table], checksums: bool) -> None:
+def _table_fits(c: _Collector, p: Path, rel: str, real: str, listed_size: int | None, count: int | None) -> bool:
+    """Checks of the table at ``p`` before it is loaded: its size against ``files.parquet`` and its
+    row count (Parquet footer) against the manifest are reported; it may be loaded (True) if it is
+    inside the dataset and declares at most :data:`MAX_TABLE_BYTES` uncompressed.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    outside = path_problem(real, rel)
+    if outside is not None:
+        c.add(rel, "path", f"{outside}, {_OUTSIDE}; not loaded")
+        return False
+    size = p.stat().st_size
+    if listed_size is not None and size != listed_size:
+        c.add(rel, "size_bytes", f"file has {size} bytes, tables/files.parquet says {listed_size} (changed or "
+                                 "truncated after writing?)")
+    try:
+        meta = pq.read_metadata(p)
+    except (OSError, pa.ArrowException):
+        return True  # reading it reports what is wrong
+    declared = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+    if declared > MAX_TABLE_BYTES:
+        c.add(rel, "file", f"declares {declared} bytes uncompressed, more than the {MAX_TABLE_BYTES} a table may "
+                           "have; not loaded")
+        return False
+    if count is not None and meta.num_rows != count:
+        c.add(MANIFEST_NAME, f"counts.{p.stem}", f"{count}, but {rel} has {meta.num_rows} rows")
+    return True
+
+
+def _check_files(c: _Collector, root: Path, real: str, info: DatasetInfo, tables: dict[str, pa.Table],
+                 checksums: bool) -> None:
     """``files.parquet`` against the manifest, and every file against ``files.parquet`` (sizes; with
     ``checksums`` also SHA-256); files on disk it does not list.
     """
@@ -215,13 +266,20 @@ def _check_files(c: _Collector, root: Path, info: DatasetInfo, tables: dict[str,
     listed: set[str] = set()
     if "files" in tables:
         ft = tables["files"].to_pydict()
-        for rel, size, digest in zip(ft["path"], ft["size_bytes"], ft["sha256"]):
+        for row, (rel, size, digest) in enumerate(zip(ft["path"], ft["size_bytes"], ft["sha256"])):
             listed.add(rel)
+            outside = path_problem(real, rel)
+            if outside is not None:
+                if not c.has(rel, "path"):
+                    c.add(files_rel, "path", f"{rel!r} {outside}, {_OUTSIDE}", row)
+                continue
             p = root / rel
             if not p.is_file():
                 c.add(rel, "file", "missing, listed in tables/files.parquet", None)
                 continue
             st = p.stat().st_size
+            if c.has(rel, "size_bytes"):
+                continue
             if st != size:
                 c.add(rel, "size_bytes", f"file has {st} bytes, tables/files.parquet says {size} (truncated?)")
             elif checksums and sha256_file(p) != digest:
@@ -357,14 +415,15 @@ def _check_frames(c: _Collector, t: pa.Table, scan_bounds: dict[str, tuple[int, 
                                        f"[{a}, {b}]", j)
 
 
-def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str, dict], color_encoding: str,
-                  decode: bool = True) -> None:
-    """Every image exists (whole file or byte range of a tar member), its header fits its camera and
-    (``decode``) it is complete and decodes.
+def _check_images(c: _Collector, root: Path, real: str, d: dict[str, list], cams: dict[str, dict],
+                  color_encoding: str, decode: bool = True) -> None:
+    """Every image is inside the dataset and exists (whole file or byte range of a tar member), its
+    header fits its camera and (``decode``, only then) it is complete and decodes.
     """
     rel = table_path("frames")
     n = len(d["scan_id"])
     sizes: dict[str, int | None] = {}
+    outside: dict[str, str | None] = {}
     fds: dict[str, object] = {}
 
     def file_size(rp: str) -> int | None:
@@ -380,6 +439,11 @@ def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str,
                 rp = d[f"{kind}_path"][j]
                 off = d.get(f"{kind}_offset", [None] * n)[j]
                 size = d.get(f"{kind}_size", [None] * n)[j]
+                if rp not in outside:
+                    outside[rp] = path_problem(real, rp)
+                if outside[rp] is not None:
+                    c.add(rel, f"{kind}_path", f"path {rp!r} {outside[rp]}, {_OUTSIDE}", j)
+                    continue
                 fsize = file_size(rp)
                 if fsize is None:
                     c.add(rel, f"{kind}_path", f"image {rp} does not exist", j)
@@ -420,18 +484,15 @@ def _check_images(c: _Collector, root: Path, d: dict[str, list], cams: dict[str,
                     except (OSError, ValueError) as exc:
                         c.add(where, "image", f"unreadable image header ({exc}), expected PNG or JPEG")
                         continue
-                if cam is not None and (hdr.width, hdr.height) != (cam["width"], cam["height"]):
-                    c.add(where, "size", f"{hdr.width}x{hdr.height}, expected the camera's "
-                                         f"{cam['width']}x{cam['height']}")
-                if kind == "depth" and (hdr.kind != "png" or hdr.bit_depth != 16 or hdr.channels != 1):
-                    c.add(where, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), "
-                                          "expected a 16-bit single-channel PNG (uint16 millimetres)")
-                if kind == "color":
-                    want = "jpeg" if color_encoding == "jpeg" else "png"
-                    if hdr.kind != want or hdr.bit_depth != 8 or hdr.channels != 3:
-                        c.add(where, "dtype", f"{hdr.kind} {hdr.dtype} with {hdr.channels} channel(s), expected "
-                                              f"an 8-bit 3-channel {want} (dataset color_encoding)")
-                if decode:
+                w, h = (cam["width"], cam["height"]) if cam is not None else (hdr.width, hdr.height)
+                problems = header_problems(hdr, kind, w, h, "jpeg" if color_encoding == "jpeg" else "png")
+                nbytes, limit = (fsize if off is None else size), max_encoded_bytes(w, h, kind)
+                if nbytes > limit:
+                    problems.append(("size_bytes", f"{nbytes} bytes, more than the {limit} an image of its camera "
+                                                   "may take"))
+                for field, what in problems:
+                    c.add(where, field, what)
+                if decode and not problems:  # never decode an image whose header does not fit: a bomb
                     _verify(c, root / rp, off, size, hdr, where)
     finally:
         for fh in fds.values():
@@ -514,13 +575,18 @@ def _check_label_tables(c: _Collector, cols: dict[str, dict[str, list[Any]]],
                                       "expected false", i)
 
 
-def _check_process_file(c: _Collector, root: Path, extra: dict[str, Any], cols: dict[str, dict[str, list]]) -> None:
+def _check_process_file(c: _Collector, root: Path, real: str, extra: dict[str, Any],
+                        cols: dict[str, dict[str, list]]) -> None:
     """A synthetic dataset's generator model (manifest ``extra.process_file``): present, readable,
     well formed (shapes, stochastic rows, ranges) and naming objects, doors and receptacles of the
     dataset (docs/FORMAT.md, "Generator model").
     """
     rel = extra.get("process_file") if isinstance(extra, dict) else None
     if not rel:
+        return
+    outside = path_problem(real, rel)
+    if outside is not None:
+        c.add(MANIFEST_NAME, "extra.process_file", f"path {rel!r} {outside}, {_OUTSIDE}")
         return
     path = root / str(rel)
     if not path.is_file():

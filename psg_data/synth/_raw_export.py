@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import FormatError
+from psg_data.loaders._checks import check_image_header
 from psg_data.loaders.raw._images import make_compressed_depth
 from psg_data.loaders.raw._transforms import invert, make_transform, matrix_to_quat_xyzw
 from psg_data.schemas._records import CameraIntrinsics
@@ -381,12 +382,14 @@ def _frame_images(ds: Any, scan: Any, cam: CameraIntrinsics, i: int, want_raw: b
     color_bytes, depth_png = scan.image_bytes(i)
     rgb = depth_mm = None
     if want_raw or ds.info.color_encoding != "jpeg":
+        check_image_header(color_bytes, cam, "color", f"{ds.root}: scan {scan.scan_id} frame {i}")
         bgr = cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
         if bgr is None:
             raise FormatError(f"{ds.root}: scan {scan.scan_id} frame {i}: unreadable colour image")
         rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
     rescale = abs(cam.depth_scale_m - 0.001) > 1e-12
     if want_raw or rescale:
+        check_image_header(depth_png, cam, "depth", f"{ds.root}: scan {scan.scan_id} frame {i}")
         raw = cv2.imdecode(np.frombuffer(depth_png, np.uint8), cv2.IMREAD_UNCHANGED)
         if raw is None:
             raise FormatError(f"{ds.root}: scan {scan.scan_id} frame {i}: unreadable depth image")

@@ -84,3 +84,21 @@ def test_scannet_folder_with_invalid_pose(tmp_path: Path) -> None:
     assert sc.stamps_ns.tolist() == [5, 5 + 200_000_000]
     np.testing.assert_allclose(sc.poses[1], pose(2, 0), atol=1e-12)
     assert np.array_equal(sc.frame(1).color, images(2, 0)[0])
+
+
+def test_tum_list_naming_a_file_outside_the_recording_is_an_error(tmp_path: Path) -> None:
+    import pytest
+
+    from psg_data.errors import ConversionError
+
+    make_tum(tmp_path / "fr1", n=2)
+    outside = tmp_path / "outside.png"
+    (tmp_path / "fr1/rgb").iterdir().__next__().rename(outside)  # a valid image, now beside the recording
+    text = (tmp_path / "fr1/rgb.txt").read_text().splitlines()
+    for bad in ("../outside.png", str(outside)):
+        stamp = text[1].split()[0]
+        (tmp_path / "fr1/rgb.txt").write_text("\n".join([text[0], f"{stamp} {bad}", *text[2:]]) + "\n")
+        cfg = ConvertConfig(intrinsics=[CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy])
+        with pytest.raises(ConversionError, match=r"rgb\.txt:2: .*(has a '\.\.' component|is absolute); expected a "
+                                                  r"path relative to"):
+            convert(tmp_path / "fr1", tmp_path / "out")

@@ -104,3 +104,59 @@ def test_write_persistence_results_replaces_each_file_atomically(tmp_path: Path,
         write_persistence_results(res, tmp_path, info={"run": 2})
     assert paths["by_receptacle"].read_bytes() == before["by_receptacle"]
     assert files_in(tmp_path) == sorted(p.name for p in paths.values())
+
+
+def _tamper(path: Path, fn) -> None:  # type: ignore[no-untyped-def]
+    data = json.loads(path.read_text())
+    fn(data)
+    path.write_text(json.dumps(data))
+
+
+@pytest.mark.parametrize("tamper, message", [
+    (lambda d: d.update(tables=["x"]), r"tables\[0\]: expected an object, got str"),
+    (lambda d: d.update(tables={"a": 1}), r"tables: expected an array, got dict"),
+    (lambda d: d["tables"][0]["rows"][0].update(method=7), r"tables\[0\]\.rows\[0\]\.method: expected a string"),
+    (lambda d: d["tables"][0]["rows"][0]["values"]["mae"].update(n=float("inf")),
+     r"tables\[0\]\.rows\[0\]\.values\.mae\.n: expected an integer, got float"),
+    (lambda d: d["tables"][0]["rows"][0]["values"]["mae"].update(mean="0.2"),
+     r"tables\[0\]\.rows\[0\]\.values\.mae\.mean: expected a number or null, got str"),
+    (lambda d: d["tables"][0]["metrics"][0].pop("key"), r"tables\[0\]\.metrics\[0\]\.key: missing"),
+    (lambda d: d["tables"][0].update(rows=[{"method": "m"}] * 10_001), r"tables\[0\]\.rows: 10001 entries, expected at most 10000"),
+    (lambda d: d.pop("task"), r"task: missing"),
+])
+def test_loader_checks_the_schema_with_one_line(tmp_path: Path, tamper, message: str) -> None:  # type: ignore[no-untyped-def]
+    path = save_results(_results(), tmp_path)["json"]
+    _tamper(path, tamper)
+    with pytest.raises(EvaluationError, match=r"results\.json: malformed results file: " + message) as err:
+        load_results(tmp_path)
+    assert "\n" not in str(err.value)
+
+
+def test_loader_refuses_absurd_sizes_before_parsing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from psg_data.evaluation._results import MAX_RESULTS_BYTES
+
+    path = save_results(_results(), tmp_path)["json"]
+    parsed: list[int] = []
+    loads = json.loads
+    monkeypatch.setattr(json, "loads", lambda s, *a, **k: parsed.append(len(s)) or loads(s, *a, **k))
+    with path.open("ab") as fh:
+        fh.write(b" " * (MAX_RESULTS_BYTES + 1))
+    with pytest.raises(EvaluationError, match=r"results\.json: larger than 16777216 bytes"):
+        load_results(tmp_path)
+    assert parsed == []
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(EvaluationError, match="nested too deeply"):
+        load_results(tmp_path)
+
+
+def test_compare_refuses_a_malformed_results_file_with_one_line(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from psg_data.cli.psg_eval_cmd import main
+
+    save_results(_results(), tmp_path / "run")
+    _tamper(tmp_path / "run/results.json", lambda d: d["tables"][0].update(metrics=[3]))
+    res = CliRunner().invoke(main, ["compare", str(tmp_path / "run")])
+    assert res.exit_code == 1
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "tables[0].metrics[0]: expected an object" in lines[0]

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from psg_data._settings import STAMP_MAX_NS, shown
 from psg_data.errors import ConversionError
+from psg_data.schemas._paths import path_problem
 
 _STAMP_MAX_S = Decimal(STAMP_MAX_NS) / 1_000_000_000
 
@@ -114,6 +115,9 @@ def _image_list(folder: Path, name: str) -> list[tuple[int, Path]]:
     for where, *cols in _list_file(folder / name):
         if len(cols) != 2:
             raise ConversionError(f"{where}: expected 'timestamp filename', got {len(cols)} value(s)")
+        outside = path_problem(str(folder), cols[1], resolve=False)
+        if outside is not None:
+            raise ConversionError(f"{where}: {cols[1]}: {outside}; expected a path relative to {folder}")
         f = folder / cols[1]
         if not f.is_file():
             raise ConversionError(f"{where}: {cols[1]}: listed image not found in {folder}; expected every image "
