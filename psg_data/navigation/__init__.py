@@ -34,6 +34,30 @@
 
 from __future__ import annotations
 
+from psg_data.graph._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
+from psg_data.maps._grid import (
+    OccupancyGrid,
+    box_footprint,
+    bresenham,
+    bresenham_many,
+    grid_from_dataset,
+    grid_from_geometry,
+    grid_from_points,
+    grid_from_scans,
+    line_of_sight,
+    points_in_polygon,
+)
+from psg_data.maps._planner import (
+    SQRT2,
+    GridPlanner,
+    PathResult,
+    PlanningCache,
+    astar,
+    astar_reference,
+    grid_graph,
+    octile_distance,
+    path_length_m,
+)
 from psg_data.navigation._agent import OUTCOMES, SETTINGS, AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import (
     LastSeenFilter,
@@ -66,30 +90,7 @@ from psg_data.navigation._doors import (
     run_door_navigation,
 )
 from psg_data.navigation._env import WEEK_S, DatasetTimeline, NavigationEnv, streams_from_states
-from psg_data.navigation._grid import (
-    OccupancyGrid,
-    box_footprint,
-    bresenham,
-    bresenham_many,
-    grid_from_dataset,
-    grid_from_geometry,
-    grid_from_points,
-    grid_from_scans,
-    line_of_sight,
-    points_in_polygon,
-)
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
-from psg_data.navigation._planner import (
-    SQRT2,
-    GridPlanner,
-    PathResult,
-    PlanningCache,
-    astar,
-    astar_reference,
-    grid_graph,
-    octile_distance,
-    path_length_m,
-)
 from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query
 from psg_data.navigation._queries import (
     CATEGORIES,
@@ -106,11 +107,11 @@ from psg_data.navigation._runner import (
     METRICS,
     NavigationResult,
     build_filters,
+    build_graph,
     door_belief_from_filters,
     run_navigation,
     score_records,
 )
-from psg_data.navigation._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
 
 __all__ = [
     "OccupancyGrid",
@@ -167,6 +168,7 @@ __all__ = [
     "NavigationResult",
     "run_navigation",
     "build_filters",
+    "build_graph",
     "score_records",
     "door_belief_from_filters",
     "METRICS",

@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data.maps._grid import box_footprint
+from psg_data.maps._planner import PlanningCache
 from psg_data.navigation._env import NavigationEnv
-from psg_data.navigation._grid import box_footprint
-from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -216,7 +216,7 @@ def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: s
     Returns:
         The figure (:func:`plot_query`).
     """
-    from psg_data.navigation._doors import door_open_probabilities, fit_door_filters
+    from psg_data.graph._fit import door_open_probabilities, fit_door_filters
 
     env, seed, qid = result.env, key[0], key[1]
     q = next(x for x in result.queries[seed] if x.query_id == qid)
