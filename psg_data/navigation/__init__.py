@@ -22,7 +22,7 @@
   real-world layout), baselines 'oracle', 'last_seen_map' and 'random_receptacle', per-method door
   beliefs, a delta sweep; scoring in :mod:`psg_data.evaluation._navigation_scores`, tables and
   files in :mod:`psg_data.evaluation`.
-- Plots (:mod:`._plots`): :func:`plot_query`.
+- Plots (:mod:`._plots`): :func:`plot_query`, :func:`plot_snapshot` (a predictive graph's snapshot on the map).
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
   (:func:`run_door_episode`), :func:`run_door_navigation` (blocked first plans, extra distance,
@@ -91,7 +91,7 @@ from psg_data.navigation._doors import (
 )
 from psg_data.navigation._env import WEEK_S, DatasetTimeline, NavigationEnv, streams_from_states
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
-from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query
+from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query, plot_snapshot
 from psg_data.navigation._queries import (
     CATEGORIES,
     Query,
@@ -174,6 +174,7 @@ __all__ = [
     "METRICS",
     "ABSENT_RULES",
     "plot_query",
+    "plot_snapshot",
     "pick_door_example",
     "plot_door_example",
     "DOOR_BASELINES",
