@@ -47,13 +47,17 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
               help="Also write the table as CSV.")
 @click.option("--png", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also draw it on the map (rooms, receptacles coloured by P, doors by P(open)).")
+@click.option("--rerun", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.rrd",
+              help="Also save the beliefs of every edge and door over the week around --at as a Rerun recording "
+                   "(needs psg-data[viewer]).")
 @click.option("--save-graph", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.json",
               help="Save the fitted graph (load it later by giving FILE.json as PATH).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save-graph file.")
 @quiet_option
 @handle_errors
 def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels: str, top: int | None,
-              csv_path: Path | None, png: Path | None, save_graph: Path | None, overwrite: bool, quiet: bool) -> None:
+              csv_path: Path | None, png: Path | None, rerun: Path | None, save_graph: Path | None, overwrite: bool,
+              quiet: bool) -> None:
     """Where things are predicted at a time: the predictive graph of PATH (a dataset, ``demo``, or a
     graph saved with --save-graph) as a table; with --object the object's receptacles ranked.
 
@@ -89,3 +93,11 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
         from psg_data.navigation._plots import plot_snapshot
 
         plot_snapshot(snap, png, object_id=object_id)
+    if rerun is not None:
+        import numpy as np
+
+        from psg_data.viewer import log_graph, recording
+
+        with recording(rerun, overwrite=overwrite, inputs=[g.info.get("dataset")]) as rec:
+            n = log_graph(rec, g, snap.t_s + np.arange(-3.5 * 86400, 3.5 * 86400 + 1, 1800.0))
+        click.echo(f"wrote {rerun} ({n} belief series, a week around {when} every 30 min)")

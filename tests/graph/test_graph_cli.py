@@ -38,3 +38,24 @@ def test_bad_input_is_one_error_line(graph_dataset: Path, tmp_path: Path) -> Non
         assert "Traceback" not in r.output
     r = CliRunner().invoke(main, ["graph", str(tmp_path / "nothing"), "--at", AT])
     assert r.exit_code == 1 and "expected a psg-dataset folder" in r.output
+
+
+def test_rerun_recording_holds_the_graphs_beliefs(graph_dataset: Path, tmp_path: Path) -> None:
+    import numpy as np
+
+    from psg_data.viewer import log_graph, recording
+    from tests.test_viewer import _column, _read
+
+    g = PredictiveGraph.from_dataset(graph_dataset, "fremen")
+    times = T0_S + 40 * 3600 + 1800.0 * np.arange(10)
+    with recording(tmp_path / "g.rrd") as rec:
+        assert log_graph(rec, g, times) == len(g.edges) + 1
+    rows, batches = _read(tmp_path / "g.rrd")
+    o, r = g.edges[0]
+    assert rows[f"/beliefs/{o}/{r}/fremen"] == 10
+    assert [v[0] for v in _column(batches[f"/beliefs/{o}/{r}/fremen"], ":scalars")] == list(
+        g.edge_probabilities(times)[:, 0])
+    assert rows["/beliefs/doors/door1/fremen"] == 10
+    r = CliRunner().invoke(main, ["graph", str(graph_dataset), "--at", AT, "-e", "fremen", "--rerun",
+                                  str(tmp_path / "c.rrd"), "-q"])
+    assert r.exit_code == 0 and "belief series" in r.output, r.output
