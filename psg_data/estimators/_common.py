@@ -117,7 +117,8 @@ class BaseEstimator:
 
     def _check_state(self, state: dict[str, Any]) -> EdgeKey:
         """The state's edge, checked to be this estimator's. No fit is required: a built-in filter's
-        state holds what it learned (a saved PredictiveGraph is loaded onto a fresh estimator)."""
+        state holds what it learned (a saved PredictiveGraph is loaded onto a fresh estimator).
+        """
         if state.get("estimator") != self.name:
             raise EstimatorError(f"filter state is for estimator {state.get('estimator')!r}, not {self.name!r}")
         return edge_from_json(state["edge"])

@@ -40,26 +40,27 @@ def snapshot_to_networkx(s: Snapshot) -> Any:
     nx = _need("networkx", "networkx")
     L = s.layout
     G = nx.DiGraph(t_s=s.t_s, timezone=L.timezone)
-    for r in L.rooms.values():
-        xy = L.room_xy(r.room_id)
-        G.add_node(("room", r.room_id), kind="room", name=r.name, pos=(float(xy[0]), float(xy[1]), 0.0))
-    for r in L.receptacles.values():
-        G.add_node(("receptacle", r.receptacle_id), kind="receptacle", name=r.name, category=r.category,
-                   pos=tuple(float(v) for v in r.box.center_m))
-        if r.room_id in L.rooms:
-            G.add_edge(("receptacle", r.receptacle_id), ("room", r.room_id), kind="in")
+    for room in L.rooms.values():
+        xy = L.room_xy(room.room_id)
+        G.add_node(("room", room.room_id), kind="room", name=room.name, pos=(float(xy[0]), float(xy[1]), 0.0))
+    for rec in L.receptacles.values():
+        G.add_node(("receptacle", rec.receptacle_id), kind="receptacle", name=rec.name, category=rec.category,
+                   pos=tuple(float(v) for v in rec.box.center_m))
+        if rec.room_id in L.rooms:
+            G.add_edge(("receptacle", rec.receptacle_id), ("room", rec.room_id), kind="in")
     for d, p in zip(s.doors.tolist(), s.p_open.tolist()):
-        rec = L.doors.get(d)
-        pos = tuple(float(v) for v in rec.box.center_m) if rec is not None else (np.nan,) * 3
-        G.add_node(("door", d), kind="door", name=rec.name if rec else d, pos=pos, p_open=float(p))
-        for room in (rec.room_a, rec.room_b) if rec is not None else ():
-            if room in L.rooms:
-                G.add_edge(("door", d), ("room", room), kind="connects", p_open=float(p))
+        door = L.doors.get(d)
+        pos = tuple(float(v) for v in door.box.center_m) if door is not None else (np.nan,) * 3
+        G.add_node(("door", d), kind="door", name=door.name if door else d, pos=pos, p_open=float(p))
+        for room_id in (door.room_a, door.room_b) if door is not None else ():
+            if room_id in L.rooms:
+                G.add_edge(("door", d), ("room", room_id), kind="connects", p_open=float(p))
     objs = sorted(set(L.objects) | set(s.objects.tolist()))
     for o in objs:
         bel = s.beliefs(o)
         best = min(bel, key=lambda r: (-bel[r], r)) if bel else None
-        pos = tuple(float(v) for v in L.receptacles[best].box.center_m) if best in L.receptacles else (np.nan,) * 3
+        pos = (tuple(float(v) for v in L.receptacles[best].box.center_m) if best is not None
+               and best in L.receptacles else (np.nan,) * 3)
         info = L.objects.get(o)
         G.add_node(("object", o), kind="object", name=info.name if info else o, pos=pos)
     for o, r, p in zip(s.objects.tolist(), s.receptacles.tolist(), s.p.tolist()):
@@ -116,15 +117,15 @@ def snapshot_to_spark_dsg(s: Snapshot) -> Any:
         if rec is not None and rec.room_id in rooms:
             G.insert_edge(sym, rooms[rec.room_id])
     for k, (d, p) in enumerate(zip(s.doors.tolist(), s.p_open.tolist())):
-        sym, rec = sd.NodeSymbol("d", k), L.doors.get(d)
+        sym, door = sd.NodeSymbol("d", k), L.doors.get(d)
         a = sd.ObjectNodeAttributes()
         a.name = d
-        if rec is not None:
-            a.position = np.asarray(rec.box.center_m, np.float64)
-            a.bounding_box = _bbox(sd, rec.box)
+        if door is not None:
+            a.position = np.asarray(door.box.center_m, np.float64)
+            a.bounding_box = _bbox(sd, door.box)
         a.metadata.set({"kind": "door", "id": d, "p_open": float(p)})
         G.add_node(sd.DsgLayers.PLACES, sym, a)
-        for room in (rec.room_a, rec.room_b) if rec is not None else ():
+        for room in (door.room_a, door.room_b) if door is not None else ():
             if room in rooms:
                 e = sd.EdgeAttributes()
                 e.weight, e.weighted = float(np.nan_to_num(p, nan=1.0)), True
@@ -135,7 +136,7 @@ def snapshot_to_spark_dsg(s: Snapshot) -> Any:
         best = min(bel, key=lambda r: (-bel[r], r)) if bel else None
         a = sd.ObjectNodeAttributes()
         a.name = o
-        if best in L.receptacles:
+        if best is not None and best in L.receptacles:
             a.position = np.asarray(L.receptacles[best].box.center_m, np.float64)
         a.metadata.set({"kind": "object", "id": o})
         sym = sd.NodeSymbol("o", j)

@@ -104,10 +104,13 @@ class PredictiveGraph:
                 fitted already).
             door_estimator: ``"same"`` (a fresh copy of ``estimator``), a registry name, an
                 instance, or None (no door model: every door planned open).
-            settings: keyword settings of a registry ``estimator``; ``door_settings`` likewise.
+            settings: keyword settings of a registry ``estimator``.
+            door_settings: keyword settings of a registry ``door_estimator``.
             val_streams: validation streams handed to the estimator's ``fit``.
             unseen_prior: P(open) of a door without training observations.
-            grid, grid_options, info: see the class.
+            grid: the planning grid (see the class).
+            grid_options: its resolution and robot radius (see the class).
+            info: provenance (see the class).
 
         Raises:
             EstimatorError: unknown estimator or settings. EvaluationError: a fit failed.
@@ -136,11 +139,15 @@ class PredictiveGraph:
                 ``detections:FILE``; :mod:`psg_data.graph._sources`): object edges are the receptacles
                 the source saw each object on in the training scans.
             train_scans: scan ids to fit on (default: split ``train``, else the first two thirds).
-            door_estimator, settings, door_settings, unseen_prior: see :meth:`fit`.
+            door_estimator: see :meth:`fit`.
+            settings: see :meth:`fit`.
+            door_settings: see :meth:`fit`.
+            unseen_prior: see :meth:`fit`.
             label_seed: seed of on-the-fly label noise.
             grid_source: ``geometry`` (room polygons, boxes; built on first :meth:`plan`) or ``scans``
                 (fused depth, built now).
-            resolution_m, robot_radius_m: the planning grid, metres.
+            resolution_m: cell size of the planning grid, metres.
+            robot_radius_m: robot radius its obstacles are inflated by, metres.
 
         Raises:
             EvaluationError: no scans, labels missing (the message names the command to run).

@@ -1,4 +1,4 @@
-"""New observations for :meth:`PredictiveGraph.update`: label-table rows or ``(t, object, receptacle, present)`` tuples."""
+"""New observations for :meth:`PredictiveGraph.update`: label rows or ``(t, object, receptacle, present)`` tuples."""
 
 from __future__ import annotations
 

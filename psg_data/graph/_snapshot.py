@@ -1,4 +1,4 @@
-"""What a predictive graph says at one time: :class:`Snapshot` (every edge and door) and :class:`Ranking` (one object)."""
+"""What a predictive graph says at one time: :class:`Snapshot` (edges and doors) and :class:`Ranking` (one object)."""
 
 from __future__ import annotations
 
@@ -102,7 +102,7 @@ class Snapshot:
         return snapshot_to_networkx(self)
 
     def to_spark_dsg(self) -> Any:
-        """A ``spark_dsg.DynamicSceneGraph`` (extra ``psg-data[graph]``): see :func:`psg_data.graph.snapshot_to_spark_dsg`."""
+        """A spark-dsg ``DynamicSceneGraph`` (extra ``psg-data[graph]``): see ``snapshot_to_spark_dsg``."""
         from psg_data.graph._convert import snapshot_to_spark_dsg
 
         return snapshot_to_spark_dsg(self)

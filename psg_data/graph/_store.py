@@ -212,7 +212,8 @@ def load_graph(path: str | Path, *, estimator: Any = None, door_estimator: Any =
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise GraphError(f"{path}: cannot read a predictive graph ({type(exc).__name__}: {exc})") from None
     if not isinstance(d, dict) or d.get("format") != GRAPH_FORMAT:
-        raise GraphError(f"{path}: format: expected {GRAPH_FORMAT!r}, got {d.get('format') if isinstance(d, dict) else d!r}")
+        got = d.get("format") if isinstance(d, dict) else type(d).__name__
+        raise GraphError(f"{path}: format: expected {GRAPH_FORMAT!r}, got {got!r}")
     if not isinstance(d.get("version"), int) or d["version"] > GRAPH_VERSION:
         raise GraphError(f"{path}: version: {d.get('version')!r}, this psg-data reads up to {GRAPH_VERSION}; "
                          "upgrade psg-data")
