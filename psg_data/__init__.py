@@ -32,7 +32,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 _SUBPACKAGES = frozenset({"datasets", "schemas", "loaders", "writers", "labeling", "estimators", "metrics", "synth",
-                          "navigation", "convert"})
+                          "navigation", "convert", "graph", "maps"})
 
 
 def __getattr__(name: str) -> Any:

@@ -15,7 +15,7 @@ import copy
 import logging
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +26,9 @@ from psg_data.graph._fit import fit_door_filters, fit_edge_filters, fresh_estima
 from psg_data.graph._layout import SceneLayout
 from psg_data.graph._snapshot import Ranking, Snapshot, ranking
 from psg_data.graph._times import TimeLike, to_seconds
+
+if TYPE_CHECKING:  # pragma: no cover
+    from psg_data.graph._plan import Plan
 
 __all__ = ["PredictiveGraph"]
 
@@ -435,7 +438,7 @@ class PredictiveGraph:
         return self._caches[key]
 
     def plan(self, start_xy: Sequence[float], object_id: str, t: TimeLike, *, delta: float = 0.2,
-             threshold: float = 0.5, exclude: Iterable[str] = (), reach_m: float = 1.0) -> Any:
+             threshold: float = 0.5, exclude: Iterable[str] = (), reach_m: float = 1.0) -> Plan:
         """The navigation agent's plan to find ``object_id`` at ``t`` from ``start_xy`` (world x, y, metres).
 
         Candidates are the object's receptacles with P(present) >= ``delta`` not in ``exclude``,

@@ -1,14 +1,16 @@
-"""Offline semi-static object navigation (the paper's PredictiveGraphs evaluation).
+"""Offline semi-static object navigation (the paper's PredictiveGraphs evaluation), on
+:class:`psg_data.graph.PredictiveGraph` objects (:func:`build_graph`: one per method).
 
-- Grids (:mod:`._grid`): :func:`grid_from_geometry` (room polygons, walls, receptacle footprints,
-  switchable doorways), :func:`grid_from_points` / :func:`grid_from_scans` (fused point clouds),
-  :class:`OccupancyGrid` (robot-radius inflation per door configuration).
-- Planning (:mod:`._planner`): :func:`astar` / :class:`GridPlanner` (exact 8-connected shortest
-  paths, octile costs, no corner cutting, through ``scipy.sparse.csgraph``; the pure-Python
+- Grids and planning (re-exported from :mod:`psg_data.maps`): :func:`grid_from_geometry` (room
+  polygons, walls, receptacle footprints, switchable doorways), :func:`grid_from_points` /
+  :func:`grid_from_scans` (fused point clouds), :class:`OccupancyGrid` (robot-radius inflation per
+  door configuration); :func:`astar` / :class:`GridPlanner` (exact 8-connected shortest paths,
+  octile costs, no corner cutting, through ``scipy.sparse.csgraph``; the pure-Python
   :func:`astar_reference` is the test oracle), :func:`grid_graph` and :class:`PlanningCache` (cached
   multi-source Dijkstra fields per receptacle approach set and door configuration).
-- Label sources (:mod:`._sources`): map, door and sighting observations of ``gt``, ``privileged``,
-  ``noisy:P``, ``detections:FILE`` (:func:`source_observations`, :class:`ObservationModel`).
+- Label sources (re-exported from :mod:`psg_data.graph`): map, door and sighting observations of
+  ``gt``, ``privileged``, ``noisy:P``, ``detections:FILE`` (:func:`source_observations`,
+  :class:`ObservationModel`).
 - Options (:mod:`._options`): :class:`NavigationOptions` and the :data:`PROTOCOLS` ``sim`` and
   ``paper-real`` (25 queries: 10 static, 10 dynamic, 5 absent, one fixed start, adaptive).
 - Queries (:mod:`._queries`): :func:`make_queries` (seeded, static / dynamic / absent), stored with
