@@ -269,3 +269,15 @@ def test_spark_dsg_export_round_trips(graph_dataset: Path, tmp_path: Path) -> No
     door = H.get_node(ids[("door", "door1")])
     assert door.attributes.metadata.get()["p_open"] == snap.p_open[0]
     np.testing.assert_allclose(H.get_node(ids[("receptacle", "o_desk")]).attributes.position, (7.0, 0.5, 0.4))
+
+
+def test_a_missing_conversion_library_names_the_extra(graph_dataset: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    from psg_data.errors import PsgDataError
+
+    snap = PredictiveGraph.from_dataset(graph_dataset, "fremen").at(T_QUERY)
+    for module, call in (("networkx", snap.to_networkx), ("spark_dsg", snap.to_spark_dsg)):
+        monkeypatch.setitem(sys.modules, module, None)  # import fails as if not installed
+        with pytest.raises(PsgDataError, match=r"pip install 'psg-data\[graph\]'"):
+            call()
