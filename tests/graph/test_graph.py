@@ -255,7 +255,7 @@ def test_conversions_carry_the_snapshot(graph_dataset: Path, tmp_path: Path) -> 
 
 
 def test_spark_dsg_export_round_trips(graph_dataset: Path, tmp_path: Path) -> None:
-    sd = pytest.importorskip("spark_dsg", reason="spark-dsg is in the [graph] extra (installed by [dev])")
+    import spark_dsg as sd  # [dev] installs psg-data[graph]: a missing extra fails loudly
     g = PredictiveGraph.from_dataset(graph_dataset, "perpetua_star")
     snap = g.at(T_QUERY)
     snap.to_spark_dsg().save(str(tmp_path / "dsg.json"), include_mesh=False)
