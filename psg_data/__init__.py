@@ -11,9 +11,10 @@ Main entry points:
 
 Subpackages (``dir(psg_data)`` lists them with the names above): ``datasets`` (the built-in
 datasets), ``schemas`` (the format), ``loaders``, ``writers``, ``convert``, ``synth``,
-``labeling``, ``estimators`` (plugin interface, registry, built-ins), ``metrics``, ``evaluation``
-(the task harnesses and results files), ``navigation``, ``viewer`` (Rerun, ``psg-data[viewer]``)
-and ``errors``.
+``labeling``, ``estimators`` (plugin interface, registry, built-ins), ``maps`` (occupancy grids
+and planners), ``metrics``, ``graph`` (the predictive scene graph), ``evaluation`` (the task
+harnesses and results files), ``navigation``, ``viewer`` (Rerun, ``psg-data[viewer]``) and
+``errors``.
 """
 
 from __future__ import annotations
@@ -40,8 +41,10 @@ if TYPE_CHECKING:  # pragma: no cover - what a type checker sees of the lazy att
     from psg_data import errors as errors
     from psg_data import estimators as estimators
     from psg_data import evaluation as evaluation
+    from psg_data import graph as graph
     from psg_data import labeling as labeling
     from psg_data import loaders as loaders
+    from psg_data import maps as maps
     from psg_data import metrics as metrics
     from psg_data import navigation as navigation
     from psg_data import schemas as schemas
@@ -53,8 +56,8 @@ if TYPE_CHECKING:  # pragma: no cover - what a type checker sees of the lazy att
     from psg_data.writers import DatasetWriter
 
 
-_SUBPACKAGES = ("datasets", "schemas", "loaders", "writers", "convert", "synth", "labeling", "estimators", "metrics",
-                "evaluation", "navigation", "viewer", "errors")
+_SUBPACKAGES = ("datasets", "schemas", "loaders", "writers", "convert", "synth", "labeling", "estimators", "maps",
+                "metrics", "graph", "evaluation", "navigation", "viewer", "errors")
 """The public subpackages, each an attribute of ``psg_data`` imported on first use."""
 
 

@@ -22,6 +22,7 @@ __all__ = [
     "EstimatorError",
     "NotFittedError",
     "EvaluationError",
+    "GraphError",
     "NotOpenError",
 ]
 
@@ -75,6 +76,10 @@ class NotFittedError(EstimatorError, AttributeError):
 
 class EvaluationError(PsgDataError, ValueError):
     """An evaluation could not run (empty split, missing labels, ...)."""
+
+
+class GraphError(PsgDataError, ValueError):
+    """A predictive graph was queried, updated or loaded with bad input (unknown object, bad time, bad file)."""
 
 
 class NotOpenError(PsgDataError, RuntimeError):

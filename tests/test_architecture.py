@@ -1,8 +1,9 @@
 """Imports between the packages of psg_data follow the data flow (docs/ARCHITECTURE.md).
 
 raw -> convert -> canonical -> label -> estimate -> evaluate -> report: a package may import
-packages of a lower layer and of its own, never of a higher one. Imports only for type checking
-(``if TYPE_CHECKING:``) do not count.
+packages of a lower layer and of its own, never of a higher one, and the imports between packages
+form no cycle (two packages of one layer may not import each other, directly or through others).
+Imports only for type checking (``if TYPE_CHECKING:``) do not count.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ LAYERS = [
     {"loaders", "writers"},  # reading and writing the format (and raw recordings)
     {"convert", "synth"},  # producers of canonical datasets
     {"labeling"},
-    {"estimators"},
-    {"metrics"},  # pure metric functions
+    {"estimators", "maps"},  # the plugin interface and built-ins; occupancy grids and planners
+    {"metrics", "graph"},  # pure metric functions; the PredictiveGraph
     {"evaluation", "navigation"},  # task harnesses
     {"viewer", "datasets", "cli", "__init__"},  # tools and the package's front door
 ]
@@ -79,3 +80,46 @@ def test_imports_follow_the_data_flow() -> None:
     assert not new, "imports against the data flow: " + "; ".join(sorted(new))
     stale = set(KNOWN) - set(against)
     assert not stale, f"fixed, remove from KNOWN: {stale}"
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle of ``graph`` (package -> packages it imports) as [a, b, ..., a], or []."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str]:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        state[node] = 2
+        stack.pop()
+        return []
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return []
+
+
+def test_the_cycle_finder_finds_cycles() -> None:
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"x": {"y"}, "y": {"x"}, "z": {"x"}}) == ["x", "y", "x"]
+
+
+def test_no_import_cycle_between_packages() -> None:
+    edges = _edges()
+    graph: dict[str, set[str]] = {}
+    for a, b in edges:
+        graph.setdefault(a, set()).add(b)
+    cycle = _cycle(graph)
+    where = "; ".join(f"{a} -> {b} ({', '.join(edges[(a, b)])})" for a, b in zip(cycle, cycle[1:]))
+    assert not cycle, f"import cycle between packages: {' -> '.join(cycle)}: {where}"

@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-EXTRAS_USED_BY = {"viewer": ("psg_data/viewer/",), "dask": ("psg_data/_executors.py",)}
+EXTRAS_USED_BY = {"viewer": ("psg_data/viewer/",), "dask": ("psg_data/_executors.py",),
+                  "graph": ("psg_data/graph/_convert.py",)}
 """Where each optional extra may be imported (lazily, with an error that names the extra)."""
 IMPORTED_INDIRECTLY = {"tzdata": "zoneinfo reads its time-zone files where the system has none"}
 

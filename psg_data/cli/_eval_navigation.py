@@ -88,8 +88,8 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
                         quiet: bool, *, references: bool = True, deltas: tuple[float, ...] = (),
                         table_format: str = "text") -> bool:
     """Object navigation on a dataset: SR / SPL / AR / DIST per method (the paper's navigation tables)."""
-    from psg_data.evaluation._navigation_job import run_navigation_job
     from psg_data.evaluation._tables import print_results
+    from psg_data.navigation._job import run_navigation_job
 
     choice = _dataset(dataset, options.labels, quiet, "navigation")
     _require(specs, choice)
@@ -105,8 +105,8 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
 def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Path, no_plots: bool,
                    quiet: bool, *, references: bool = True, table_format: str = "text") -> bool:
     """Door navigation on a dataset's own map, and objects behind predicted-closed doors."""
-    from psg_data.evaluation._navigation_job import run_door_job
     from psg_data.evaluation._tables import print_results
+    from psg_data.navigation._job import run_door_job
 
     choice = _dataset(dataset, options.labels, quiet, "doors")
     _require(specs, choice)

@@ -21,6 +21,7 @@ _COMMANDS = {
     "label": "psg_data.cli._label_cmd:label_cmd",
     "view": "psg_data.cli._view_cmd:view_cmd",
     "lab-stats": "psg_data.cli._lab_stats_cmd:lab_stats_cmd",
+    "graph": "psg_data.cli._graph_cmd:graph_cmd",
 }
 
 

@@ -88,7 +88,13 @@ class PersistenceEstimator(Protocol):
         ...
 
     def filter_from_state(self, state: dict[str, Any]) -> EdgeFilter:
-        """Rebuild a filter from :meth:`EdgeFilter.get_state`."""
+        """Rebuild a filter from :meth:`EdgeFilter.get_state`.
+
+        To be saved in a :class:`~psg_data.graph.PredictiveGraph`, this must work on a freshly
+        constructed, *unfitted* estimator with the same settings: the state then holds everything
+        the filter learned. An estimator whose filters need the fitted estimator raises
+        :class:`~psg_data.errors.NotFittedError` here, and ``PredictiveGraph.save`` refuses it.
+        """
         ...
 
     def get_params(self) -> dict[str, Any]:

@@ -122,7 +122,9 @@ class BaseEstimator:
             raise NotFittedError(f"{type(self).__name__} ({self.name}) is not fitted; call fit(train_streams) first")
 
     def _check_state(self, state: dict[str, Any]) -> EdgeKey:
-        self._check_fitted()
+        """The state's edge, checked to be this estimator's. No fit is required: a built-in filter's
+        state holds what it learned (a saved PredictiveGraph is loaded onto a fresh estimator).
+        """
         if state.get("estimator") != self.name:
             raise EstimatorError(f"filter state is for estimator {state.get('estimator')!r}, not {self.name!r}")
         return edge_from_json(state["edge"])

@@ -74,7 +74,8 @@ class FremenFilter(BaseFilter):
         return self.comps.predict(self.clock(t))
 
     def get_state(self) -> dict[str, Any]:
-        return {"estimator": self._name, "edge": list(self.edge), "last_t_s": self._last_t}
+        return {"estimator": self._name, "edge": list(self.edge), "last_t_s": self._last_t,
+                "components": self.comps.to_dict(), "clock": self.clock.to_dict()}
 
 
 class FremenEstimator(BaseEstimator):
@@ -134,6 +135,10 @@ class FremenEstimator(BaseEstimator):
     def filter_from_state(self, state: dict[str, Any]) -> FremenFilter:
         """The filter that :meth:`get_state` of one of this estimator's filters described."""
         edge = self._check_state(state)
-        f = self.make_filter(edge)
+        if "components" in state:  # self-contained (psg-data >= 0.2.0 with graphs): no fit needed
+            f = FremenFilter(edge, FremenComponents.from_dict(state["components"]),
+                             LocalClock.from_dict(state["clock"]), self.name)
+        else:
+            f = self.make_filter(edge)
         f._last_t = state["last_t_s"]
         return f

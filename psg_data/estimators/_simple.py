@@ -177,7 +177,7 @@ class _NoFitEstimator(BaseEstimator):
 
     def filter_from_state(self, state: dict[str, Any]) -> ConstantFilter:
         edge = self._check_state(state)
-        f = self.make_filter(edge)
+        f = ConstantFilter(edge, self.name, self.value)
         f.last_y = state["last_y"]
         f._last_t = state["last_t_s"]
         return f
@@ -230,7 +230,8 @@ class _TowFilter(BaseFilter):
         return self.table[i]
 
     def get_state(self) -> dict[str, Any]:
-        return {"estimator": self._name, "edge": list(self.edge), "last_t_s": self._last_t}
+        return {"estimator": self._name, "edge": list(self.edge), "last_t_s": self._last_t,
+                "table": self.table.tolist(), "clock": self.clock.to_dict(), "bin_s": self.bin_s}
 
 
 class TimeOfWeekFrequencyEstimator(BaseEstimator):
@@ -281,6 +282,10 @@ class TimeOfWeekFrequencyEstimator(BaseEstimator):
     def filter_from_state(self, state: dict[str, Any]) -> _TowFilter:
         """The filter that :meth:`get_state` of one of this estimator's filters described."""
         edge = self._check_state(state)
-        f = self.make_filter(edge)
+        if "table" in state:  # self-contained: no fit needed
+            f = _TowFilter(edge, np.asarray(state["table"], np.float64), LocalClock.from_dict(state["clock"]),
+                           float(state["bin_s"]), self.name)
+        else:
+            f = self.make_filter(edge)
         f._last_t = state["last_t_s"]
         return f

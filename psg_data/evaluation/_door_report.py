@@ -27,7 +27,8 @@ from psg_data.evaluation._intervals import describe_interval, ratio_interval
 from psg_data.evaluation._references import describe_method
 from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, ResultTable, save_results
 
-__all__ = ["door_terms", "summarise_doors", "door_results", "DOOR_METRICS", "pick_blocked_door_query"]
+__all__ = ["door_terms", "summarise_doors", "door_results", "DOOR_METRICS", "pick_blocked_door_query", "walk_summary",
+           "DOOR_MODE_LABELS"]
 
 DOOR_METRICS: dict[str, MetricInfo] = {
     "blocked_rate": MetricInfo("blocked_rate", "blocked %", "lower", "first plans through a door closed at the query "
@@ -145,8 +146,33 @@ def write_door_results(res: Any, out: Path, *, roles: Mapping[str, tuple[str, st
     res.records.to_csv(out / "records.csv", index=False)
     res.summary.to_csv(out / "results.csv", index=False)
     if res.objects is not None:
-        from psg_data.navigation import walk_summary
-
         res.objects.save(out / "objects", roles={"oracle": ("ceiling", "the true receptacle and doors")})
         walk_summary(res.objects).to_csv(out / "objects" / "walk.csv", index=False)
     return results
+
+
+DOOR_MODE_LABELS = {"all_open": "doors all open", "predicted": "doors predicted", "truth": "doors known"}
+
+
+def walk_summary(objects: Any) -> Any:
+    """Per method of the objects run: found targets, metres walked (all queries, and towards targets
+    no route reaches at the query time, which the SR / SPL table leaves out), and the queries it
+    lost / won against the same estimator with all doors open.
+    """
+    import pandas as pd
+
+    rec = objects.records
+    rows = []
+    for name, df in rec.groupby("method", sort=False):
+        d = df.set_index(["seed", "query_id"])
+        row = {"method": name, "queries": len(d), "found": int(d["success"].sum()),
+               "walked_m": float(d["path_m"].mean()),
+               "walked_unreachable_m": (float(d.loc[~d["reachable"], "path_m"].mean()) if (~d["reachable"]).any()
+                                        else 0.0)}
+        base = name.rsplit(" [", 1)[0] + f" [{DOOR_MODE_LABELS['all_open']}]"
+        if name != base and base in set(rec["method"]):
+            b = rec[rec["method"] == base].set_index(["seed", "query_id"])["success"].reindex(d.index)
+            row["lost_vs_all_open"] = int((b & ~d["success"]).sum())
+            row["won_vs_all_open"] = int((~b & d["success"]).sum())
+        rows.append(row)
+    return pd.DataFrame(rows)

@@ -1,14 +1,16 @@
-"""Offline semi-static object navigation (the paper's PredictiveGraphs evaluation).
+"""Offline semi-static object navigation (the paper's PredictiveGraphs evaluation), on
+:class:`psg_data.graph.PredictiveGraph` objects (:func:`build_graph`: one per method).
 
-- Grids (:mod:`._grid`): :func:`grid_from_geometry` (room polygons, walls, receptacle footprints,
-  switchable doorways), :func:`grid_from_points` / :func:`grid_from_scans` (fused point clouds),
-  :class:`OccupancyGrid` (robot-radius inflation per door configuration).
-- Planning (:mod:`._planner`): :func:`astar` / :class:`GridPlanner` (exact 8-connected shortest
-  paths, octile costs, no corner cutting, through ``scipy.sparse.csgraph``; the pure-Python
+- Grids and planning (re-exported from :mod:`psg_data.maps`): :func:`grid_from_geometry` (room
+  polygons, walls, receptacle footprints, switchable doorways), :func:`grid_from_points` /
+  :func:`grid_from_scans` (fused point clouds), :class:`OccupancyGrid` (robot-radius inflation per
+  door configuration); :func:`astar` / :class:`GridPlanner` (exact 8-connected shortest paths,
+  octile costs, no corner cutting, through ``scipy.sparse.csgraph``; the pure-Python
   :func:`astar_reference` is the test oracle), :func:`grid_graph` and :class:`PlanningCache` (cached
   multi-source Dijkstra fields per receptacle approach set and door configuration).
-- Label sources (:mod:`._sources`): map, door and sighting observations of ``gt``, ``privileged``,
-  ``noisy:P``, ``detections:FILE`` (:func:`source_observations`, :class:`ObservationModel`).
+- Label sources (re-exported from :mod:`psg_data.graph`): map, door and sighting observations of
+  ``gt``, ``privileged``, ``noisy:P``, ``detections:FILE`` (:func:`source_observations`,
+  :class:`ObservationModel`).
 - Options (:mod:`._options`): :class:`NavigationOptions` and the :data:`PROTOCOLS` ``sim`` and
   ``paper-real`` (25 queries: 10 static, 10 dynamic, 5 absent, one fixed start, adaptive).
 - Queries (:mod:`._queries`): :func:`make_queries` (seeded, static / dynamic / absent), stored with
@@ -22,7 +24,7 @@
   real-world layout), baselines 'oracle', 'last_seen_map' and 'random_receptacle', per-method door
   beliefs, a delta sweep; scoring in :mod:`psg_data.evaluation._navigation_scores`, tables and
   files in :mod:`psg_data.evaluation`.
-- Plots (:mod:`._plots`): :func:`plot_query`.
+- Plots (:mod:`._plots`): :func:`plot_query`, :func:`plot_snapshot` (a predictive graph's snapshot on the map).
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
   (:func:`run_door_episode`), :func:`run_door_navigation` (blocked first plans, extra distance,
@@ -34,6 +36,30 @@
 
 from __future__ import annotations
 
+from psg_data.graph._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
+from psg_data.maps._grid import (
+    OccupancyGrid,
+    box_footprint,
+    bresenham,
+    bresenham_many,
+    grid_from_dataset,
+    grid_from_geometry,
+    grid_from_points,
+    grid_from_scans,
+    line_of_sight,
+    points_in_polygon,
+)
+from psg_data.maps._planner import (
+    SQRT2,
+    GridPlanner,
+    PathResult,
+    PlanningCache,
+    astar,
+    astar_reference,
+    grid_graph,
+    octile_distance,
+    path_length_m,
+)
 from psg_data.navigation._agent import OUTCOMES, SETTINGS, AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import (
     LastSeenFilter,
@@ -66,31 +92,8 @@ from psg_data.navigation._doors import (
     run_door_navigation,
 )
 from psg_data.navigation._env import WEEK_S, DatasetTimeline, NavigationEnv, streams_from_states
-from psg_data.navigation._grid import (
-    OccupancyGrid,
-    box_footprint,
-    bresenham,
-    bresenham_many,
-    grid_from_dataset,
-    grid_from_geometry,
-    grid_from_points,
-    grid_from_scans,
-    line_of_sight,
-    points_in_polygon,
-)
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, START_MODES, NavigationOptions
-from psg_data.navigation._planner import (
-    SQRT2,
-    GridPlanner,
-    PathResult,
-    PlanningCache,
-    astar,
-    astar_reference,
-    grid_graph,
-    octile_distance,
-    path_length_m,
-)
-from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query
+from psg_data.navigation._plots import pick_door_example, plot_door_example, plot_query, plot_snapshot
 from psg_data.navigation._queries import (
     CATEGORIES,
     Query,
@@ -106,11 +109,11 @@ from psg_data.navigation._runner import (
     METRICS,
     NavigationResult,
     build_filters,
+    build_graph,
     door_belief_from_filters,
     run_navigation,
     score_records,
 )
-from psg_data.navigation._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
 
 __all__ = [
     "OccupancyGrid",
@@ -167,11 +170,13 @@ __all__ = [
     "NavigationResult",
     "run_navigation",
     "build_filters",
+    "build_graph",
     "score_records",
     "door_belief_from_filters",
     "METRICS",
     "ABSENT_RULES",
     "plot_query",
+    "plot_snapshot",
     "pick_door_example",
     "plot_door_example",
     "DOOR_BASELINES",

@@ -23,7 +23,7 @@ Episode (the paper's location-prediction and active-navigation tools):
 
 Looking (on arrival, and when a path first enters the approach set of the receptacle that holds
 the object, with ``detect_en_route``) goes through the environment's sighting model
-(:class:`~psg_data.navigation._sources.ObservationModel`): exact for ground-truth and privileged
+(:class:`~psg_data.graph._sources.ObservationModel`): exact for ground-truth and privileged
 labels, with the source's miss and false-positive rates for noisy or perception labels. A missed
 object is walked past.
 
@@ -45,9 +45,10 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeFilter
-from psg_data.navigation._planner import PlanningCache
+from psg_data.graph._plan import ranked_candidates
+from psg_data.graph._sources import ObservationModel
+from psg_data.maps._planner import PlanningCache
 from psg_data.navigation._queries import Query
-from psg_data.navigation._sources import ObservationModel
 
 __all__ = ["AgentConfig", "Episode", "run_episode", "episode_record", "SETTINGS", "OUTCOMES"]
 
@@ -262,8 +263,7 @@ class _Walk:
         """The most believed receptacle not tried yet that is reachable under the believed doors
         (one attempt spent), or None and why the episode ends.
         """
-        delta = self.config.delta
-        cands = sorted((r for r in bel if r not in self.tried and bel[r] >= delta), key=lambda r: (-bel[r], r))
+        cands = ranked_candidates(bel, self.config.delta, self.tried)
         if not cands:
             return None, "abort"
         if self.attempts >= self.config.max_attempts:

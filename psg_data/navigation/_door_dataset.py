@@ -27,12 +27,13 @@ from typing import Any
 import numpy as np
 
 from psg_data.errors import EvaluationError
+from psg_data.evaluation._door_report import DOOR_MODE_LABELS, walk_summary
+from psg_data.graph._sources import source_observations
+from psg_data.maps._grid import grid_from_dataset, points_in_polygon
+from psg_data.maps._planner import PlanningCache
 from psg_data.navigation._doors import DoorWorld
 from psg_data.navigation._env import DatasetTimeline
-from psg_data.navigation._grid import grid_from_dataset, points_in_polygon
-from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import start_cells
-from psg_data.navigation._sources import source_observations
 
 __all__ = ["door_world_from_dataset", "DoorTaskOptions", "DoorTaskResult", "run_door_task", "DOOR_MODE_LABELS",
            "walk_summary"]
@@ -245,33 +246,6 @@ def _door_summary(per_seed: Any, records: Any, n_seeds: int) -> Any:
             row[c], row[f"{c}_std"] = scores[n][c].mean, scores[n][c].std
             row[f"{c}_ci_low"], row[f"{c}_ci_high"] = scores[n][c].ci_low, scores[n][c].ci_high
         row["seeds"], row["unseen_doors"] = n_seeds, g.get_group(n)["unseen_doors"].iloc[0]
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-DOOR_MODE_LABELS = {"all_open": "doors all open", "predicted": "doors predicted", "truth": "doors known"}
-
-
-def walk_summary(objects: Any) -> Any:
-    """Per method of the objects run: found targets, metres walked (all queries, and towards targets
-    no route reaches at the query time, which the SR / SPL table leaves out), and the queries it
-    lost / won against the same estimator with all doors open.
-    """
-    import pandas as pd
-
-    rec = objects.records
-    rows = []
-    for name, df in rec.groupby("method", sort=False):
-        d = df.set_index(["seed", "query_id"])
-        row = {"method": name, "queries": len(d), "found": int(d["success"].sum()),
-               "walked_m": float(d["path_m"].mean()),
-               "walked_unreachable_m": (float(d.loc[~d["reachable"], "path_m"].mean()) if (~d["reachable"]).any()
-                                        else 0.0)}
-        base = name.rsplit(" [", 1)[0] + f" [{DOOR_MODE_LABELS['all_open']}]"
-        if name != base and base in set(rec["method"]):
-            b = rec[rec["method"] == base].set_index(["seed", "query_id"])["success"].reindex(d.index)
-            row["lost_vs_all_open"] = int((b & ~d["success"]).sum())
-            row["won_vs_all_open"] = int((~b & d["success"]).sum())
         rows.append(row)
     return pd.DataFrame(rows)
 

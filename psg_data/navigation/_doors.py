@@ -38,11 +38,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from psg_data.errors import EvaluationError, PsgDataError
-from psg_data.estimators._base import EdgeFilter, EdgeStream
-from psg_data.estimators._simple import ConstantFilter
-from psg_data.navigation._grid import OccupancyGrid, grid_from_geometry
-from psg_data.navigation._planner import PlanningCache
+from psg_data.errors import EvaluationError
+from psg_data.estimators._base import EdgeStream
+from psg_data.graph._fit import door_open_probabilities, fit_door_filters
+from psg_data.graph._graph import PredictiveGraph
+from psg_data.graph._layout import SceneLayout
+from psg_data.graph._snapshot import doors_believed_open
+from psg_data.maps._grid import OccupancyGrid, grid_from_geometry
+from psg_data.maps._planner import PlanningCache
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
@@ -149,80 +152,6 @@ class DoorEpisode:
         return 0.0 if abs(d) < 1e-6 else d  # float round-off of two sums of the same steps
 
 
-def _open_streams(streams: Sequence[EdgeStream]) -> dict[str, EdgeStream]:
-    out: dict[str, EdgeStream] = {}
-    for s in streams:
-        if s.edge[1] == "open":
-            out[s.edge[0]] = s
-        elif s.edge[1] != "closed":
-            raise EvaluationError(f"door stream {s.edge}: state must be 'open' or 'closed'")
-    return out
-
-
-def fit_door_filters(estimator: Any, streams: Sequence[EdgeStream], door_ids: Sequence[str], *,
-                     timezone: str = "UTC", unseen_prior: float = 0.5, settings: Mapping[str, Any] | None = None
-                     ) -> tuple[dict[str, EdgeFilter], dict[str, str]]:
-    """One P(open) filter per door from the door streams.
-
-    The estimator (registry name or instance) is fitted on the ``(door_id, 'open')`` streams with
-    observations; each such door's filter is updated with its history. A door without observations
-    gets the constant ``unseen_prior`` (reported as ``"prior"`` in the second return value).
-
-    Returns:
-        (door_id -> filter, door_id -> ``"estimator"`` or ``"prior"``).
-
-    Raises:
-        EvaluationError: unknown estimator or failed fit.
-    """
-    if not 0.0 <= unseen_prior <= 1.0:
-        raise EvaluationError(f"unseen_prior: {unseen_prior}, expected a probability in [0, 1]")
-    by_door = _open_streams(streams)
-    seen = [by_door[d] for d in door_ids if d in by_door and len(by_door[d]) > 0]
-    filters: dict[str, EdgeFilter] = {}
-    kind: dict[str, str] = {}
-    est = estimator
-    if seen:
-        if isinstance(est, str):
-            from psg_data.estimators._registry import get_estimator
-
-            try:
-                est = get_estimator(est, **dict(settings or {}))
-            except PsgDataError as exc:
-                raise EvaluationError(f"estimator {estimator!r}: {exc}") from exc
-        try:
-            est.fit(seen, timezone=timezone)
-        except PsgDataError as exc:
-            raise EvaluationError(f"{type(est).__name__}: fit on the door streams failed ({exc})") from exc
-    for d in door_ids:
-        s = by_door.get(d)
-        if s is None or len(s) == 0:
-            filters[d], kind[d] = ConstantFilter((d, "open"), "prior", unseen_prior), "prior"
-            continue
-        f = est.make_filter(s.edge)
-        f.update_many(s.t_s, s.y)
-        filters[d], kind[d] = f, "estimator"
-    return filters, kind
-
-
-def door_open_probabilities(filters: Mapping[str, EdgeFilter], t_s: float, door_ids: Sequence[str], *,
-                            prior: float = 0.5) -> dict[str, float]:
-    """P(open) per door at ``t_s`` (clipped to [0, 1]); doors without a filter or with a non-finite
-    prediction get ``prior`` (a warning is logged for the latter).
-    """
-    out = {}
-    for d in door_ids:
-        f = filters.get(d)
-        if f is None:
-            out[d] = float(prior)
-            continue
-        v = float(np.asarray(f.predict(np.array([t_s], np.float64))).reshape(-1)[0])
-        if not math.isfinite(v):
-            log.warning("door %s: filter predicted %s at t=%s; using the prior %s", d, v, t_s, prior)
-            v = float(prior)
-        out[d] = min(max(v, 0.0), 1.0)
-    return out
-
-
 def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str, float], *,
                      threshold: float = 0.5, method: str = "", no_path: str = "decline") -> DoorEpisode:
     """Run one door-aware query (module docstring).
@@ -255,8 +184,9 @@ def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str
     fallback_used = False
     declined = False
     success = False
+    planned = doors_believed_open({d: float(p_open.get(d, 1.0)) for d in doors}, threshold)
     for _ in range(len(doors) + 1):
-        belief = {d: (float(p_open.get(d, 1.0)) >= threshold) and d not in known_closed for d in doors}
+        belief = {d: planned[d] and d not in known_closed for d in doors}
         path = cache.path(query.goal, cache.key(belief), cur)
         if path is None and no_path == "decline":
             declined = first_plan is None
@@ -390,14 +320,15 @@ def _door_methods(world: DoorWorld, estimators: Sequence[Any], baselines: Sequen
             methods.append(("oracle", lambda q: {d: float(q.doors_open.get(d, True)) for d in doors}, []))
     for e in estimators:
         label, est = (e if isinstance(e, tuple) else (e if isinstance(e, str) else type(e).__name__, e))
-        filters, kind = fit_door_filters(est, world.train_streams, doors, timezone=world.timezone,
-                                         unseen_prior=unseen_prior, settings=(settings or {}).get(str(label)))
-        unseen = [d for d, k in kind.items() if k == "prior"]
+        graph = PredictiveGraph(SceneLayout(timezone=world.timezone), {}).with_door_model(
+            est, world.train_streams, settings=(settings or {}).get(str(label)), unseen_prior=unseen_prior,
+            door_ids=doors)
+        unseen = [d for d, k in graph.door_kinds.items() if k == "prior"]
         if unseen:
             log.info("%s: doors without training observations use P(open) = %s: %s", label, unseen_prior, unseen)
 
-        def belief(q: DoorQuery, filters: Mapping[str, EdgeFilter] = filters) -> dict[str, float]:
-            return door_open_probabilities(filters, q.t_s, doors, prior=unseen_prior)
+        def belief(q: DoorQuery, graph: PredictiveGraph = graph) -> dict[str, float]:
+            return graph.door_open_probabilities(q.t_s, prior=unseen_prior)
 
         methods.append((str(label), belief, unseen))
     return methods

@@ -2,7 +2,7 @@
 
 A :class:`NavigationEnv` is what the agent and the scorer need from a dataset:
 
-- the occupancy grid (:mod:`psg_data.navigation._grid`) and the receptacle / door records;
+- the occupancy grid (:mod:`psg_data.maps._grid`) and the receptacle / door records;
 - the *map*: the observations of every (object, receptacle) edge up to the last map update
   ``t_map_s`` (one :class:`~psg_data.estimators.EdgeStream` per edge), which estimators are fitted
   and updated on, and the state of every object and door at that update;
@@ -11,7 +11,7 @@ A :class:`NavigationEnv` is what the agent and the scorer need from a dataset:
 
 Edges: for every object, the receptacles it was seen on during the mapping scans (the paper's
 "previously observed receptacles"). The observations come from a label source
-(:mod:`psg_data.navigation._sources`): with ``labels="gt"`` (default) every mapping scan yields, for
+(:mod:`psg_data.graph._sources`): with ``labels="gt"`` (default) every mapping scan yields, for
 each of those edges, ``y = 1`` if the object was on that receptacle and ``y = 0`` otherwise, stamped
 at the scan start; other sources observe what they saw. The door observations of the same source
 (``door_streams``) drive predicted door states, and its sighting model (``observation``) what the
@@ -23,7 +23,6 @@ drawn inside the dataset's scoring windows (``windows``, its operating hours).
 
 from __future__ import annotations
 
-import bisect
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -34,15 +33,16 @@ import numpy as np
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.navigation._grid import OccupancyGrid, grid_from_dataset, grid_from_geometry
-from psg_data.navigation._sources import ObservationModel, source_observations
-from psg_data.schemas._records import Door, Receptacle
+from psg_data.graph._layout import SceneLayout
+from psg_data.graph._sources import ObservationModel, source_observations
+from psg_data.graph._timeline import WEEK_S, DatasetTimeline
+from psg_data.maps._grid import OccupancyGrid, grid_from_dataset, grid_from_geometry
+from psg_data.schemas._records import Door, ObjectInfo, Receptacle
 
 __all__ = ["NavigationEnv", "DatasetTimeline", "streams_from_states", "WEEK_S"]
 
 log = logging.getLogger(__name__)
 
-WEEK_S = 7 * 86400.0
 
 
 def streams_from_states(times_s: Sequence[float], states: Sequence[Mapping[str, str | None]],
@@ -66,97 +66,6 @@ def streams_from_states(times_s: Sequence[float], states: Sequence[Mapping[str, 
             y = np.array([x == r for x in seq], dtype=np.int8)
             out.append(EdgeStream((o, r), t, y))
     return out
-
-
-@dataclass
-class DatasetTimeline:
-    """The scans of a dataset in time order with their ground truth (a step function between scans).
-
-    Attributes:
-        ids: scan ids, chronological.
-        start_s, end_s: scan start / end times, float seconds UTC.
-        map_ids: the map scans (chronological).
-        by_scan: scan -> {object_id: receptacle_id | None} (the ``schedule`` table).
-        door_by_scan: scan -> {door_id: is_open} (the ``door_states`` table; 'unknown' counts open).
-        door_ids: the dataset's doors.
-        t_map_s: end of the last map scan; t_end_s: end of the last later scan (or a week after).
-    """
-
-    ids: list[str]
-    start_s: list[float]
-    end_s: list[float]
-    map_ids: list[str]
-    by_scan: dict[str, dict[str, str | None]]
-    door_by_scan: dict[str, dict[str, bool]]
-    door_ids: list[str]
-    t_map_s: float
-    t_end_s: float
-
-    @classmethod
-    def from_dataset(cls, dataset: Any, map_scans: Sequence[str] | None = None, *, need_schedule: bool = True
-                     ) -> DatasetTimeline:
-        """Timeline of a dataset; map scans default to split 'train' (if no scan has a split, the
-        first two thirds of the scans).
-
-        Raises:
-            EvaluationError: no scans, no map scans, or (``need_schedule``) an empty schedule.
-        """
-        scans = dataset.df("scans").sort_values(["start_stamp_ns", "scan_id"]).reset_index(drop=True)
-        if scans.empty:
-            raise EvaluationError(f"{dataset.root}: no scans; navigation needs scans with a schedule")
-        sched = dataset.df("schedule") if dataset.has_table("schedule") else None
-        if need_schedule and (sched is None or sched.empty):
-            raise EvaluationError(f"{dataset.root}: table 'schedule' is empty; navigation needs ground truth")
-        if map_scans is None:
-            if scans["split"].notna().any():
-                map_ids = scans.loc[scans["split"] == "train", "scan_id"].tolist()
-            else:
-                map_ids = scans["scan_id"].tolist()[: max(1, int(round(len(scans) * 2 / 3)))]
-        else:
-            map_ids = list(map_scans)
-        if not map_ids:
-            raise EvaluationError(f"{dataset.root}: no map scans (no scan with split 'train')")
-        ids = scans["scan_id"].tolist()
-        pos = {sid: k for k, sid in enumerate(ids)}
-        unknown = [m for m in map_ids if m not in pos]
-        if unknown:
-            raise EvaluationError(f"{dataset.root}: map scans {unknown[:3]} are not in the scans table")
-        by_scan: dict[str, dict[str, str | None]] = {sid: {} for sid in ids}
-        if sched is not None:
-            for sid, o, r in zip(sched["scan_id"], sched["object_id"], sched["receptacle_id"]):
-                by_scan.setdefault(sid, {})[o] = None if r is None or (isinstance(r, float) and np.isnan(r)) else str(r)
-        door_by_scan: dict[str, dict[str, bool]] = {}
-        if dataset.has_table("door_states"):
-            ds_ = dataset.df("door_states")
-            for sid, d, st in zip(ds_["scan_id"], ds_["door_id"], ds_["state"]):
-                door_by_scan.setdefault(sid, {})[d] = st != "closed"
-        start_s = (scans["start_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
-        end_s = (scans["end_stamp_ns"].to_numpy(np.int64) / 1e9).tolist()
-        map_ids = sorted(map_ids, key=lambda x: pos[x])
-        last = pos[map_ids[-1]]
-        later = end_s[last + 1:]
-        t_map = end_s[last]
-        return cls(ids, start_s, end_s, map_ids, by_scan, door_by_scan,
-                   list(dataset.doors) if dataset.has_table("doors") else [], float(t_map),
-                   float(max(later) if later else t_map + WEEK_S))
-
-    def scan_before(self, t_s: float) -> str:
-        """The latest scan starting at or before ``t_s`` (the first scan before any)."""
-        k = bisect.bisect_right(self.start_s, t_s) - 1
-        return self.ids[max(k, 0)]
-
-    def gt_at(self, object_id: str, t_s: float) -> str | None:
-        """Receptacle of ``object_id`` in the latest scan at or before ``t_s``, or None (absent)."""
-        return self.by_scan.get(self.scan_before(t_s), {}).get(object_id)
-
-    def doors_of(self, scan_id: str) -> dict[str, bool]:
-        """Door states of scan ``scan_id`` (unknown counts as open)."""
-        st = self.door_by_scan.get(scan_id, {})
-        return {d: bool(st.get(d, True)) for d in self.door_ids}
-
-    def doors_at(self, t_s: float) -> dict[str, bool]:
-        """Door states of the latest scan at or before ``t_s``."""
-        return self.doors_of(self.scan_before(t_s))
 
 
 @dataclass
@@ -211,6 +120,14 @@ class NavigationEnv:
     truth: str = "latest scan row"
 
     @property
+    def layout(self) -> SceneLayout:
+        """The environment's receptacles, doors and objects as a :class:`~psg_data.graph.SceneLayout`
+        (no rooms: the grid is given), the layout of its predictive graphs.
+        """
+        return SceneLayout(receptacles=self.receptacles, doors=self.doors,
+                           objects={o: ObjectInfo(o, o) for o in self.object_ids}, timezone=self.timezone)
+
+    @property
     def edges(self) -> list[EdgeKey]:
         """The edges (object, receptacle) of the map streams."""
         return [s.edge for s in self.map_streams]
@@ -248,7 +165,7 @@ class NavigationEnv:
             robot_radius_m: robot radius the obstacles are inflated by, metres.
             name: environment name (default: the dataset name).
             labels: label source of the map and door observations (``gt``, ``privileged``,
-                ``noisy:P[,P_F]``, ``detections:FILE``; :mod:`psg_data.navigation._sources`).
+                ``noisy:P[,P_F]``, ``detections:FILE``; :mod:`psg_data.graph._sources`).
             label_seed: seed of the ``noisy`` flips and of the agent's sighting draws.
 
         Raises:

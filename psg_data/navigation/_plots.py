@@ -10,15 +10,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data.maps._grid import box_footprint
+from psg_data.maps._planner import PlanningCache
 from psg_data.navigation._env import NavigationEnv
-from psg_data.navigation._grid import box_footprint
-from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-__all__ = ["plot_query", "pick_door_example", "plot_door_example"]
+__all__ = ["plot_query", "pick_door_example", "plot_door_example", "plot_snapshot"]
 
 log = logging.getLogger(__name__)
 
@@ -216,7 +216,7 @@ def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: s
     Returns:
         The figure (:func:`plot_query`).
     """
-    from psg_data.navigation._doors import door_open_probabilities, fit_door_filters
+    from psg_data.graph._fit import door_open_probabilities, fit_door_filters
 
     env, seed, qid = result.env, key[0], key[1]
     q = next(x for x in result.queries[seed] if x.query_id == qid)
@@ -234,3 +234,72 @@ def plot_door_example(result: Any, label: str, key: tuple[int, int], out_path: s
                                f"all doors open ({walked[1]:.1f} m, {outcome[1]})"),
                       label=f"{label}, predicted doors ({walked[0]:.1f} m, {outcome[0]})",
                       title=f"{label}: {q.object_id} ({q.category}), query {qid} of seed {seed}")
+
+
+def plot_snapshot(snapshot: Any, out_path: str | Path | None = None, *, object_id: str | None = None,
+                  title: str | None = None, dpi: int = 110) -> Figure:
+    """A predictive graph's snapshot on the map (top-down, world x / y in metres): a
+    ``matplotlib.figure.Figure``, written as a PNG at ``out_path`` if given (replaced atomically).
+
+    Rooms are outlined and named; each receptacle's footprint is coloured by P(``object_id`` on it)
+    (without ``object_id``: the expected number of objects on it, the sum over its edges, clipped at 1),
+    hatched where there is no edge; doors by P(open) (pink low, teal high; grey: no door model),
+    labelled with the value. Missing geometry (rooms without polygons) is left out.
+    """
+    import matplotlib
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch, Polygon
+
+    L = snapshot.layout
+    if object_id is not None:
+        value, what = snapshot.beliefs(object_id), f"P({object_id} on receptacle)"
+    else:
+        value, what = {}, "expected objects on receptacle (sum of P, clipped at 1)"
+        for r, p in zip(snapshot.receptacles.tolist(), snapshot.p.tolist()):
+            value[r] = min(value.get(r, 0.0) + p, 1.0)
+    fig = Figure(figsize=(10, 6))
+    ax = fig.subplots()
+    for room in L.rooms.values():
+        if room.floor_polygon_m is not None and len(room.floor_polygon_m) >= 3:
+            poly = np.asarray(room.floor_polygon_m, float)
+            ax.add_patch(Polygon(poly, closed=True, facecolor="0.96", edgecolor="0.2", lw=1.5))
+            ax.annotate(room.name, poly.mean(axis=0), ha="center", fontsize=9, color="0.4")
+    cmap = matplotlib.colormaps["viridis"]
+    for r, rec in L.receptacles.items():
+        fp = box_footprint(rec.box)
+        v = value.get(r)
+        ax.add_patch(Polygon(fp, closed=True, facecolor=cmap(v) if v is not None else "white", edgecolor="black",
+                             lw=0.8, hatch=None if v is not None else "////"))
+        if v is not None and v >= 0.05:
+            ax.annotate(f"{r}\n{v:.2f}", fp.mean(axis=0), fontsize=6, ha="center", va="center",
+                        color="white" if v < 0.5 else "black")
+    door_cmap = LinearSegmentedColormap.from_list("door_p", ["#e75480", "#f2e6c9", "#008080"])
+    for d, p in zip(snapshot.doors.tolist(), snapshot.p_open.tolist()):
+        rec = L.doors.get(d)
+        if rec is None:
+            continue
+        fp = box_footprint(rec.box)
+        ok = bool(np.isfinite(p))
+        ax.add_patch(Polygon(fp, closed=True, facecolor=door_cmap(p) if ok else "0.7", edgecolor="black", lw=1.0))
+        ax.annotate(f"{d}\nP(open)={p:.2f}" if ok else f"{d}\n(no model)", fp.mean(axis=0), fontsize=7,
+                    ha="center", va="bottom", xytext=(0, 8), textcoords="offset points")
+    ax.autoscale_view()
+    fig.colorbar(ScalarMappable(cmap=cmap, norm=Normalize(0, 1)), ax=ax, fraction=0.03, pad=0.02, label=what)
+    ax.legend(handles=[Patch(facecolor="white", edgecolor="black", hatch="////", label="no edge"),
+                       Patch(facecolor=door_cmap(0.9), edgecolor="black", label="door: colour = P(open)"),
+                       Patch(facecolor="0.96", edgecolor="0.2", label="room")], loc="upper center",
+              bbox_to_anchor=(0.5, -0.2), ncol=3, fontsize=8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal")
+    import datetime as dt
+    from zoneinfo import ZoneInfo
+
+    when = dt.datetime.fromtimestamp(snapshot.t_s, ZoneInfo(L.timezone)).strftime("%Y-%m-%d %H:%M %Z")
+    ax.set_title(title or (f"{object_id}: where it is predicted at {when}" if object_id else
+                           f"predictive graph at {when}"), fontsize=10)
+    from psg_data.evaluation._persistence_plots import save_figure
+
+    return save_figure(fig, out_path, dpi)

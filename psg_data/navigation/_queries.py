@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 
 from psg_data.errors import EvaluationError
+from psg_data.maps._grid import OccupancyGrid
 from psg_data.navigation._env import WEEK_S, NavigationEnv
-from psg_data.navigation._grid import OccupancyGrid
 
 __all__ = ["Query", "make_queries", "start_cells", "queries_to_frame", "queries_from_frame", "save_queries",
            "load_queries", "CATEGORIES"]
@@ -132,7 +132,7 @@ def make_queries(env: NavigationEnv, n_queries: int = 250, *, seed: int = 0, hor
     fixed = None if start_cell is None else int(start_cell[0]) * W + int(start_cell[1])
     cache = None
     if reachable_only:
-        from psg_data.navigation._planner import PlanningCache
+        from psg_data.maps._planner import PlanningCache
 
         cache = PlanningCache(env.grid, reach_m=reach_m)
 

@@ -24,18 +24,21 @@ from typing import Any
 
 import numpy as np
 
-from psg_data.errors import EvaluationError, NotFittedError, PsgDataError
+from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeFilter, EdgeKey
 from psg_data.evaluation._navigation_scores import ABSENT_RULES, METRICS, score_records, summarise_navigation
+from psg_data.graph._fit import fit_edge_filters, fresh_estimator, resolve_estimator
+from psg_data.graph._graph import PredictiveGraph
+from psg_data.graph._snapshot import doors_believed_open
+from psg_data.maps._planner import PlanningCache
 from psg_data.navigation._agent import AgentConfig, Episode, episode_record, run_episode
 from psg_data.navigation._baselines import last_seen_filters, oracle_filters, random_filters
 from psg_data.navigation._env import NavigationEnv
 from psg_data.navigation._options import DOOR_BELIEFS, PROTOCOLS, NavigationOptions
-from psg_data.navigation._planner import PlanningCache
 from psg_data.navigation._queries import Query, load_queries, make_queries, save_queries
 
-__all__ = ["NavigationResult", "run_navigation", "build_filters", "score_records", "door_belief_from_filters",
-           "METRICS", "ABSENT_RULES"]
+__all__ = ["NavigationResult", "run_navigation", "build_filters", "build_graph", "score_records",
+           "door_belief_from_filters", "METRICS", "ABSENT_RULES"]
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +47,21 @@ BUILTIN_METHODS = ("oracle", "last_seen_map", "random_receptacle")
 MethodSpec = Any
 """A registry name or 'oracle' / 'last_seen_map', a PersistenceEstimator (fitted or not), a
 mapping edge -> EdgeFilter, or a callable ``env -> mapping edge -> EdgeFilter``."""
+
+
+def build_graph(env: NavigationEnv, spec: MethodSpec, *, settings: Mapping[str, Any] | None = None
+                ) -> PredictiveGraph:
+    """The :class:`~psg_data.graph.PredictiveGraph` of a method on the environment: one filter per
+    edge, updated with the map observations up to ``env.t_map_s`` (no door model; see :func:`build_filters`).
+
+    Raises:
+        EvaluationError: unknown spec, or the estimator failed to fit.
+    """
+    if isinstance(spec, str) and spec not in BUILTIN_METHODS:
+        spec = resolve_estimator(spec, settings)
+    if hasattr(spec, "make_filter") and not isinstance(spec, Mapping):
+        return PredictiveGraph.fit(env.layout, env.map_streams, estimator=spec, door_estimator=None, grid=env.grid)
+    return PredictiveGraph(env.layout, build_filters(env, spec, settings=settings), grid=env.grid)
 
 
 def build_filters(env: NavigationEnv, spec: MethodSpec, *, settings: Mapping[str, Any] | None = None
@@ -65,26 +83,11 @@ def build_filters(env: NavigationEnv, spec: MethodSpec, *, settings: Mapping[str
             return dict(last_seen_filters(env.map_streams))
         if spec == "random_receptacle":
             return dict(random_filters(env.map_streams, seed=int(dict(settings or {}).get("seed", 0))))
-        from psg_data.estimators._registry import get_estimator
-
-        spec = get_estimator(spec, **dict(settings or {}))
+        spec = resolve_estimator(spec, settings)
     if isinstance(spec, Mapping):
         return dict(spec)
     if hasattr(spec, "make_filter"):
-        est = spec
-        try:
-            est.make_filter(env.map_streams[0].edge) if env.map_streams else None
-        except NotFittedError:
-            try:
-                est.fit(env.map_streams, timezone=env.timezone)
-            except PsgDataError as exc:
-                raise EvaluationError(f"{type(est).__name__}: fit on the map observations failed ({exc})") from exc
-        out: dict[EdgeKey, EdgeFilter] = {}
-        for s in env.map_streams:
-            f = est.make_filter(s.edge)
-            f.update_many(s.t_s, s.y)
-            out[s.edge] = f
-        return out
+        return fit_edge_filters(spec, env.map_streams, timezone=env.timezone)
     if callable(spec):
         return dict(spec(env))
     raise EvaluationError("method spec: expected a name, estimator, filter mapping or callable, got "
@@ -203,17 +206,9 @@ def _methods(estimators: Any) -> list[tuple[str, MethodSpec]]:
     return out
 
 
-def _fresh(estimator: Any) -> Any:
-    """An unfitted copy of an estimator with the same settings (scikit-learn's ``clone``)."""
-    try:
-        params = estimator.get_params(deep=False)
-    except TypeError:  # a plugin whose get_params takes no ``deep``
-        params = estimator.get_params()
-    return type(estimator)(**params)
-
-
 def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: NavigationOptions,
-                settings: Mapping[str, Any] | None) -> Callable[[Sequence[float]], list[dict[str, bool]] | None]:
+                settings: Mapping[str, Any] | None, graph: PredictiveGraph
+                ) -> Callable[[Sequence[float]], list[dict[str, bool]] | None]:
     """Door states a method plans with at a batch of query times (None = the true states)."""
     mode = options.door_belief
     door_ids = list(env.grid.door_ids)
@@ -223,18 +218,17 @@ def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: Naviga
         return lambda ts: [dict(env.map_doors) for _ in ts]
     if mode == "all_open" or spec == "random_receptacle":  # chance has no door model: it plans all doors open
         return lambda ts: [{d: True for d in door_ids} for _ in ts]
-    from psg_data.navigation._doors import fit_door_filters
-
     if spec == "last_seen_map":
         filters: Mapping[str, EdgeFilter] = {s.edge[0]: f for s, f in zip(env.door_streams, last_seen_filters(
             env.door_streams).values())}
         missing = [d for d in door_ids if d not in filters]
         if missing:
             log.info("%s: doors never observed on the map (believed open): %s", name, missing)
+        doors = graph.with_door_filters(filters)
     elif isinstance(spec, str) or hasattr(spec, "get_params"):
-        est = spec if isinstance(spec, str) else _fresh(spec)
-        filters, kind = fit_door_filters(est, env.door_streams, door_ids, timezone=env.timezone, settings=settings)
-        unseen = [d for d, k in kind.items() if k == "prior"]
+        est = spec if isinstance(spec, str) else fresh_estimator(spec)
+        doors = graph.with_door_model(est, env.door_streams, settings=settings)
+        unseen = [d for d, k in doors.door_kinds.items() if k == "prior"]
         if unseen:
             log.info("%s: doors without observations use P(open) = 0.5 (believed open): %s", name, unseen)
     else:
@@ -242,11 +236,11 @@ def _door_hooks(env: NavigationEnv, name: str, spec: MethodSpec, options: Naviga
                               "(to fit on the door streams); got a filter mapping or callable")
 
     def hook(ts: Sequence[float]) -> list[dict[str, bool]]:
-        t = np.asarray(ts, np.float64)
-        p = {d: np.asarray(f.predict(t), np.float64).reshape(-1) for d, f in filters.items()}
+        p = doors.door_probabilities(np.asarray(ts, np.float64))
         out = []
-        for k in range(t.size):
-            out.append({d: bool(not np.isfinite(p[d][k]) or p[d][k] >= 0.5) if d in p else True for d in door_ids})
+        for row in p:
+            believed = doors_believed_open(dict(zip(doors.doors, row)))
+            out.append({d: believed.get(d, True) for d in door_ids})
         return out
 
     return hook
@@ -286,14 +280,14 @@ def _query_sets(env: NavigationEnv, options: NavigationOptions, out_dir: str | P
     return qsets
 
 
-def _initial_beliefs(name: str, qs: list[Query], by_obj: Mapping[str, Mapping[str, EdgeFilter]]
-                     ) -> dict[int, dict[str, float]]:
+def _initial_beliefs(name: str, qs: list[Query], graph: PredictiveGraph) -> dict[int, dict[str, float]]:
     """Beliefs at the query times, one vectorised predict per edge."""
     bel0: dict[int, dict[str, float]] = {}
+    known = set(graph.objects)
     for o in {q.object_id for q in qs}:
         mine = [q for q in qs if q.object_id == o]
         t = np.array([q.t_s for q in mine], dtype=np.float64)
-        preds = {r: np.asarray(f.predict(t), dtype=np.float64).reshape(-1) for r, f in by_obj.get(o, {}).items()}
+        preds = graph.object_probabilities(o, t) if o in known else {}
         for r, v in preds.items():
             if v.shape != t.shape or not np.all(np.isfinite(v)):
                 raise EvaluationError(f"method {name}: edge ({o}, {r}) predicted non-finite or misshaped beliefs")
@@ -302,13 +296,13 @@ def _initial_beliefs(name: str, qs: list[Query], by_obj: Mapping[str, Mapping[st
     return bel0
 
 
-def _episodes(env: NavigationEnv, cache: PlanningCache, name: str, qs: list[Query],
-              by_obj: Mapping[str, Mapping[str, EdgeFilter]], doors_for: Callable[[Sequence[float]], Any],
-              cfg: AgentConfig) -> list[tuple[Query, dict[str, bool] | None, Episode]]:
+def _episodes(env: NavigationEnv, cache: PlanningCache, name: str, qs: list[Query], graph: PredictiveGraph,
+              doors_for: Callable[[Sequence[float]], Any], cfg: AgentConfig
+              ) -> list[tuple[Query, dict[str, bool] | None, Episode]]:
     """Every query of one set for one method: (query, door belief, episode)."""
-    bel0 = _initial_beliefs(name, qs, by_obj)
+    bel0 = _initial_beliefs(name, qs, graph)
     door_bel = doors_for([q.t_s for q in qs]) or [None] * len(qs)
-    return [(q, db, run_episode(cache, q, by_obj.get(q.object_id, {}), cfg, beliefs=bel0[q.query_id],
+    return [(q, db, run_episode(cache, q, graph.filters_of(q.object_id), cfg, beliefs=bel0[q.query_id],
                                 door_belief=db, observation=env.observation)) for q, db in zip(qs, door_bel)]
 
 
@@ -340,27 +334,24 @@ class _MethodRuns:
         self.trails: dict[tuple[str, int, int], Any] = {}
         self.beliefs: dict[tuple[str, int, int], dict[str, float]] = {}
         self.timings: dict[str, float] = {}
-        self.fitted: dict[Any, dict[EdgeKey, EdgeFilter]] = {}
+        self.fitted: dict[Any, PredictiveGraph] = {}
 
-    def _filters(self, spec: MethodSpec, settings: Mapping[str, Any] | None) -> dict[str, dict[str, EdgeFilter]]:
+    def _graph(self, spec: MethodSpec, settings: Mapping[str, Any] | None) -> PredictiveGraph:
         key = (spec, repr(sorted((settings or {}).items()))) if isinstance(spec, str) else id(spec)
         if key not in self.fitted:
-            self.fitted[key] = build_filters(self.env, spec, settings=settings)
-        by_obj: dict[str, dict[str, EdgeFilter]] = {}
-        for (o, r), f in self.fitted[key].items():
-            by_obj.setdefault(o, {})[r] = f
-        return by_obj
+            self.fitted[key] = build_graph(self.env, spec, settings=settings)
+        return self.fitted[key]
 
     def method(self, name: str, spec: MethodSpec, settings: Mapping[str, Any] | None, mode: str | None) -> None:
         opts = self.opts
-        by_obj = self._filters(spec, settings)
+        graph = self._graph(spec, settings)
         m_opts = replace(opts, door_belief=mode) if mode is not None else opts
-        doors_for = _door_hooks(self.env, name, spec, m_opts, settings) if self.hook is None else (
+        doors_for = _door_hooks(self.env, name, spec, m_opts, settings, graph) if self.hook is None else (
             lambda ts, h=self.hook: [dict(h) if isinstance(h, Mapping) else dict(h(t)) for t in ts])
         for delta in opts.deltas:
             cfg = replace(self.cfg, delta=delta)
             for sd in opts.seeds:
-                for q, db, ep in _episodes(self.env, self.cache, name, self.qsets[sd], by_obj, doors_for, cfg):
+                for q, db, ep in _episodes(self.env, self.cache, name, self.qsets[sd], graph, doors_for, cfg):
                     self.rows.append(episode_record(
                         ep, method=name, seed=sd, delta=delta, t_s=q.t_s, start_x_m=q.start_xy[0],
                         start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle, map_receptacle=q.map_receptacle,

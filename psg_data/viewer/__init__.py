@@ -9,16 +9,18 @@
   spawned viewer, or streamed to a :class:`WebViewer` (Rerun's web viewer served from this
   machine, bound to 127.0.0.1 by default); :func:`display_problem` says why no native viewer can
   open here (no display).
+- :func:`log_graph`: a predictive graph's beliefs per edge and door over a range of times, on the
+  same entity paths. ``psg-data graph PATH --at T --rerun FILE.rrd``.
 - :func:`dataset_blueprint`, :func:`beliefs_blueprint`: the layouts sent with the recordings.
 
 README.md ("Looking at a dataset") lists the entities a recording holds.
 """
 
-from psg_data.viewer._beliefs import log_beliefs
+from psg_data.viewer._beliefs import log_beliefs, log_graph
 from psg_data.viewer._blueprint import beliefs_blueprint, dataset_blueprint
 from psg_data.viewer._dataset_log import SCAN_TIMELINE, TIMELINE, log_dataset
 from psg_data.viewer._recording import display_problem, recording
 from psg_data.viewer._web import WebViewer
 
-__all__ = ["TIMELINE", "SCAN_TIMELINE", "log_dataset", "log_beliefs", "recording", "display_problem",
+__all__ = ["TIMELINE", "SCAN_TIMELINE", "log_dataset", "log_beliefs", "log_graph", "recording", "display_problem",
            "dataset_blueprint", "beliefs_blueprint", "WebViewer"]

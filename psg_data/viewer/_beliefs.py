@@ -10,7 +10,7 @@ import numpy as np
 from psg_data.viewer._dataset_log import TIMELINE, edge_path, timestamps
 from psg_data.viewer._recording import import_rerun
 
-__all__ = ["log_beliefs"]
+__all__ = ["log_beliefs", "log_graph"]
 
 
 def log_beliefs(rec: Any, traces: Sequence[Any], *, seed: int | None = None) -> int:
@@ -50,3 +50,33 @@ def log_beliefs(rec: Any, traces: Sequence[Any], *, seed: int | None = None) -> 
                              columns=rr.Scalars.columns(scalars=np.asarray(tr.obs_y, np.float64)))
             rec.log(f"{base}/observations", rr.SeriesPoints(markers="cross", marker_sizes=4.0), static=True)
     return len(done)
+
+
+def log_graph(rec: Any, graph: Any, times_s: Any, *, name: str | None = None) -> int:
+    """Log a :class:`~psg_data.graph.PredictiveGraph`'s beliefs at ``times_s`` as time series.
+
+    Per edge ``beliefs/OBJECT/RECEPTACLE/NAME`` (the entity paths of :func:`log_beliefs`, so a
+    graph's beliefs sit beside an evaluation's) and per door ``beliefs/doors/DOOR/NAME`` (P(open);
+    doors without a model are left out), on the ``time`` timeline. ``NAME`` defaults to the
+    graph's estimator name. One vectorised prediction per filter
+    (:meth:`~psg_data.graph.PredictiveGraph.edge_probabilities`).
+
+    Returns:
+        The number of edges and doors logged.
+    """
+    rr = import_rerun()
+    t = np.asarray(times_s, np.float64).reshape(-1)
+    label = name or getattr(graph.estimator, "name", None) or "graph"
+    idx = [rr.TimeColumn(TIMELINE, timestamp=timestamps(t))]
+    p = graph.edge_probabilities(t)
+    for k, edge in enumerate(graph.edges):
+        rec.send_columns(f"{edge_path('beliefs', edge)}/{rr.escape_entity_path_part(label)}", indexes=idx,
+                         columns=rr.Scalars.columns(scalars=p[:, k]))
+    po = graph.door_probabilities(t)
+    n = len(graph.edges)
+    for k, d in enumerate(graph.doors):
+        if np.all(np.isfinite(po[:, k])):
+            rec.send_columns(f"{edge_path('beliefs', ('doors', d))}/{rr.escape_entity_path_part(label)}", indexes=idx,
+                             columns=rr.Scalars.columns(scalars=po[:, k]))
+            n += 1
+    return n

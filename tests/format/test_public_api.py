@@ -11,7 +11,8 @@ import pytest
 
 import psg_data
 
-SUBPACKAGES = ["schemas", "loaders", "writers", "labeling", "estimators", "metrics", "synth", "navigation", "convert"]
+SUBPACKAGES = ["schemas", "loaders", "writers", "labeling", "estimators", "metrics", "synth", "navigation", "convert",
+               "graph", "maps"]
 
 
 @pytest.mark.parametrize("name", SUBPACKAGES)
@@ -67,7 +68,7 @@ def test_module_all_lists_what_the_package_exports_from_it(name: str) -> None:
 
 
 DOCUMENTED = ["schemas", "loaders", "loaders.raw", "writers", "convert", "synth", "labeling", "navigation", "viewer",
-              "estimators", "metrics", "evaluation"]
+              "estimators", "metrics", "evaluation", "graph", "maps"]
 """Packages whose whole public surface is documented."""
 
 

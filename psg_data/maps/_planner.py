@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
-from psg_data.navigation._grid import DoorConfig, OccupancyGrid, bresenham_many
+from psg_data.maps._grid import DoorConfig, OccupancyGrid, bresenham_many
 
 __all__ = ["PathResult", "astar", "astar_reference", "GridPlanner", "octile_distance", "grid_graph",
            "path_length_m", "PlanningCache", "SQRT2"]

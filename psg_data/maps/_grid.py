@@ -1,4 +1,4 @@
-"""2-D occupancy grids for navigation: from the dataset geometry or from fused scan point clouds.
+"""2-D occupancy grids: from the dataset geometry or from fused scan point clouds.
 
 Grid convention: cell ``(i, j)`` (row ``i``, column ``j``) covers world ``x`` in
 ``[x0 + j * res, x0 + (j + 1) * res)`` and ``y`` in ``[y0 + i * res, y0 + (i + 1) * res)``, with
