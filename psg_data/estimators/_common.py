@@ -255,3 +255,7 @@ def log_fit_summary(name: str, summary: Mapping[str, Any]) -> None:
     er = summary.get("error_rates")
     if er:
         log.info("%s: P_M = %.4f, P_F = %.4f (%s)", name, er["p_m"], er["p_f"], er["source"])
+    osel = summary.get("order_selection")
+    if osel:
+        log.info("%s: FreMEn order rule %s, duration rule %s, median order %s over %d edges", name,
+                 osel["order_rule"], "on" if osel["duration_rule"] else "off", osel["median_order"], len(osel["edges"]))

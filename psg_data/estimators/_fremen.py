@@ -11,6 +11,22 @@ The static part is mu = mean(y); the coefficient of period k is c_k = (S_k - mu 
 mean-subtracted Fourier sum); the prediction with the ``order`` strongest components (ranked by
 amplitude |c_k|) is ``clip(mu + sum 2 |c_k| cos(w_k tau + arg c_k), 0, 1)``.
 
+The two rules of the public FreMEn code (strands-project/fremen, ``CFrelement``), each by name:
+
+- **duration rule** (``FremenModel(duration_rule=True)``): a period whose 1.5 x length exceeds the
+  span of the data the model was fitted on (last minus first time) gets amplitude 0, so it is
+  never selected (:meth:`FremenModel.admissible`);
+- **order rule** (:data:`ORDER_RULES`): ``"reference"`` scores each order 0..M on held-out data
+  by the error rate of the *unclipped* estimate thresholded at 0.5 and moves to a higher order
+  only when it beats the best so far by more than a tolerance (the public ``evaluate()``, 0.001);
+  ``"mae"`` scores the mean |clipped prediction - y| and takes the smallest order within the
+  tolerance of the best (this library's rule before the reference one became the default).
+
+Unlike the public code, periods are exact (one week / k in float64: the public code's integer
+periods ``floor(604800 / k)`` s are a defect, wrong for every k that does not divide 604800), angles
+are float64 on a relative epoch (the public code uses float32 angles of Unix times), and adding data
+in batches equals one batch.
+
 Because the periods are harmonics of one week, the sums for all k at once are a few FFTs: times
 are binned on a fine grid of the week (M bins) and the within-bin offset is handled exactly by a
 Taylor series of order P (error < 1e-17), so N = 1e6, K = 1000 costs ~0.1 s instead of N*K
@@ -28,10 +44,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data.errors import EstimatorError
 
-__all__ = ["WEEK_S", "FremenModel", "FremenComponents", "fourier_sums", "wall_seconds", "reference_monday",
-           "LocalClock"]
+__all__ = ["WEEK_S", "ORDER_RULES", "FremenModel", "FremenComponents", "fourier_sums", "wall_seconds",
+           "reference_monday", "LocalClock", "choose_order"]
 
 WEEK_S = 7 * 86400.0
+ORDER_RULES = {"reference": "error rate of (unclipped estimate > 0.5); a higher order only if better than the best "
+                            "so far by more than the tolerance (public FreMEn evaluate())",
+               "mae": "mean |clipped prediction - y|; the smallest order within the tolerance of the best"}
+"""Order rules by name, with what each scores and how it chooses (:func:`choose_order`)."""
+DURATION_FACTOR = 1.5
+"""Duration rule: a period T is kept only if DURATION_FACTOR * T <= the span of the fitted data."""
 _DIRECT_LIMIT = 100_000  # N*K below which the direct sum is used
 
 
@@ -215,15 +237,20 @@ class FremenModel:
     Args:
         n_periods: K, number of candidate periods (base / k, k = 1..K).
         base_period_s: one week by default.
+        duration_rule: zero the amplitude of every period T with 1.5 T > :attr:`span_s` (the
+            public FreMEn code's rule); False keeps every period.
     """
 
-    def __init__(self, n_periods: int = 1000, base_period_s: float = WEEK_S) -> None:
+    def __init__(self, n_periods: int = 1000, base_period_s: float = WEEK_S, duration_rule: bool = False) -> None:
         if n_periods < 0:
             raise EstimatorError(f"n_periods must be >= 0, got {n_periods}")
         self.n_periods = int(n_periods)
         self.base_period_s = float(base_period_s)
+        self.duration_rule = bool(duration_rule)
         self.n = 0
         self.sum_y = 0.0
+        self.first_tau = math.inf
+        self.last_tau = -math.inf
         self.s = np.zeros(self.n_periods, dtype=np.complex128)
         self.z = np.zeros(self.n_periods, dtype=np.complex128)
 
@@ -237,29 +264,34 @@ class FremenModel:
             return self
         self.n += int(tau.size)
         self.sum_y += float(y.sum())
+        self.first_tau = min(self.first_tau, float(tau.min()))
+        self.last_tau = max(self.last_tau, float(tau.max()))
         self.s += fourier_sums(tau, y, self.n_periods, self.base_period_s, method)
         self.z += fourier_sums(tau, np.ones_like(tau), self.n_periods, self.base_period_s, method)
         return self
-
-    def subtract(self, other: FremenModel) -> FremenModel:
-        """Statistics of self minus other (e.g. all data minus a held-out week)."""
-        out = FremenModel(self.n_periods, self.base_period_s)
-        out.n = self.n - other.n
-        out.sum_y = self.sum_y - other.sum_y
-        out.s = self.s - other.s
-        out.z = self.z - other.z
-        return out
 
     @property
     def mean(self) -> float:
         """The static term: the mean of the observations (0.5 before any)."""
         return self.sum_y / self.n if self.n else 0.5
 
+    @property
+    def span_s(self) -> float:
+        """Last minus first observation time, seconds (0 before any)."""
+        return self.last_tau - self.first_tau if self.n else 0.0
+
+    def admissible(self) -> NDArray[np.bool_]:
+        """(K,) which periods may carry an amplitude: all, or under the duration rule 1.5 T <= span."""
+        if not self.duration_rule:
+            return np.ones(self.n_periods, dtype=bool)
+        periods = self.base_period_s / np.arange(1, self.n_periods + 1, dtype=np.float64)
+        return DURATION_FACTOR * periods <= self.span_s
+
     def coefficients(self) -> NDArray[np.complex128]:
-        """(K,) c_k = (S_k - mu Z_k) / n."""
+        """(K,) c_k = (S_k - mu Z_k) / n (0 for a period the duration rule drops)."""
         if self.n == 0:
             return np.zeros(self.n_periods, dtype=np.complex128)
-        return (self.s - self.mean * self.z) / self.n
+        return np.where(self.admissible(), (self.s - self.mean * self.z) / self.n, 0.0)
 
     def ranking(self) -> NDArray[np.int64]:
         """Harmonic indices (1-based) sorted by decreasing amplitude (stable)."""
@@ -272,8 +304,15 @@ class FremenModel:
         ks = self.ranking()[: max(0, int(order))]
         return FremenComponents(self.mean, ks, c[ks - 1], self.base_period_s)
 
-    def validation_errors(self, tau: ArrayLike, y: ArrayLike, max_order: int | None = None) -> NDArray[np.float64]:
-        """(max_order+1,) mean |prediction - y| on held-out data for orders 0..max_order."""
+    def order_scores(self, tau: ArrayLike, y: ArrayLike, max_order: int | None = None,
+                     rule: str = "reference") -> NDArray[np.float64]:
+        """(M+1,) held-out score of orders 0..M (M = ``max_order``, at most K; None: K), lower is better.
+
+        ``rule`` (:data:`ORDER_RULES`): "reference" gives the error rate of (unclipped estimate > 0.5)
+        against y, "mae" the mean |clipped prediction - y|.
+        """
+        if rule not in ORDER_RULES:
+            raise EstimatorError(f"FreMEn: order rule must be one of {', '.join(ORDER_RULES)}, got {rule!r}")
         tau = np.asarray(tau, dtype=np.float64).reshape(-1)
         y = np.asarray(y, dtype=np.float64).reshape(-1)
         mo = self.n_periods if max_order is None else min(int(max_order), self.n_periods)
@@ -293,17 +332,32 @@ class FremenModel:
             pred[:, 0] = self.mean
             np.cumsum(contrib, axis=1, out=pred[:, 1:])
             pred[:, 1:] += self.mean
-            err += np.abs(np.clip(pred, 0.0, 1.0) - y[s:s + step, None]).sum(axis=0)
+            est = (pred > 0.5).astype(np.float64) if rule == "reference" else np.clip(pred, 0.0, 1.0)
+            err += np.abs(est - y[s:s + step, None]).sum(axis=0)
         return err / tau.size
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable dict."""
-        return {"n_periods": self.n_periods, "base_period_s": self.base_period_s, "n": self.n, "sum_y": self.sum_y,
+        return {"n_periods": self.n_periods, "base_period_s": self.base_period_s, "duration_rule": self.duration_rule,
+                "n": self.n, "sum_y": self.sum_y, "first_tau": self.first_tau, "last_tau": self.last_tau,
                 "s_re": self.s.real.tolist(), "s_im": self.s.imag.tolist(), "z_re": self.z.real.tolist(),
                 "z_im": self.z.imag.tolist()}
 
 
-def choose_order(errors: NDArray[np.float64], tol: float) -> int:
-    """Smallest order whose validation error is within ``tol`` of the best."""
-    best = float(np.min(errors))
-    return int(np.flatnonzero(errors <= best + tol)[0])
+def choose_order(scores: ArrayLike, tol: float, rule: str = "reference") -> int:
+    """The order (index into ``scores``, orders 0..M) that ``rule`` (:data:`ORDER_RULES`) chooses.
+
+    "reference": start at order 0 and move to order j only if ``scores[j] < best - tol``, best being
+    the score of the order chosen so far (the public ``evaluate()``); "mae": the smallest order
+    whose score is within ``tol`` of the minimum.
+    """
+    s = np.asarray(scores, dtype=np.float64).reshape(-1)
+    if rule == "mae":
+        return int(np.flatnonzero(s <= float(np.min(s)) + tol)[0])
+    if rule != "reference":
+        raise EstimatorError(f"FreMEn: order rule must be one of {', '.join(ORDER_RULES)}, got {rule!r}")
+    best, order = math.inf, 0
+    for j, v in enumerate(s):
+        if v < best - tol:
+            best, order = float(v), j
+    return order

@@ -60,7 +60,12 @@ from psg_data.estimators._common import (
     log_fit_summary,
     streams_by_edge,
 )
-from psg_data.estimators._fremen_estimator import fit_fremen_edge, training_clock
+from psg_data.estimators._fremen_estimator import (
+    fit_fremen_edge,
+    fremen_order_parameters,
+    order_selection_summary,
+    training_clock,
+)
 from psg_data.estimators._mixture import ESCAPE, ESCAPE_FIRST, MixtureFilter, ScanResult
 from psg_data.estimators._params import Integral, MappingParam, Options, Real
 from psg_data.estimators._priors import (
@@ -487,8 +492,12 @@ class PerpetuaStarEstimator(BaseEstimator):
             (:data:`~psg_data.estimators._common.TRAINING_PARAMETERS`): the survival mixtures are fitted
             by interval-censored EM to the runs of the states given by the pooled error-rate HMM
             (``segmentation="hmm"``), which also estimates P_M and P_F.
-        n_periods, max_order, order_tol: FreMEn prior: candidate periods one week / k, k = 1..n_periods
-            (None: the shortest period is 2 g, at most 1000), order chosen on validation data.
+        n_periods, max_order, order_tol, order_rule, duration_rule: FreMEn prior: candidate periods
+            one week / k, k = 1..n_periods (None: the shortest period is 2 g, at most 1000), order chosen
+            on validation data (``val_streams``, else each edge's last training week) by the same rules
+            and defaults as the ``fremen`` estimator (:class:`~psg_data.estimators.FremenEstimator`): the
+            public FreMEn code's order rule ("reference") and duration rule (on); the choice is
+            reported in ``fit_summary_["order_selection"]``.
         profile_step_s, profile_days: profile prior: step length (None: g rounded to a divisor of a
             day) and day types ("workweek": Mon-Fri / Sat-Sun, "all", "weekday").
         schedules: for prior="schedule": mapping edge -> LLM answer text (the prompt's list format)
@@ -518,8 +527,7 @@ class PerpetuaStarEstimator(BaseEstimator):
         **TRAINING_PARAMETERS,
         "n_periods": Integral(1, None, none_ok=True, help="FreMEn prior: candidate periods one week / k; none: "
                               "shortest period twice the typical gap (at most 1000)"),
-        "max_order": Integral(0, None, none_ok=True, help="FreMEn prior: largest order tried"),
-        "order_tol": Real(0.0, None, help="FreMEn prior: MAE tolerance favouring smaller orders"),
+        **fremen_order_parameters("FreMEn prior: "),
         "profile_step_s": Real(0.0, 86400.0, closed="right", none_ok=True,
                                help="profile prior: step of the day, seconds; none: the typical gap"),
         "profile_days": Options(*PROFILE_DAYS, help="profile prior: day types"),
@@ -536,7 +544,8 @@ class PerpetuaStarEstimator(BaseEstimator):
                  segmentation: str = "hmm", durations: str = "segments", min_segment: int = 5,
                  segment_penalty: float = 3.0, pool_weight: float = 2.0, sigma_min: float = 0.05,
                  escape: float = ESCAPE, n_periods: int | None = None, max_order: int | None = None,
-                 order_tol: float = 1e-3, profile_step_s: float | None = None, profile_days: str = "workweek",
+                 order_tol: float = 1e-3, order_rule: str = "reference", duration_rule: bool = True,
+                 profile_step_s: float | None = None, profile_days: str = "workweek",
                  schedules: Mapping[Any, Any] | None = None, schedule_inside: float = 0.9,
                  schedule_outside: float = 0.1, ground_truth: Mapping[Any, Any] | None = None,
                  prior_floor: float = 1e-3, random_state: int = 0) -> None:
@@ -559,6 +568,8 @@ class PerpetuaStarEstimator(BaseEstimator):
         self.n_periods = n_periods
         self.max_order = max_order
         self.order_tol = order_tol
+        self.order_rule = order_rule
+        self.duration_rule = duration_rule
         self.profile_step_s = profile_step_s
         self.profile_days = profile_days
         self.schedules = schedules
@@ -623,6 +634,9 @@ class PerpetuaStarEstimator(BaseEstimator):
             self.priors_[e] = self._fit_prior(e, ss, va.get(e))
         self._extra_schedule_priors()
         self.fit_summary_ = {"estimator": self.name, "cadence": cad.to_dict(), "settings": settings, **training}
+        if self.prior == "fremen":
+            self.fit_summary_["order_selection"] = order_selection_summary(self.order_rule, self.duration_rule,
+                                                                           self.order_tol, self.fit_info_)
         log_fit_summary(self.name, self.fit_summary_)
         self.fitted_ = True
         return self
@@ -630,7 +644,8 @@ class PerpetuaStarEstimator(BaseEstimator):
     def _fit_prior(self, e: EdgeKey, ss: list[EdgeStream], val: list[EdgeStream] | None) -> SwitchingPrior:
         if self.prior == "fremen":
             comps, info = fit_fremen_edge(ss, val, self.clock_, n_periods=self.n_periods_,
-                                          order_tol=self.order_tol, max_order=self.max_order)
+                                          order_tol=self.order_tol, max_order=self.max_order,
+                                          order_rule=self.order_rule, duration_rule=self.duration_rule)
             self.fit_info_[e] = info
             return FremenPrior(comps, self.clock_)
         if self.prior == "profile":
