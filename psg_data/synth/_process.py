@@ -62,7 +62,8 @@ def _pick(p: NDArray[np.float64], u: float) -> int:
 
 def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng: np.random.Generator) -> EntityPath:
     """Sample an entity's path over ``n_steps`` steps (four uniforms per step, so paths of two
-    models that differ in one parameter share their random numbers).
+    models that differ in one parameter share their random numbers). From a regime's start day on
+    the regime's model of the entity is used (:meth:`StepProcess.entity_on`).
     """
     K = process.n_slots
     s = _pick(entity.state_initial, float(rng.random()))
@@ -71,9 +72,11 @@ def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng
     days = -(-n_steps // K)
     pats = np.zeros(days, np.int64)
     st, dw, ev, fr = (np.zeros(n_steps, np.int64) for _ in range(4))
+    base = entity
     for n in range(n_steps):
         day, k = divmod(n, K)
         if k == 0:
+            entity = process.entity_on(base.entity_id, day) if base.entity_id in process.entities else base
             row = process.day_initial(entity) if day == 0 else process.day_matrix(entity, day)[p]
             p = _pick(row, u[n, 0])
             pats[day] = p
@@ -139,11 +142,17 @@ class ForwardBelief:
         return rho * routine + (1.0 - rho) * (hold + jumped[:, :, None] * self.U)
 
     def advance(self) -> None:
-        """Move the belief one step ahead (no observation)."""
+        """Move the belief one step ahead (no observation); at a regime's first day the regime's model
+        of the entity takes over.
+        """
         n = self.n + 1
         day, k = divmod(n, self.process.n_slots)
         beta = self.alpha
         if k == 0:
+            if self.process.regimes and self.entity.entity_id in self.process.entities:
+                e = self.process.entity_on(self.entity.entity_id, day)
+                if e is not self.entity:
+                    self.entity, self.U = e, e.dwell_pmf()
             beta = np.einsum("psr,pq->qsr", beta, self.process.day_matrix(self.entity, day))
         self.alpha = self._hour_kernel(beta, k)
         self.n = n
