@@ -11,10 +11,11 @@ from psg_data.evaluation._hints import EstimatorSpec, dataset_hints, require_hin
 
 __all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice",
            "resolve_dataset", "persistence_task_for", "persistence_tasks", "dataset_hints", "require_hints",
-           "available_hints", "BENCHMARK", "DEMO"]
+           "available_hints", "BENCHMARK", "DEMO", "NAVIGATION_BENCHMARK"]
 
 BENCHMARK = "persistence-benchmark"
 DEMO = "demo"
+NAVIGATION_BENCHMARK = "navigation-benchmark"
 
 
 def parse_estimator_spec(text: str) -> EstimatorSpec:
@@ -75,7 +76,7 @@ def check_estimators(specs: list[EstimatorSpec]) -> None:
 
 @dataclass(frozen=True)
 class DatasetChoice:
-    kind: str  # "benchmark" or "dataset"
+    kind: str  # "benchmark", "dataset" or "scenes" (a folder of scene datasets, e.g. the navigation benchmark)
     path: Path | None
     label: str
 
@@ -96,10 +97,18 @@ def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
         return DatasetChoice("dataset", Path(root), "demo lab")
     if value == BENCHMARK:
         return DatasetChoice("benchmark", None, BENCHMARK)
+    if value == NAVIGATION_BENCHMARK:
+        from psg_data.cli._progress import Progress
+        from psg_data.datasets import BUILTIN, NAVIGATION_BENCHMARK_SCENES
+
+        with Progress("building the navigation benchmark (once)", total=NAVIGATION_BENCHMARK_SCENES, unit="scenes",
+                      quiet=quiet) as prog:
+            root = BUILTIN[NAVIGATION_BENCHMARK](progress=prog)
+        return DatasetChoice("scenes", Path(root), NAVIGATION_BENCHMARK)
     path = Path(value)
     if not path.is_dir():
         raise EvaluationError(f"--dataset {value!r}: not a directory; expected a psg-dataset path, "
-                              f"'{DEMO}' or '{BENCHMARK}'")
+                              f"'{DEMO}', '{BENCHMARK}' or '{NAVIGATION_BENCHMARK}'")
     return DatasetChoice("dataset", path, str(path))
 
 
@@ -111,6 +120,8 @@ def available_hints(value: str | None) -> dict[str, Any]:
         return {"dataset": "<the demo lab>", "schedules": {}}
     if value == BENCHMARK:
         return {"schedules": {}}
+    if value == NAVIGATION_BENCHMARK:
+        return {"dataset": "<each scene>", "schedules": {}, "test_shift": True}
     path = Path(value)
     if not path.is_dir():
         return {}

@@ -50,6 +50,25 @@ def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs:
     return result, task, roles
 
 
+def _scenes(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int, scheduler: str | None,
+            quiet: bool, references: bool, keep_all: bool = False) -> tuple[Any, Any, dict[str, Any]]:
+    """A folder of scene datasets (the navigation benchmark): each scene a draw, one job per scene."""
+    from psg_data.cli._eval_inputs import available_hints
+    from psg_data.datasets import navigation_benchmark_scenes
+    from psg_data.evaluation._persistence_job import persistence_rows, run_scene_datasets
+
+    paths = navigation_benchmark_scenes(choice.path)
+    rows, roles = persistence_rows(specs, available_hints(choice.label), references=references)
+    with Progress(f"evaluating {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
+            _executor(jobs, scheduler) as executor:
+        def progress(done: int, _total: int) -> None:
+            prog.done = done
+            prog.update(0)
+
+        result, task = run_scene_datasets(paths, labels, rows, options, executor=executor, progress=progress)
+    return result, task, roles
+
+
 def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_seeds: int, jobs: int,
                scheduler: str | None, quiet: bool, references: bool) -> tuple[Any, Any, dict[str, Any]]:
     from psg_data.evaluation._persistence_job import draw_task, persistence_rows, run_lab_draws
@@ -81,8 +100,9 @@ def run_persistence(specs: list[Any], dataset: str | None, options: Any, labels:
         result, task, roles = _lab_draws(specs, choice, options, labels, lab_seeds, jobs, scheduler, quiet, references)
     else:
         choice = resolve_dataset(dataset, quiet=quiet)
-        result, task, roles = _one_dataset(specs, choice, options, labels, jobs, scheduler, quiet, references,
-                                           keep_all=rerun_file is not None)
+        run = _scenes if choice.kind == "scenes" else _one_dataset
+        result, task, roles = run(specs, choice, options, labels, jobs, scheduler, quiet, references,
+                                  keep_all=rerun_file is not None)
     info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **task.info,
                        "lab_seeds": lab_seeds,
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
