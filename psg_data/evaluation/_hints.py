@@ -45,7 +45,8 @@ def dataset_hints(ds: Any) -> dict[str, Any]:
     from psg_data.synth._process import llm_schedules
 
     proc = load_process(ds.root)
-    out = {"dataset": str(ds.root), "schedules": {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}}
+    schedules = {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}
+    out: dict[str, Any] = {"dataset": str(ds.root), "schedules": schedules}
     if proc.regimes:
         out["test_shift"] = True
     return out

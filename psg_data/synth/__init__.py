@@ -15,11 +15,11 @@ from __future__ import annotations
 
 from psg_data.schemas._generator_model import PROCESS_FILE, EntityProcess, StepProcess, load_process
 from psg_data.synth._build import build_lab, object_description, rerender_frame
+from psg_data.synth._catalog import CONFUSABLE, FURNITURE, OBJECTS, FurnitureSpec, ObjectSpec
 from psg_data.synth._house_build import HOUSE_GENERATOR, HouseConfig, HouseModel, build_house
 from psg_data.synth._house_layout import HouseLayout, HouseObject, HouseParams, make_house
 from psg_data.synth._house_process import HouseProcessParams, house_process, shifted_objects
 from psg_data.synth._house_shift import transition_test
-from psg_data.synth._catalog import CONFUSABLE, FURNITURE, OBJECTS, FurnitureSpec, ObjectSpec
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
 from psg_data.synth._layout import (

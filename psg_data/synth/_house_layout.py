@@ -258,7 +258,7 @@ def _shared_wall(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, flo
     return None
 
 
-def _plan(rng: np.random.Generator, params: HouseParams) -> tuple[list[str], list[tuple[float, ...]]]:
+def _plan(rng: np.random.Generator, params: HouseParams) -> tuple[list[str], list[tuple[float, float, float, float]]]:
     n = int(rng.integers(params.rooms[0], params.rooms[1] + 1))
     kinds = ["living_room", "kitchen", "bedroom", "bathroom", *[str(k) for k in rng.permutation(_EXTRA_ROOMS)][: n - 4]]
     order = list(rng.permutation(n))
@@ -354,8 +354,9 @@ def _attempt(rng: np.random.Generator, seed: int, params: HouseParams) -> HouseL
             sw = _shared_wall(rects[a], rects[b])
             if sw is not None:
                 x, y, _, axis = sw
-                doors.append(Door(f"door_{a}{b}", f"door {kinds[a]} - {kinds[b]}", ids[a], ids[b], _door_box(x, y, axis)))
-    zones = {i: [] for i in ids}  # door swing zones on both sides of each doorway
+                doors.append(Door(f"door_{a}{b}", f"door {kinds[a]} - {kinds[b]}", ids[a], ids[b],
+                                  _door_box(x, y, axis)))
+    zones: dict[str, list[tuple[float, ...]]] = {i: [] for i in ids}  # door swing zones on both sides of each doorway
     for d in doors:
         x, y = d.box.center_m[:2]
         vertical = abs(d.box.rotation[0][0]) > 0.5

@@ -101,7 +101,8 @@ def _paint(day: list[int], start: int, length: int, state: int) -> None:
         day[h] = state
 
 
-def _workday(rng: np.random.Generator, w: NDArray[np.float64], home: int) -> tuple[list[int], list[tuple[int, ...]]]:
+def _workday(rng: np.random.Generator, w: NDArray[np.float64], home: int
+             ) -> tuple[list[int], list[tuple[int, int, int]]]:
     day = [home] * 24
     blocks = []
     for _ in range(int(rng.integers(1, 4))):
@@ -111,7 +112,8 @@ def _workday(rng: np.random.Generator, w: NDArray[np.float64], home: int) -> tup
     return day, blocks
 
 
-def _variant(rng: np.random.Generator, home: int, blocks: list[tuple[int, ...]], w: NDArray[np.float64]) -> list[int]:
+def _variant(rng: np.random.Generator, home: int, blocks: list[tuple[int, int, int]], w: NDArray[np.float64]
+             ) -> list[int]:
     k = int(rng.integers(len(blocks)))
     day = [home] * 24
     for i, (s, n, st) in enumerate(blocks):
@@ -149,7 +151,7 @@ def _object(house: HouseLayout, j: int, params: HouseProcessParams) -> EntityPro
                              np.ones(1), np.ones((1, 1)), np.ones(1), np.zeros((1, 24), np.int64), np.ones((1, 24)),
                              np.ones((1, 1, 1)), np.ones((1, 1, 2), np.int64))
     n_other = min(int(rng.integers(2, 4)), int((w_all > 0).sum()) - 1)
-    others = []
+    others: list[int] = []
     for _ in range(n_other):
         others.append(_choose(rng, w_all, {home, *others}))
     recs = [home, *others]
@@ -225,7 +227,7 @@ def house_process(house: HouseLayout, params: HouseProcessParams, start_date: dt
     ents = {o.object_id: _object(house, j, params) for j, o in enumerate(house.objects)}
     for k, d in enumerate(house.doors):
         ents[d.door_id] = _door(house, k, params)
-    regimes = ()
+    regimes: tuple[Regime, ...] = ()
     changed = shifted_objects(house, params.shift)
     if changed:
         rng = np.random.default_rng([house.seed, 2514])

@@ -88,7 +88,8 @@ def transition_test(items: Iterable[tuple[StepProcess, Mapping[str, Sequence[int
     Args:
         items: ``(model, {entity_id: state index per step from step 0})`` pairs (e.g. one per house:
             its training model and the sampled paths of its moving objects).
-        first_step, end_step: the tested window (the transition into step n is tested for n in it).
+        first_step: first step of the tested window (the transition into step n is tested for n in it).
+        end_step: end of the window (exclusive).
         block_hours: hours per time-of-day block of the bins.
     """
     from scipy.stats import chi2
