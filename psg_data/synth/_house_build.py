@@ -66,6 +66,7 @@ class HouseConfig:
     weeks: int = 4
 
     def to_extra(self) -> dict[str, Any]:
+        """The configuration as the manifest's ``extra`` (generator, parameters, splits, process file)."""
         return {"generator": HOUSE_GENERATOR, "house_version": HOUSE_VERSION, "seed": self.seed,
                 "geometry": asdict(self.geometry), "schedules": asdict(self.schedules),
                 "shift": self.schedules.shift, "start_date": self.start_date, "timezone": self.timezone,

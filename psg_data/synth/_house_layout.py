@@ -122,18 +122,22 @@ class HouseLayout:
     # -- lookups ----------------------------------------------------------------------------------
     @property
     def room_ids(self) -> list[str]:
+        """Room ids in layout order."""
         return [r.room_id for r in self.rooms]
 
     @property
     def door_ids(self) -> list[str]:
+        """Door ids in layout order."""
         return [d.door_id for d in self.doors]
 
     @property
     def receptacle_ids(self) -> list[str]:
+        """Receptacle ids in layout order."""
         return [r.receptacle_id for r in self.receptacles]
 
     @property
     def object_ids(self) -> list[str]:
+        """Object ids in layout order."""
         return [o.object_id for o in self.objects]
 
     def room_area_m2(self, room_id: str) -> float:
