@@ -88,6 +88,30 @@ def draw_task(kind: str, seed: int, labels: str) -> PersistenceTask:
     return persistence_task_from_lab(LabConfig(seed=int(seed)), labels=labels)
 
 
+def _gather(fn: Callable[..., tuple[PersistenceResult, PersistenceTask | None]], calls: dict[int, tuple[Any, ...]],
+            executor: Executor | None, progress: Callable[[int, int], None] | None
+            ) -> tuple[dict[int, PersistenceResult], PersistenceTask | None]:
+    """Run ``fn(*args)`` per key (inline, or one job each on ``executor``): results by key, the first task kept."""
+    results: dict[int, PersistenceResult] = {}
+    first: PersistenceTask | None = None
+    if executor is None:
+        for done, (key, args) in enumerate(calls.items(), 1):
+            res, task = fn(*args)
+            results[key], first = res, first or task
+            if progress is not None:
+                progress(done, len(calls))
+        return results, first
+    from concurrent.futures import as_completed
+
+    futs = {executor.submit(fn, *args): key for key, args in calls.items()}
+    for done, fut in enumerate(as_completed(futs), 1):
+        res, task = fut.result()
+        results[futs[fut]], first = res, first or task
+        if progress is not None:
+            progress(done, len(calls))
+    return results, first
+
+
 def _draw_job(kind: str, seed: int, labels: str, specs: Sequence[EstimatorSpec], options: PersistenceOptions,
               keep: bool) -> tuple[PersistenceResult, PersistenceTask | None]:
     """One draw, evaluated inline (runs in a worker process)."""
@@ -111,24 +135,8 @@ def run_lab_draws(kind: str, seeds: Sequence[int], labels: str, specs: Sequence[
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise EvaluationError("--lab-seeds: no draw")
-    results: dict[int, PersistenceResult] = {}
-    first: PersistenceTask | None = None
-    if executor is None:
-        for k, s in enumerate(seeds):
-            res, task = _draw_job(kind, s, labels, specs, options, k == 0)
-            results[s], first = res, first or task
-            if progress is not None:
-                progress(k + 1, len(seeds))
-    else:
-        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0): s
-                for k, s in enumerate(seeds)}
-        from concurrent.futures import as_completed
-
-        for done, fut in enumerate(as_completed(futs), 1):
-            res, task = fut.result()
-            results[futs[fut]], first = res, first or task
-            if progress is not None:
-                progress(done, len(seeds))
+    calls = {s: (kind, s, labels, list(specs), options, k == 0) for k, s in enumerate(seeds)}
+    results, first = _gather(_draw_job, calls, executor, progress)
     assert first is not None
     merged = merge_results([results[s] for s in seeds]) if len(seeds) > 1 else results[seeds[0]]
     return merged, first
@@ -158,24 +166,9 @@ def run_scene_datasets(paths: Sequence[Any], labels: str, specs: Sequence[Estima
     """
     if not paths:
         raise EvaluationError("run_scene_datasets: no scene")
-    results: dict[int, PersistenceResult] = {}
-    first: PersistenceTask | None = None
     jobs = [(str(p), k) for k, p in enumerate(paths)]
-    if executor is None:
-        for done, (p, k) in enumerate(jobs, 1):
-            res, task = _scene_job(p, k, labels, specs, options, k == 0)
-            results[k], first = res, first or task
-            if progress is not None:
-                progress(done, len(jobs))
-    else:
-        from concurrent.futures import as_completed
-
-        futs = {executor.submit(_scene_job, p, k, labels, list(specs), options, k == 0): k for p, k in jobs}
-        for done, fut in enumerate(as_completed(futs), 1):
-            res, task = fut.result()
-            results[futs[fut]], first = res, first or task
-            if progress is not None:
-                progress(done, len(jobs))
+    calls = {k: (p, k, labels, list(specs), options, k == 0) for p, k in jobs}
+    results, first = _gather(_scene_job, calls, executor, progress)
     assert first is not None
     ordered = [results[k] for _, k in jobs]
     merged = merge_results(ordered, draw_unit="scenes") if len(ordered) > 1 else ordered[0]
