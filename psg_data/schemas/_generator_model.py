@@ -315,11 +315,12 @@ class StepProcess:
         self.clock = StepClock(self.timezone, self.start_date, self.step_hours)
         self._shifted = frozenset(self.shifted_days)
 
-    def entity_on(self, entity_id: str, day: int) -> EntityProcess:
-        """The model of ``entity_id`` in force on ``day`` (the last regime started by then that lists it,
-        else the base model).
+    def entity_on(self, entity_id: str, day: int, base: EntityProcess | None = None) -> EntityProcess:
+        """The model of ``entity_id`` in force on ``day``: the last regime started by then that lists it,
+        else ``base`` (default: the stored base model; a caller's own variant of it stays in force
+        outside the regimes).
         """
-        out = self.entities[entity_id]
+        out = self.entities[entity_id] if base is None else base
         for r in self.regimes:
             if r.start_day <= day and entity_id in r.entities:
                 out = r.entities[entity_id]

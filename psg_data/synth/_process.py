@@ -76,7 +76,7 @@ def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng
     for n in range(n_steps):
         day, k = divmod(n, K)
         if k == 0:
-            entity = process.entity_on(base.entity_id, day) if base.entity_id in process.entities else base
+            entity = process.entity_on(base.entity_id, day, base)
             row = process.day_initial(entity) if day == 0 else process.day_matrix(entity, day)[p]
             p = _pick(row, u[n, 0])
             pats[day] = p
@@ -108,6 +108,7 @@ class ForwardBelief:
     def __init__(self, process: StepProcess, entity: EntityProcess) -> None:
         self.process = process
         self.entity = entity
+        self._base = entity
         self.U = entity.dwell_pmf()
         self.n = -1
         self.alpha = np.zeros((entity.n_patterns, entity.n_states, entity.max_dwell))
@@ -116,7 +117,7 @@ class ForwardBelief:
     def copy(self) -> ForwardBelief:
         """An independent copy of the belief (same process, own state)."""
         out = ForwardBelief.__new__(ForwardBelief)
-        out.process, out.entity, out.U = self.process, self.entity, self.U
+        out.process, out.entity, out.U, out._base = self.process, self.entity, self.U, self._base
         out.n, out.alpha, out.log_evidence = self.n, self.alpha.copy(), self.log_evidence
         return out
 
@@ -149,8 +150,8 @@ class ForwardBelief:
         day, k = divmod(n, self.process.n_slots)
         beta = self.alpha
         if k == 0:
-            if self.process.regimes and self.entity.entity_id in self.process.entities:
-                e = self.process.entity_on(self.entity.entity_id, day)
+            if self.process.regimes:
+                e = self.process.entity_on(self._base.entity_id, day, self._base)
                 if e is not self.entity:
                     self.entity, self.U = e, e.dwell_pmf()
             beta = np.einsum("psr,pq->qsr", beta, self.process.day_matrix(self.entity, day))
