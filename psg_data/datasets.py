@@ -4,6 +4,9 @@
 dataset (``psg-data info demo``, ``psg-eval --dataset persistence-benchmark``); :func:`resolve`
 turns a name or a path into a dataset directory, or refuses a name that is not one (saying which
 commands accept it). A new built-in dataset is one entry of :data:`BUILTIN`.
+
+:func:`navigation_benchmark` builds the paper's simulation benchmark (15 procedural houses, one
+psg-dataset per scene) once into the cache.
 """
 
 from __future__ import annotations
@@ -16,12 +19,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["demo", "cache_dir", "DEMO_VERSION", "BuiltinDataset", "BUILTIN", "resolve"]
+__all__ = ["demo", "cache_dir", "DEMO_VERSION", "BuiltinDataset", "BUILTIN", "resolve", "navigation_benchmark",
+           "navigation_benchmark_scenes", "NAVIGATION_BENCHMARK_VERSION", "NAVIGATION_BENCHMARK_SCENES"]
 
 log = logging.getLogger(__name__)
 
 DEMO_VERSION = "synth2-steps-seed0-d21-f8-160x120-fmt2"
 """Cache key of the demo dataset; bumped whenever the generator's output (or its format) changes."""
+
+NAVIGATION_BENCHMARK_VERSION = "house1-shift0.5-fmt2"
+"""Cache key of the navigation benchmark; bumped whenever the house generator's output changes."""
+
+NAVIGATION_BENCHMARK_SCENES = 15
+"""Scenes of the navigation benchmark (house seeds 0..14), as the paper's 15 ProcTHOR scenes."""
 
 
 def cache_dir() -> Path:
@@ -91,6 +101,47 @@ def demo(*, rebuild: bool = False, progress: Callable[..., Any] | None = None) -
     return root
 
 
+def navigation_benchmark(*, rebuild: bool = False, progress: Callable[..., Any] | None = None,
+                         scenes: int = NAVIGATION_BENCHMARK_SCENES) -> Path:
+    """Folder of the navigation benchmark: ``scene_00`` ... ``scene_14``, one psg-dataset per house.
+
+    Each scene is :func:`psg_data.synth.build_house` of ``HouseConfig(seed=k)`` (5-8 rooms, 100-150
+    m2 navigable, 4 weeks of hourly steps: weeks 1-2 train, week 3 validation, week 4 test with the
+    default test-time shift; no images) labelled with the ``privileged`` source (the hourly
+    patrol's line of sight; ``gt`` needs no labels). Built on first use into :func:`cache_dir`
+    under :data:`NAVIGATION_BENCHMARK_VERSION`; a scene whose cached copy is incomplete is rebuilt.
+
+    Args:
+        rebuild: rebuild every scene even if a valid copy is cached.
+        progress: called as ``progress(1)`` per scene built.
+        scenes: number of scenes (house seeds 0..scenes-1).
+    """
+    root = cache_dir() / f"navigation-benchmark-{NAVIGATION_BENCHMARK_VERSION}"
+    with _lock(cache_dir() / f".navigation-benchmark-{NAVIGATION_BENCHMARK_VERSION}.lock"):
+        for k in range(scenes):
+            scene = root / f"scene_{k:02d}"
+            if rebuild or not _is_complete(scene) or not _has_labels(scene):
+                from psg_data.labeling import label_dataset
+                from psg_data.synth import HouseConfig, build_house
+
+                log.info("building navigation-benchmark scene %d into %s", k, scene)
+                build_house(scene, HouseConfig(seed=k), overwrite=True)
+                label_dataset(scene, "privileged")
+            if progress is not None:
+                progress(1)
+    return root
+
+
+def navigation_benchmark_scenes(root: Path | None = None, scenes: int = NAVIGATION_BENCHMARK_SCENES) -> list[Path]:
+    """The scene folders of the navigation benchmark (built if needed), in seed order."""
+    root = root or navigation_benchmark(scenes=scenes)
+    return [root / f"scene_{k:02d}" for k in range(scenes)]
+
+
+def _has_labels(root: Path) -> bool:
+    return (root / "tables" / "labels.parquet").is_file()
+
+
 @dataclass(frozen=True)
 class BuiltinDataset:
     """A dataset name every command that takes a dataset knows.
@@ -119,6 +170,11 @@ BUILTIN: dict[str, BuiltinDataset] = {
     "persistence-benchmark": BuiltinDataset(
         "persistence-benchmark", "the paper's Sec. V-A simulation benchmark: observation streams drawn in memory, "
         "no dataset directory", None, "psg-eval --dataset persistence-benchmark (the persistence task)"),
+    "navigation-benchmark": BuiltinDataset(
+        "navigation-benchmark", "the paper's simulation benchmark: 15 procedural houses, one dataset per scene "
+        "(navigation_benchmark_scenes), built once into the cache", None,
+        "psg-eval --dataset navigation-benchmark (the persistence task over its scenes)",
+        scans=NAVIGATION_BENCHMARK_SCENES),
 }
 """The built-in dataset names (name -> :class:`BuiltinDataset`)."""
 

@@ -8,7 +8,7 @@ from typing import Any
 from psg_data.errors import EvaluationError
 from psg_data.evaluation._hints import EstimatorSpec
 
-__all__ = ["parse_deltas", "persistence_options", "check_lab_seeds", "check_task_estimators"]
+__all__ = ["parse_deltas", "persistence_options", "check_lab_seeds", "check_task_estimators", "check_builtin_task"]
 
 _TASK_ONLY = {"perpetua_star_oracle": ("persistence", "the training ground truth of the persistence task's streams "
                                                       "(navigation and door maps carry none)")}
@@ -63,6 +63,18 @@ def check_lab_seeds(lab_seeds: tuple[int, ...] | None, dataset: str | None, task
     if labels.split(":", 1)[0] not in ("gt", "noisy"):
         raise EvaluationError(f"--lab-seeds with --labels {labels}: a regenerated lab is drawn without images, so only "
                               "gt and noisy:P labels exist; build it (psg-data synth) and label it for other sources")
+
+
+def check_builtin_task(dataset: str | None, task: str, lab_seeds: tuple[int, ...] | int | None) -> None:
+    """The navigation benchmark is scored by the persistence task (its navigation protocols are not built yet)."""
+    if dataset != "navigation-benchmark":
+        return
+    if task != "persistence":
+        raise EvaluationError(f"--task {task} on navigation-benchmark: only --task persistence is available on the "
+                              "navigation benchmark so far; pass one scene (--dataset "
+                              "<cache>/navigation-benchmark-*/scene_00) to the navigation or door task")
+    if lab_seeds is not None:
+        raise EvaluationError("--lab-seeds with navigation-benchmark: its 15 scenes are the draws already")
 
 
 def check_task_estimators(specs: list[EstimatorSpec], task: str) -> None:

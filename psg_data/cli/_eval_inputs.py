@@ -11,10 +11,11 @@ from psg_data.evaluation._hints import EstimatorSpec, dataset_hints, require_hin
 
 __all__ = ["EstimatorSpec", "parse_estimator_spec", "check_estimators", "with_hints", "DatasetChoice",
            "resolve_dataset", "persistence_task_for", "persistence_tasks", "dataset_hints", "require_hints",
-           "available_hints", "BENCHMARK", "DEMO"]
+           "available_hints", "BENCHMARK", "DEMO", "NAVIGATION_BENCHMARK"]
 
 BENCHMARK = "persistence-benchmark"
 DEMO = "demo"
+NAVIGATION_BENCHMARK = "navigation-benchmark"
 
 
 def parse_estimator_spec(text: str) -> EstimatorSpec:
@@ -108,20 +109,28 @@ def _trial_fit(spec: EstimatorSpec, est: Any, undeclared: list[str]) -> None:
 
 @dataclass(frozen=True)
 class DatasetChoice:
-    kind: str  # "benchmark" or "dataset"
+    kind: str  # "benchmark", "dataset" or "scenes" (a folder of scene datasets, e.g. the navigation benchmark)
     path: Path | None
     label: str
 
 
 def resolve_dataset(value: str | None, *, quiet: bool) -> DatasetChoice:
     """``demo`` (default: the built-in lab, built once into the cache), ``persistence-benchmark``
-    (the paper's Sec. V-A streams) or a dataset directory.
+    (the paper's Sec. V-A streams), ``navigation-benchmark`` (the 15 house scenes) or a dataset directory.
     """
     from psg_data.datasets import BUILTIN
 
     name = DEMO if value is None else value
     if name == BENCHMARK:
         return DatasetChoice("benchmark", None, BENCHMARK)
+    if name == NAVIGATION_BENCHMARK and not Path(name).is_dir():
+        from psg_data.cli._progress import Progress
+        from psg_data.datasets import NAVIGATION_BENCHMARK_SCENES, navigation_benchmark
+
+        with Progress("building the navigation benchmark (once)", total=NAVIGATION_BENCHMARK_SCENES, unit="scenes",
+                      quiet=quiet) as prog:
+            root = navigation_benchmark(progress=prog)
+        return DatasetChoice("scenes", Path(root), NAVIGATION_BENCHMARK)
     entry = BUILTIN.get(name)
     if entry is not None and entry.build is not None and not Path(name).is_dir():
         from psg_data.cli._common import dataset_path
@@ -143,6 +152,8 @@ def available_hints(value: str | None) -> dict[str, Any]:
         return {"dataset": "<the demo lab>", "schedules": {}}
     if value == BENCHMARK:
         return {"schedules": {}}
+    if value == NAVIGATION_BENCHMARK:
+        return {"dataset": "<each scene>", "schedules": {}, "test_shift": True}
     path = Path(value)
     if not path.is_dir():
         return {}

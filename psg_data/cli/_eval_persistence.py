@@ -50,6 +50,25 @@ def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs:
     return result, task, roles
 
 
+def _scenes(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int, scheduler: str | None,
+            quiet: bool, references: bool, keep_all: bool = False) -> tuple[Any, Any, dict[str, Any]]:
+    """A folder of scene datasets (the navigation benchmark): each scene a draw, one job per scene."""
+    from psg_data.cli._eval_inputs import available_hints
+    from psg_data.datasets import navigation_benchmark_scenes
+    from psg_data.evaluation._persistence_job import persistence_rows, run_scene_datasets
+
+    paths = navigation_benchmark_scenes(choice.path)
+    rows, roles = persistence_rows(specs, available_hints(choice.label), references=references)
+    with Progress(f"evaluating {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
+            _executor(jobs, scheduler) as executor:
+        def progress(done: int, _total: int) -> None:
+            prog.done = done
+            prog.update(0)
+
+        result, task = run_scene_datasets(paths, labels, rows, options, executor=executor, progress=progress)
+    return result, task, roles
+
+
 def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_seeds: tuple[int, ...], jobs: int,
                scheduler: str | None, quiet: bool, references: bool,
                label_seed: int) -> tuple[Any, Any, dict[str, Any]]:
@@ -84,8 +103,12 @@ def run_persistence(specs: list[Any], dataset: str | None, options: Any, labels:
                                          label_seed)
     else:
         choice = resolve_dataset(dataset, quiet=quiet)
-        result, task, roles = _one_dataset(specs, choice, options, labels, jobs, scheduler, quiet, references,
-                                           keep_all=rerun_file is not None, label_seed=label_seed)
+        if choice.kind == "scenes":
+            result, task, roles = _scenes(specs, choice, options, labels, jobs, scheduler, quiet, references,
+                                          keep_all=rerun_file is not None)
+        else:
+            result, task, roles = _one_dataset(specs, choice, options, labels, jobs, scheduler, quiet, references,
+                                               keep_all=rerun_file is not None, label_seed=label_seed)
     info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **task.info,
                        "lab_seeds": None if lab_seeds is None else list(lab_seeds),
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})

@@ -50,11 +50,11 @@ def _out_dir(out: Path | None, overwrite: bool, inputs: list[Path | None]) -> Pa
 def _eval_inputs(dataset: str | None, labels: str) -> list[Path | None]:
     """Paths psg-eval reads (``--out`` may not be, contain or lie inside one)."""
     paths: list[Path | None] = []
-    if dataset not in (None, "demo", "persistence-benchmark", "door-loop", "door-loop-lab"):
+    if dataset not in (None, "demo", "persistence-benchmark", "navigation-benchmark", "door-loop", "door-loop-lab"):
         paths.append(Path(dataset))  # type: ignore[arg-type]
     if labels.startswith("detections:"):
         paths.append(Path(labels.split(":", 1)[1]))
-    if dataset in (None, "demo"):
+    if dataset in (None, "demo", "navigation-benchmark"):
         from psg_data.datasets import cache_dir
 
         paths.append(cache_dir())
@@ -76,8 +76,9 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 
 
 @click.group(cls=ContractGroup, invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
-@click.option("--dataset", "dataset", default=None, metavar="PATH|demo|persistence-benchmark",
-              help="Dataset to evaluate on (default: demo, the built-in synthetic lab).")
+@click.option("--dataset", "dataset", default=None, metavar="PATH|demo|persistence-benchmark|navigation-benchmark",
+              help="Dataset to evaluate on (default: demo, the built-in synthetic lab; navigation-benchmark: 15 "
+                   "procedural houses, hourly steps, a shifted test week, each scene a draw).")
 @click.option("--estimator", "-e", "estimators", multiple=True, metavar="NAME[:key=value,...]",
               help=f"Estimator to score (repeatable; default {DEFAULT_ESTIMATOR}). Settings after ':'.")
 @click.option("--references/--no-references", default=True, show_default=True,
@@ -167,6 +168,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
       psg-eval --estimator perpetua_star                       # the built-in lab
       psg-eval --lab-seeds 5 -e perpetua_star                  # five regenerated labs, t-interval
       psg-eval --dataset persistence-benchmark --lab-seeds 5 -e perpetua_star -e perpetua_star_oracle
+      psg-eval --dataset navigation-benchmark -e perpetua_star --jobs -1   # 15 houses, shifted test week
       psg-eval --dataset /data/lab --labels privileged -e my_plugin:alpha=0.3 --out res/
       psg-eval --task navigation -e perpetua_star -e fremen    # SR / SPL / AR / DIST
       psg-eval --task navigation --delta 0.05,0.1,0.2,0.3 -e perpetua_star
@@ -177,7 +179,13 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     if ctx.invoked_subcommand is not None:
         return
     setup_logging(quiet)
-    from psg_data.cli._eval_checks import check_lab_seeds, check_task_estimators, parse_deltas, persistence_options
+    from psg_data.cli._eval_checks import (
+        check_builtin_task,
+        check_lab_seeds,
+        check_task_estimators,
+        parse_deltas,
+        persistence_options,
+    )
     from psg_data.cli._eval_inputs import available_hints, check_estimators, parse_estimator_spec, require_hints
 
     if list_estimators:
@@ -193,6 +201,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
     deltas = parse_deltas(delta, task)
     p_opts = persistence_options(setting=setting, horizon=horizon, weighting=weighting, windows=windows, seeds=seeds)
+    check_builtin_task(dataset, task, lab_seeds)
     check_lab_seeds(lab_seeds, dataset, task, labels)
     require_hints(specs, available_hints(dataset), "the " + (dataset or "demo") + " dataset")
     nav_options = None

@@ -23,6 +23,12 @@ update time ``H``, whatever order the filters are built, updated or asked in):
 
 Before any observation (``last_t_s`` None) the prediction is the model's prior marginal.
 
+Two readings (``model``): ``generating`` (default), the posterior under the model that generated
+the data, test-week regime included (the ceiling); ``train``, the posterior under the training model
+only (:meth:`~psg_data.schemas._generator_model.StepProcess.base_model`: the stored process without
+its regimes), the best a predictor that does not adapt to a test-time shift can do. On a dataset
+without a shift the two are the same model.
+
 What the ceiling is a ceiling of: the posterior probability (``output="probability"``, default) is
 the best possible prediction for proper scores (log loss, Brier) and, thresholded at 0.5, the most
 accurate present/absent decision at every time. MAE is not a proper score: its optimum is the
@@ -80,7 +86,9 @@ class ProcessOracleEstimator(BaseEstimator):
     Args:
         dataset: a dataset directory written by ``psg-data synth`` (generator ``steps-v2``), or the
             path of its ``generator/process.json``. ``psg-eval`` fills it in for such datasets.
-        model: the process as a dict (the parsed JSON) or a ``StepProcess``; overrides ``dataset``.
+        process: the process as a dict (the parsed JSON) or a ``StepProcess``; overrides ``dataset``.
+        model: ``generating`` (the model that generated the data, the ceiling) or ``train`` (the
+            training model only, regimes dropped; module docstring).
         p_m: P(seen absent | present) of the observations (0 for ground-truth / privileged labels).
         p_f: P(seen present | absent) of the observations.
         share_updates: also use the post-training observations that sibling filters of the same
@@ -92,16 +100,20 @@ class ProcessOracleEstimator(BaseEstimator):
     name = "process_oracle"
     _parameters = {
         "dataset": Text(help="synthetic dataset (or its generator/process.json) carrying the generator model"),
-        "model": MappingParam(help="the generator process as a dict (Python API; overrides dataset)"),
+        "process": MappingParam(help="the generator process as a dict (Python API; overrides dataset)"),
+        "model": Options("generating", "train", help="posterior under the generating model (the ceiling) or the "
+                                                     "training model only (regimes dropped)"),
         "p_m": Real(0.0, 0.5, closed="left", help="P(seen absent | present) of the labels"),
         "p_f": Real(0.0, 0.5, closed="left", help="P(seen present | absent) of the labels"),
         "share_updates": Boolean(help="filters of one object share their post-training observations"),
         "output": Options("probability", "median", help="posterior probability, or its 0/1 median (MAE)"),
     }
 
-    def __init__(self, *, dataset: str | None = None, model: Mapping[str, Any] | None = None, p_m: float = 0.0,
-                 p_f: float = 0.0, share_updates: bool = False, output: str = "probability") -> None:
+    def __init__(self, *, dataset: str | None = None, process: Mapping[str, Any] | None = None,
+                 model: str = "generating", p_m: float = 0.0, p_f: float = 0.0, share_updates: bool = False,
+                 output: str = "probability") -> None:
         self.dataset = dataset
+        self.process = process
         self.model = model
         self.p_m = p_m
         self.p_f = p_f
@@ -111,15 +123,16 @@ class ProcessOracleEstimator(BaseEstimator):
     def _load(self) -> Any:
         from psg_data.schemas._generator_model import load_process
 
-        source = self.model if self.model is not None else self.dataset
+        source = self.process if self.process is not None else self.dataset
         if source is None:
             raise EstimatorError(f"{self.name}: needs the generator model of a synthetic dataset (dataset=PATH of a "
                                  "psg-data synth dataset; psg-eval sets it for such datasets); other datasets have "
                                  "no exact ceiling")
         try:
-            return load_process(source)
+            proc = load_process(source)
         except PsgDataError as exc:
             raise EstimatorError(f"{self.name}: {exc}") from None
+        return proc.base_model() if self.model == "train" else proc
 
     def fit(self, streams: Sequence[EdgeStream], *, val_streams: Sequence[EdgeStream] | None = None,
             timezone: str = "UTC") -> ProcessOracleEstimator:

@@ -345,7 +345,7 @@ def persistence_task_from_lab(lab: Any, *, labels: str = "gt", seed: int = 0) ->
     task.windows, task.cadence_s = windows, float(np.median(np.diff(step)) * 3600.0) if len(step) > 1 else 86400.0
     proc = getattr(lab.schedule, "process", None)
     if proc is not None:
-        task.estimator_hints = {"model": json.loads(proc.to_json()),
+        task.estimator_hints = {"process": json.loads(proc.to_json()),
                                 "schedules": {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}}
     task.draw = int(cfg.seed)
     return task

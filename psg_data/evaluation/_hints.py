@@ -2,7 +2,9 @@
 
 A synthetic dataset with its stored generator model gives ``dataset`` (its path, for
 ``process_oracle``) and ``schedules`` (its routines in the paper's LLM output format, for the
-schedule prior); a lab drawn without images gives ``model`` instead of ``dataset``; the persistence
+schedule prior); a lab drawn without images gives ``process`` instead of ``dataset``; a dataset
+whose process has a test-time regime (the procedural houses) also gives ``test_shift`` (True),
+which adds the ``process_oracle:model=train`` reference row; the persistence
 benchmark gives ``schedules``. :func:`with_hints` adds a hint to an estimator's settings when the
 estimator has that setting, the user did not set it and its value is None. :func:`require_hints`
 refuses, before any work, an estimator that needs a hint the dataset cannot give.
@@ -37,13 +39,17 @@ def dataset_hints(ds: Any) -> dict[str, Any]:
     """Estimator settings a dataset provides (module docstring)."""
     extra = ds.info.extra
     rel = extra.get("process_file")
-    if extra.get("generator") != "psg_data.synth" or not rel or not (ds.root / rel).is_file():
+    if not str(extra.get("generator", "")).startswith("psg_data.synth") or not rel or not (ds.root / rel).is_file():
         return {}
     from psg_data.schemas._generator_model import load_process
     from psg_data.synth._process import llm_schedules
 
     proc = load_process(ds.root)
-    return {"dataset": str(ds.root), "schedules": {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}}
+    schedules = {f"{o}/{r}": v for (o, r), v in llm_schedules(proc).items()}
+    out: dict[str, Any] = {"dataset": str(ds.root), "schedules": schedules}
+    if proc.regimes:
+        out["test_shift"] = True
+    return out
 
 
 def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
@@ -86,7 +92,7 @@ def with_label_noise(spec: EstimatorSpec, labels: str) -> EstimatorSpec:
 
 
 NEEDS: dict[str, tuple[tuple[str, ...], str]] = {
-    "process_oracle": (("dataset", "model"), "a synthetic dataset with its stored generator model (psg-data synth, "
+    "process_oracle": (("dataset", "process"), "a synthetic dataset with its stored generator model (psg-data synth, "
                                              "generator steps-v2)"),
     "perpetua_star_schedule": (("schedules",), "schedules in the LLM output format (the persistence benchmark "
                                                "and psg-data synth datasets provide them)"),

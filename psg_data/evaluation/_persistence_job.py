@@ -6,6 +6,10 @@ one dataset or several draws of a synthetic one, and the files and figures of th
 - :func:`run_lab_draws`: ``--lab-seeds N``: N regenerated labs (or benchmark draws), one job per
   draw on an executor (:func:`psg_data._executors.open_executor`), merged into one result whose
   interval is the t-interval over draws;
+- :func:`run_scene_datasets`: several datasets scored as draws of one benchmark (the navigation
+  benchmark's 15 scenes): one job per scene, merged; the interval is the t-interval over the
+  scenes and ``std`` the standard deviation across scenes (the paper's ±). Each scene's validation
+  split (``scans.split == 'val'``, week 3) reaches ``fit`` as ``val_streams`` and is never scored;
 - :func:`write_persistence_outputs`: the results schema, CSV files and the PNG figures.
 """
 
@@ -26,7 +30,7 @@ from psg_data.evaluation._persistence_task import RegistryFactory, run_persisten
 from psg_data.evaluation._references import PAPER_METHODS, persistence_references
 
 __all__ = ["persistence_rows", "factories_for", "run_persistence_rows", "run_lab_draws", "write_persistence_outputs",
-           "draw_task"]
+           "draw_task", "run_scene_datasets"]
 
 Roles = dict[str, tuple[str, str]]
 
@@ -86,6 +90,30 @@ def draw_task(kind: str, seed: int, labels: str, label_seed: int = 0) -> Persist
     return persistence_task_from_lab(LabConfig(seed=int(seed)), labels=labels, seed=label_seed)
 
 
+def _gather(fn: Callable[..., tuple[PersistenceResult, PersistenceTask | None]], calls: dict[int, tuple[Any, ...]],
+            executor: Executor | None, progress: Callable[[int, int], None] | None
+            ) -> tuple[dict[int, PersistenceResult], PersistenceTask | None]:
+    """Run ``fn(*args)`` per key (inline, or one job each on ``executor``): results by key, the first task kept."""
+    results: dict[int, PersistenceResult] = {}
+    first: PersistenceTask | None = None
+    if executor is None:
+        for done, (key, args) in enumerate(calls.items(), 1):
+            res, task = fn(*args)
+            results[key], first = res, first or task
+            if progress is not None:
+                progress(done, len(calls))
+        return results, first
+    from concurrent.futures import as_completed
+
+    futs = {executor.submit(fn, *args): key for key, args in calls.items()}
+    for done, fut in enumerate(as_completed(futs), 1):
+        res, task = fut.result()
+        results[futs[fut]], first = res, first or task
+        if progress is not None:
+            progress(done, len(calls))
+    return results, first
+
+
 def _draw_job(kind: str, seed: int, labels: str, specs: Sequence[EstimatorSpec], options: PersistenceOptions,
               keep: bool, label_seed: int = 0) -> tuple[PersistenceResult, PersistenceTask | None]:
     """One draw, evaluated inline (runs in a worker process)."""
@@ -111,26 +139,43 @@ def run_lab_draws(kind: str, seeds: Sequence[int], labels: str, specs: Sequence[
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise EvaluationError("--lab-seeds: no draw")
-    results: dict[int, PersistenceResult] = {}
-    first: PersistenceTask | None = None
-    if executor is None:
-        for k, s in enumerate(seeds):
-            res, task = _draw_job(kind, s, labels, specs, options, k == 0, label_seed)
-            results[s], first = res, first or task
-            if progress is not None:
-                progress(k + 1, len(seeds))
-    else:
-        futs = {executor.submit(_draw_job, kind, s, labels, list(specs), options, k == 0, label_seed): s
-                for k, s in enumerate(seeds)}
-        from concurrent.futures import as_completed
-
-        for done, fut in enumerate(as_completed(futs), 1):
-            res, task = fut.result()
-            results[futs[fut]], first = res, first or task
-            if progress is not None:
-                progress(done, len(seeds))
+    calls = {s: (kind, s, labels, list(specs), options, k == 0, label_seed) for k, s in enumerate(seeds)}
+    results, first = _gather(_draw_job, calls, executor, progress)
     assert first is not None
     merged = merge_results([results[s] for s in seeds]) if len(seeds) > 1 else results[seeds[0]]
+    return merged, first
+
+
+def _scene_job(path: str, draw: int, labels: str, specs: Sequence[EstimatorSpec], options: PersistenceOptions,
+               keep: bool) -> tuple[PersistenceResult, PersistenceTask | None]:
+    """One scene dataset, evaluated inline (runs in a worker process)."""
+    from psg_data.evaluation._dataset_task import persistence_task_from_dataset
+    from psg_data.evaluation._report import choose_plot_edges
+
+    task = persistence_task_from_dataset(path, labels=labels)
+    task.draw = int(draw)
+    task.info["kind"] = "the navigation benchmark"
+    kept = choose_plot_edges(task.ground_truth) if keep else ()
+    res = run_persistence_rows(specs, task, options, keep_predictions=kept)
+    return res, (task if keep else None)
+
+
+def run_scene_datasets(paths: Sequence[Any], labels: str, specs: Sequence[EstimatorSpec], options: PersistenceOptions,
+                       *, executor: Executor | None = None, progress: Callable[[int, int], None] | None = None
+                       ) -> tuple[PersistenceResult, PersistenceTask]:
+    """Evaluate the rows on every scene dataset (draw ``k`` = ``paths[k]``) and merge (module docstring).
+
+    Returns:
+        The merged result (t-interval over the scenes) and the first scene's task.
+    """
+    if not paths:
+        raise EvaluationError("run_scene_datasets: no scene")
+    jobs = [(str(p), k) for k, p in enumerate(paths)]
+    calls = {k: (p, k, labels, list(specs), options, k == 0) for p, k in jobs}
+    results, first = _gather(_scene_job, calls, executor, progress)
+    assert first is not None
+    ordered = [results[k] for _, k in jobs]
+    merged = merge_results(ordered, draw_unit="scenes") if len(ordered) > 1 else ordered[0]
     return merged, first
 
 

@@ -71,8 +71,10 @@ def _draw_objects(per_seed: dict[int, dict[str, tuple[float, float]]]) -> tuple[
 
 
 def summarize_rows(rows: Sequence[Any], metric: str, *, confidence: float = 0.95, n_bootstrap: int = 2000,
-                   seed: int = 0) -> Summary:
-    """One table cell from per-edge (or breakdown) rows (module docstring)."""
+                   seed: int = 0, draw_unit: str = "lab draws") -> Summary:
+    """One table cell from per-edge (or breakdown) rows (module docstring); ``draw_unit`` names the
+    draws of a multi-draw interval (``scenes`` for the navigation benchmark).
+    """
     sums = _object_sums(rows, metric)
     nan = float("nan")
     if not sums:
@@ -80,7 +82,7 @@ def summarize_rows(rows: Sequence[Any], metric: str, *, confidence: float = 0.95
     per_draw = {d: _draw_objects(s) for d, s in sorted(sums.items())}
     if len(per_draw) >= 2:
         est = [float(n.sum() / dd.sum()) for n, dd, _ in per_draw.values()]
-        iv = t_interval(est, confidence=confidence, unit="lab draws")
+        iv = t_interval(est, confidence=confidence, unit=draw_unit)
         std = float(np.std(est, ddof=1))
         return Summary(iv.estimate, std, iv.low, iv.high, iv.n, iv.method, iv.unit)
     num, den, seed_est = next(iter(per_draw.values()))
@@ -139,7 +141,8 @@ class PersistenceResult:
         self.summary = {}
         for name in self.estimators:
             rows = [r for r in self.edges if r.estimator == name]
-            self.summary[name] = {m: summarize_rows(rows, m, confidence=conf, n_bootstrap=nb, seed=bs)
+            unit = str(self.config.get("draw_unit", "lab draws"))
+            self.summary[name] = {m: summarize_rows(rows, m, confidence=conf, n_bootstrap=nb, seed=bs, draw_unit=unit)
                                   for m in ALL_METRICS}
 
     def seed_spread(self, name: str, metric: str = "balanced_accuracy") -> float:
@@ -242,7 +245,7 @@ class PersistenceResult:
         })
 
 
-def merge_results(results: Sequence[PersistenceResult]) -> PersistenceResult:
+def merge_results(results: Sequence[PersistenceResult], *, draw_unit: str = "lab draws") -> PersistenceResult:
     """Merge runs on different draws of a synthetic dataset (``--lab-seeds``, benchmark draws) into one result.
 
     The configuration of the first run is kept, with ``draws`` the union of all draws; the summary
@@ -265,6 +268,7 @@ def merge_results(results: Sequence[PersistenceResult]) -> PersistenceResult:
             draws.append(d)
     config = dict(first.config)
     config["draws"] = draws
+    config["draw_unit"] = draw_unit
     for k in ("n_edges", "n_objects"):
         v = sum(r.config.get(k, 0) for r in results) / len(results)
         config[k] = int(v) if float(v).is_integer() else round(v, 1)

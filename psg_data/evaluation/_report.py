@@ -137,6 +137,14 @@ def _ceiling_note(rows: list[ResultRow], ceiling: dict[str, float], chance: dict
     return text + f"; % of ceiling = 100 (B-Acc - chance) / (ceiling B-Acc - chance), chance = {c:.3f}"
 
 
+def _scene_std_note(rows: list[ResultRow], n: int) -> str:
+    """The standard deviation across scenes of every row (the paper's ±)."""
+    parts = [f"{r.method} " + " / ".join(f"{m} {r.values[k].std:.3f}" for k, m in
+                                         (("mae", "MAE"), ("balanced_accuracy", "B-Acc"), ("f1", "F1")))
+             for r in rows]
+    return f"std across the {n} scenes (ddof 1; the paper's ±): " + "; ".join(parts)
+
+
 def persistence_results(result: PersistenceResult, *, roles: Mapping[str, tuple[str, str]] | None = None,
                         info: dict[str, Any] | None = None, title: str | None = None) -> EvalResults:
     """The results-schema form of a persistence run (module docstring).
@@ -167,6 +175,9 @@ def persistence_results(result: PersistenceResult, *, roles: Mapping[str, tuple[
     draws = cfg.get("draws") or [0]
     where = (f"{len(draws)} draws of {cfg.get('dataset_kind', 'the dataset')} (seeds {min(draws)}-{max(draws)})"
              if len(draws) > 1 else str(cfg.get("dataset")))
+    if len(draws) > 1 and cfg.get("draw_unit") == "scenes":
+        where = f"the {len(draws)} scenes of {cfg.get('dataset_kind') or 'the benchmark'}"
+        notes.insert(len(notes) - 1, _scene_std_note(rows, len(draws)))
     name = title or (f"Persistence estimation on {where} ({cfg.get('n_edges')} edges of {cfg.get('n_objects')} objects"
                      f"{' per draw' if len(draws) > 1 else ''}; {cfg.get('setting_text')})")
     first = rows[0].values["mae"] if rows else None

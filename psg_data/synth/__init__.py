@@ -6,6 +6,9 @@ Main entry points:
     build_lab(out, config)               write the lab as a canonical psg-dataset
     rerender_frame(dataset, scan, i)     re-render a stored frame with per-pixel instance ids
     write_detections(ds_or_lab, path)    simulated scene-graph detections (Parquet)
+    HouseModel(HouseConfig(seed=...))    a procedural multi-room house (the navigation benchmark's scenes)
+    build_house(out, config)             write a house as a psg-dataset (no images; hourly steps)
+    transition_test(process, paths, ...) chi-square test of a week's transitions against a model
 """
 
 from __future__ import annotations
@@ -13,6 +16,10 @@ from __future__ import annotations
 from psg_data.schemas._generator_model import PROCESS_FILE, EntityProcess, StepProcess, load_process
 from psg_data.synth._build import build_lab, object_description, rerender_frame
 from psg_data.synth._catalog import CONFUSABLE, FURNITURE, OBJECTS, FurnitureSpec, ObjectSpec
+from psg_data.synth._house_build import HOUSE_GENERATOR, HouseConfig, HouseModel, build_house
+from psg_data.synth._house_layout import HouseLayout, HouseObject, HouseParams, make_house
+from psg_data.synth._house_process import HouseProcessParams, house_process, shifted_objects
+from psg_data.synth._house_shift import transition_test
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
 from psg_data.synth._layout import (
@@ -48,4 +55,6 @@ __all__ = [
     "OBJECTS", "FURNITURE", "CONFUSABLE", "ObjectSpec", "FurnitureSpec",
     "export_raw", "RAW_EXPORT_FORMATS",
     "make_persistence_benchmark", "PersistenceBenchmark", "BENCHMARK_FEATURES",
+    "HouseConfig", "HouseModel", "HouseLayout", "HouseObject", "HouseParams", "HouseProcessParams", "build_house",
+    "make_house", "house_process", "shifted_objects", "transition_test", "HOUSE_GENERATOR",
 ]

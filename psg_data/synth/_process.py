@@ -62,7 +62,8 @@ def _pick(p: NDArray[np.float64], u: float) -> int:
 
 def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng: np.random.Generator) -> EntityPath:
     """Sample an entity's path over ``n_steps`` steps (four uniforms per step, so paths of two
-    models that differ in one parameter share their random numbers).
+    models that differ in one parameter share their random numbers). From a regime's start day on
+    the regime's model of the entity is used (:meth:`StepProcess.entity_on`).
     """
     K = process.n_slots
     s = _pick(entity.state_initial, float(rng.random()))
@@ -71,9 +72,11 @@ def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng
     days = -(-n_steps // K)
     pats = np.zeros(days, np.int64)
     st, dw, ev, fr = (np.zeros(n_steps, np.int64) for _ in range(4))
+    base = entity
     for n in range(n_steps):
         day, k = divmod(n, K)
         if k == 0:
+            entity = process.entity_on(base.entity_id, day, base)
             row = process.day_initial(entity) if day == 0 else process.day_matrix(entity, day)[p]
             p = _pick(row, u[n, 0])
             pats[day] = p
@@ -105,6 +108,7 @@ class ForwardBelief:
     def __init__(self, process: StepProcess, entity: EntityProcess) -> None:
         self.process = process
         self.entity = entity
+        self._base = entity
         self.U = entity.dwell_pmf()
         self.n = -1
         self.alpha = np.zeros((entity.n_patterns, entity.n_states, entity.max_dwell))
@@ -113,7 +117,7 @@ class ForwardBelief:
     def copy(self) -> ForwardBelief:
         """An independent copy of the belief (same process, own state)."""
         out = ForwardBelief.__new__(ForwardBelief)
-        out.process, out.entity, out.U = self.process, self.entity, self.U
+        out.process, out.entity, out.U, out._base = self.process, self.entity, self.U, self._base
         out.n, out.alpha, out.log_evidence = self.n, self.alpha.copy(), self.log_evidence
         return out
 
@@ -139,11 +143,17 @@ class ForwardBelief:
         return rho * routine + (1.0 - rho) * (hold + jumped[:, :, None] * self.U)
 
     def advance(self) -> None:
-        """Move the belief one step ahead (no observation)."""
+        """Move the belief one step ahead (no observation); at a regime's first day the regime's model
+        of the entity takes over.
+        """
         n = self.n + 1
         day, k = divmod(n, self.process.n_slots)
         beta = self.alpha
         if k == 0:
+            if self.process.regimes:
+                e = self.process.entity_on(self._base.entity_id, day, self._base)
+                if e is not self.entity:
+                    self.entity, self.U = e, e.dwell_pmf()
             beta = np.einsum("psr,pq->qsr", beta, self.process.day_matrix(self.entity, day))
         self.alpha = self._hour_kernel(beta, k)
         self.n = n

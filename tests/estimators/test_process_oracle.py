@@ -46,7 +46,7 @@ def proc() -> StepProcess:
 
 
 def test_check_estimator(proc: StepProcess) -> None:
-    est = get_estimator("process_oracle", model=proc.to_dict(), p_m=P, p_f=P)
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P)
     report = check_estimator(est, streams=_streams(proc, 12, 0))
     assert set(report.values()) == {"ok"}
 
@@ -66,7 +66,7 @@ def _reference(proc: StepProcess, obs: list[tuple[float, str, int]], H: float, q
 
 def test_prediction_is_the_posterior_of_its_information_set(proc: StepProcess) -> None:
     train = _streams(proc, 10, 3)
-    est = get_estimator("process_oracle", model=proc.to_dict(), p_m=P, p_f=P).fit(train)
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P).fit(train)
     own = train[0]
     cut = own.t_s[11]  # the filter knows its edge up to step 11 only
     f = est.make_filter(own.edge)
@@ -74,7 +74,7 @@ def test_prediction_is_the_posterior_of_its_information_set(proc: StepProcess) -
     q = np.linspace(cut, cut + 5 * 86400, 50)
     obs = [(t, s.edge[1], int(y)) for s in train for t, y in zip(s.t_s, s.y) if s.edge != own.edge or t <= cut]
     np.testing.assert_allclose(f.predict(q), _reference(proc, obs, cut, q, own.edge[1]), atol=1e-12)
-    med = get_estimator("process_oracle", model=proc.to_dict(), p_m=P, p_f=P, output="median").fit(train)
+    med = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P, output="median").fit(train)
     m = med.make_filter(own.edge)
     m.update_many(own.t_s[:12], own.y[:12])
     np.testing.assert_array_equal(m.predict(q), (f.predict(q) >= 0.5).astype(float))
@@ -87,7 +87,7 @@ def _run(proc: StepProcess, train: list[EdgeStream], test: list[EdgeStream], ord
          share: bool) -> list[np.ndarray]:
     """Edge 0 is fed up to H_x first; the others then run their whole test streams in ``order``,
     edge 0 predicting after each sibling update. Returns edge 0's predictions."""
-    est = get_estimator("process_oracle", model=proc.to_dict(), p_m=P, p_f=P, share_updates=share).fit(train)
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P, share_updates=share).fit(train)
     filters = [est.make_filter(s.edge) for s in train]
     for f, s in zip(filters[1:], train[1:]):
         f.update_many(s.t_s, s.y)
@@ -145,7 +145,7 @@ def test_refuses_missing_or_wrong_models(tmp_path: Path, make_dataset) -> None: 
         get_estimator("process_oracle", dataset=str(ds)).fit(streams)
     assert "\n" not in str(exc.value)
     with pytest.raises(EstimatorError, match="not an entity of the generator model"):
-        get_estimator("process_oracle", model=tiny_process(0).to_dict()).fit(streams)
+        get_estimator("process_oracle", process=tiny_process(0).to_dict()).fit(streams)
 
 
 @pytest.fixture(scope="module")
