@@ -58,7 +58,7 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
 def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels: str, top: int | None,
               csv_path: Path | None, png: Path | None, rerun: Path | None, save_graph: Path | None, overwrite: bool,
               quiet: bool) -> None:
-    """Where things are predicted at a time: the predictive graph of PATH (a dataset, ``demo``, or a
+    """Where things are predicted at a time: the predictive graph of PATH (a dataset, demo, or a
     graph saved with --save-graph) as a table; with --object the object's receptacles ranked.
 
     \b
