@@ -115,6 +115,19 @@ def _estep_lognormal(lo: NDArray[np.float64], hi: NDArray[np.float64], mu: NDArr
         rb = np.exp(np.minimum(lpb - logp, 700.0))
         ez = ra - rb
         ez2 = 1.0 + np.where(np.isfinite(a), a * ra, 0.0) - np.where(np.isfinite(b), b * rb, 0.0)
+    # narrow intervals (width h < 1e-5 in z, e.g. 1 ms at 1 h): Phi(b) - Phi(a) and the moment
+    # ratios cancel to ~eps / h; expand around the midpoint m instead (error O(h^4))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = np.log1p((hi - lo) / lo)[:, None] / sd
+    narrow = ~exact & (h < 1e-5)
+    if narrow.any():
+        with np.errstate(invalid="ignore"):
+            m = np.where(narrow, 0.5 * (a + b), 0.0)
+        h = np.where(narrow, h, 1.0)
+        logp = np.where(narrow, np.log(h) - _LOG_SQRT_2PI - 0.5 * m * m + np.log1p(h * h * (m * m - 1.0) / 24.0),
+                        logp)
+        ez = np.where(narrow, m - m * h * h / 12.0, ez)
+        ez2 = np.where(narrow, m * m + h * h * (1.0 - 2.0 * m * m) / 12.0, ez2)
     ez = np.where(exact, a, ez)
     ez2 = np.where(exact, a * a, np.maximum(ez2, ez * ez))
     bad = ~np.isfinite(logp)
@@ -129,12 +142,17 @@ def _estep_exponential(lo: NDArray[np.float64], hi: NDArray[np.float64],
     exact = (lo == hi)[:, None]
     a = lo[:, None]
     d = (hi - lo)[:, None]
-    ld = lam * d
+    ld = lam * d  # may be subnormal or 0 for widths near the underflow limit: only used where >= 1e-8
+    small = ld < 1e-8
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        tail = np.where(np.isinf(d), 0.0, np.log(-np.expm1(-ld)))
+        # log(1 - e^-x) = log x - x/2 + O(x^2) for x = lam d < 1e-8, without forming lam d
+        tail = np.where(np.isinf(d), 0.0, np.where(small, np.log(lam) + np.log(d) - 0.5 * ld,
+                                                   np.log(-np.expm1(-ld))))
         logp = np.where(exact, np.log(lam) - lam * a, -lam * a + tail)
         corr = np.where(np.isinf(d) | (ld > 700), 0.0, d / np.expm1(ld))
-        et = np.where(exact, a, a + 1.0 / lam - np.where(ld < 1e-8, d * (1.0 / ld - 0.5), corr))
+        # E[T] - lo = d (1/x - 1/expm1(x)) = d (1/2 - x/12 + O(x^3)) for small x: the series avoids
+        # 1/lam - d/x (cancellation) and 1/x (overflow for subnormal x)
+        et = np.where(exact, a, np.where(small, a + d * (0.5 - ld / 12.0), a + 1.0 / lam - corr))
     return logp, et
 
 
