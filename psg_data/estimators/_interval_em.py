@@ -120,7 +120,7 @@ def _estep_lognormal(lo: NDArray[np.float64], hi: NDArray[np.float64], mu: NDArr
         ez2 = 1.0 + np.where(np.isfinite(a), a * ra, 0.0) - np.where(np.isfinite(b), b * rb, 0.0)
     # narrow intervals (width h < 1e-5 in z, e.g. 1 ms at 1 h): Phi(b) - Phi(a) and the moment
     # ratios cancel to ~eps / h; expand around the midpoint m instead (error O(h^4))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         h = np.log1p((hi - lo) / lo)[:, None] / sd
     narrow = ~exact & (h < 1e-5)
     if narrow.any():
@@ -163,16 +163,16 @@ def _weibull_log_mass(ka: NDArray[np.float64], kb: NDArray[np.float64], kw: NDAr
                       lo_pos: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """log(exp(-ua) - exp(-ub)) with ua = e^ka = (lo/s)^k, ub = e^kb, kw = k log(hi/lo) (from log1p).
 
-    D = ub - ua is taken as ua expm1(kw) (lo > 0; ub - ua cancels to ~eps ua / D for narrow
+    D = ub - ua is taken as ua expm1(kw) where kw < 1 (ub - ua cancels to ~eps ua / D for narrow
     intervals) and, where D < 1e-8 (narrow intervals, or (hi/s)^k near the underflow limit), in
-    logs: log D = ka + log(expm1(kw)) (lo > 0) or kb (lo = 0), log(1 - e^-D) = log D - D/2 + O(D^2).
+    logs: log D = kb + log(1 - e^-kw) (kw = inf for lo = 0), log(1 - e^-D) = log D - D/2 + O(D^2).
     Also returns where that branch was taken.
     """
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         ua, ub = np.exp(ka), np.exp(kb)
-        d = np.where(np.isinf(kb), np.inf, np.where(lo_pos, ua * np.expm1(kw), ub))
+        d = np.where(np.isinf(kb), np.inf, np.where(lo_pos & (kw < 1.0), ua * np.expm1(kw), ub - ua))
         wide = -ua + np.log(-np.expm1(-d))
-        logd = np.where(lo_pos, ka + np.log(np.expm1(kw)), kb)
+        logd = kb + np.log(-np.expm1(-np.where(lo_pos, kw, np.inf)))
         small = logd < math.log(1e-8)
         return np.where(small, -ua + logd - 0.5 * np.exp(logd), wide), small
 
@@ -208,7 +208,7 @@ def _weibull_nll_grad(v: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArr
         kw = k * np.log1p((hi - lo) / lo)
         mass, small = _weibull_log_mass(np.where(lo > 0, ka, -np.inf), np.where(np.isinf(hi), np.inf, kb), kw, lo > 0)
         # d log P / d(ln k) where D = ub - ua is taken in logs (the D/2 term is dropped)
-        g_k_small = np.where(lo > 0, ka + kw / -np.expm1(-kw), kb)
+        g_k_small = np.where((lo > 0) & np.isfinite(kw), kb + kw / np.expm1(kw), kb)
         za = np.where(k * za > 50.0, 0.0, za)
         zb = np.where(k * zb > 50.0, 0.0, zb)
         d = ub - ua

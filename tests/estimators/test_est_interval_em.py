@@ -94,6 +94,11 @@ rows = st.lists(st.tuples(st.floats(0.0, 50.0), st.floats(0.0, 30.0), st.boolean
 # an 8e-306 s wide interval: lam d subnormal made 1/(lam d) overflow, E[T] = -inf and lam jump to 2e300
 @example(rows=[(0.0, 0.0, False, False), (0.0, 2.225073858507203e-309, False, False), (1.0, 0.0, False, False)],
          family="exponential", k=1, seed=0)
+# lo = 1.8e-320 s (subnormal): d / lo overflows, (lo/s)^k underflows to 0 and 0 * expm1(inf) was NaN
+@example(rows=[(0.0, 0.0, False, False), (0.0, 0.0, False, False), (5e-324, 4.0, False, False)],
+         family="weibull", k=1, seed=0)
+@example(rows=[(0.0, 0.0, False, False), (0.0, 0.0, False, False), (5e-324, 1.0, False, False)],
+         family="lognormal", k=1, seed=0)
 def test_log_likelihood_never_decreases(rows, family, k, seed) -> None:
     lo = np.array([r[0] for r in rows]) * H
     width = np.array([r[1] for r in rows]) * H
