@@ -172,8 +172,10 @@ def _weibull_log_mass(ka: NDArray[np.float64], kb: NDArray[np.float64], kw: NDAr
         ua, ub = np.exp(ka), np.exp(kb)
         d = np.where(np.isinf(kb), np.inf, np.where(lo_pos & (kw < 1.0), ua * np.expm1(kw), ub - ua))
         wide = -ua + np.log(-np.expm1(-d))
+        small = d < 1e-8
+        if not small.any():
+            return wide, small
         logd = kb + np.log(-np.expm1(-np.where(lo_pos, kw, np.inf)))
-        small = logd < math.log(1e-8)
         return np.where(small, -ua + logd - 0.5 * np.exp(logd), wide), small
 
 
