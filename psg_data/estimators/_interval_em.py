@@ -21,8 +21,11 @@ E-step needs the closed-form interval integrals of each family:
   (a generalised EM step: it never lowers the likelihood).
 
 Every step is computed in log space (``log_ndtr``, ``expm1``) so that intervals deep in a tail do
-not underflow, and sigma (of ln T) is floored at ``sigma_min`` so that a component cannot collapse
-on one duration. The likelihood never decreases from one iteration to the next (tested).
+not underflow; tiny intervals
+(``lam d < 1e-8``, a width < 1e-5 in z = (ln T - mu) / sigma, ``(hi/s)^k - (lo/s)^k < 1e-8``),
+including widths near the underflow limit, use series expansions instead of differences that
+cancel or underflow. Sigma (of ln T) is floored at ``sigma_min`` so that a component cannot
+collapse on one duration. The likelihood never decreases from one iteration to the next (tested).
 K = 1..max_components is chosen by AIC (3K parameters for log-normal and Weibull, 2K for
 exponential, as the Perpetua reference), trying K upward and stopping at the first K whose AIC
 does not improve on K - 1; components with weight < 0.01 are dropped.
@@ -115,6 +118,19 @@ def _estep_lognormal(lo: NDArray[np.float64], hi: NDArray[np.float64], mu: NDArr
         rb = np.exp(np.minimum(lpb - logp, 700.0))
         ez = ra - rb
         ez2 = 1.0 + np.where(np.isfinite(a), a * ra, 0.0) - np.where(np.isfinite(b), b * rb, 0.0)
+    # narrow intervals (width h < 1e-5 in z, e.g. 1 ms at 1 h): Phi(b) - Phi(a) and the moment
+    # ratios cancel to ~eps / h; expand around the midpoint m instead (error O(h^4))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        h = np.log1p((hi - lo) / lo)[:, None] / sd
+    narrow = ~exact & (h < 1e-5)
+    if narrow.any():
+        with np.errstate(invalid="ignore"):
+            m = np.where(narrow, 0.5 * (a + b), 0.0)
+        h = np.where(narrow, h, 1.0)
+        logp = np.where(narrow, np.log(h) - _LOG_SQRT_2PI - 0.5 * m * m + np.log1p(h * h * (m * m - 1.0) / 24.0),
+                        logp)
+        ez = np.where(narrow, m - m * h * h / 12.0, ez)
+        ez2 = np.where(narrow, m * m + h * h * (1.0 - 2.0 * m * m) / 12.0, ez2)
     ez = np.where(exact, a, ez)
     ez2 = np.where(exact, a * a, np.maximum(ez2, ez * ez))
     bad = ~np.isfinite(logp)
@@ -129,13 +145,38 @@ def _estep_exponential(lo: NDArray[np.float64], hi: NDArray[np.float64],
     exact = (lo == hi)[:, None]
     a = lo[:, None]
     d = (hi - lo)[:, None]
-    ld = lam * d
+    ld = lam * d  # may be subnormal or 0 for widths near the underflow limit: only used where >= 1e-8
+    small = ld < 1e-8
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        tail = np.where(np.isinf(d), 0.0, np.log(-np.expm1(-ld)))
+        # log(1 - e^-x) = log x - x/2 + O(x^2) for x = lam d < 1e-8, without forming lam d
+        tail = np.where(np.isinf(d), 0.0, np.where(small, np.log(lam) + np.log(d) - 0.5 * ld,
+                                                   np.log(-np.expm1(-ld))))
         logp = np.where(exact, np.log(lam) - lam * a, -lam * a + tail)
         corr = np.where(np.isinf(d) | (ld > 700), 0.0, d / np.expm1(ld))
-        et = np.where(exact, a, a + 1.0 / lam - np.where(ld < 1e-8, d * (1.0 / ld - 0.5), corr))
+        # E[T] - lo = d (1/x - 1/expm1(x)) = d (1/2 - x/12 + O(x^3)) for small x: the series avoids
+        # 1/lam - d/x (cancellation) and 1/x (overflow for subnormal x)
+        et = np.where(exact, a, np.where(small, a + d * (0.5 - ld / 12.0), a + 1.0 / lam - corr))
     return logp, et
+
+
+def _weibull_log_mass(ka: NDArray[np.float64], kb: NDArray[np.float64], kw: NDArray[np.float64],
+                      lo_pos: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """log(exp(-ua) - exp(-ub)) with ua = e^ka = (lo/s)^k, ub = e^kb, kw = k log(hi/lo) (from log1p).
+
+    D = ub - ua is taken as ua expm1(kw) where kw < 1 (ub - ua cancels to ~eps ua / D for narrow
+    intervals) and, where D < 1e-8 (narrow intervals, or (hi/s)^k near the underflow limit), in
+    logs: log D = kb + log(1 - e^-kw) (kw = inf for lo = 0), log(1 - e^-D) = log D - D/2 + O(D^2).
+    Also returns where that branch was taken.
+    """
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        ua, ub = np.exp(ka), np.exp(kb)
+        d = np.where(np.isinf(kb), np.inf, np.where(lo_pos & (kw < 1.0), ua * np.expm1(kw), ub - ua))
+        wide = -ua + np.log(-np.expm1(-d))
+        small = d < 1e-8
+        if not small.any():
+            return wide, small
+        logd = kb + np.log(-np.expm1(-np.where(lo_pos, kw, np.inf)))
+        return np.where(small, -ua + logd - 0.5 * np.exp(logd), wide), small
 
 
 def _weibull_logp(lo: NDArray[np.float64], hi: NDArray[np.float64], k: NDArray[np.float64],
@@ -145,11 +186,11 @@ def _weibull_logp(lo: NDArray[np.float64], hi: NDArray[np.float64], k: NDArray[n
         za = np.log(lo)[:, None] - np.log(s)
         zb = np.log(hi)[:, None] - np.log(s)
         ua = np.exp(k * za)
-        ub = np.exp(k * zb)
-        tail = np.log(-np.expm1(-(ub - ua)))
+        kw = k * np.log1p((hi - lo) / lo)[:, None]
+        mass = _weibull_log_mass(k * za, k * zb, kw, (lo > 0)[:, None])[0]
         dens = np.log(k) - np.log(s) + (k - 1.0) * za - ua
         # S(lo) = 0 to double precision (ua = inf): P(lo < T <= hi) is 0, not inf - inf
-        interval = np.where(np.isinf(ua), -np.inf, -ua + tail)
+        interval = np.where(np.isinf(ua), -np.inf, mass)
     return np.where(exact, dens, interval)
 
 
@@ -166,18 +207,21 @@ def _weibull_nll_grad(v: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArr
         ka, kb = np.minimum(k * za, 50.0), np.minimum(k * zb, 50.0)
         ua = np.where(lo > 0, np.exp(ka), 0.0)
         ub = np.where(np.isinf(hi), np.inf, np.exp(kb))
+        kw = k * np.log1p((hi - lo) / lo)
+        mass, small = _weibull_log_mass(np.where(lo > 0, ka, -np.inf), np.where(np.isinf(hi), np.inf, kb), kw, lo > 0)
+        # d log P / d(ln k) where D = ub - ua is taken in logs (the D/2 term is dropped)
+        g_k_small = np.where((lo > 0) & np.isfinite(kw), kb + kw / np.expm1(kw), kb)
         za = np.where(k * za > 50.0, 0.0, za)
         zb = np.where(k * zb > 50.0, 0.0, zb)
         d = ub - ua
-        tail = np.log(-np.expm1(-d))
         inv = np.where(np.isinf(d), 0.0, 1.0 / np.expm1(d))
         # derivatives of u = (t/s)^k: du/dlnk = k z u, du/dlns = -k u (0 where u is 0 or inf)
         dua_k = np.where(ua > 0, k * za * ua, 0.0)
         dub_k = np.where(np.isfinite(ub) & (ub > 0), k * zb * ub, 0.0)
         dua_s, dub_s = -k * ua, np.where(np.isfinite(ub), -k * ub, 0.0)
-        lp = np.where(exact, v[0] - ls + (k - 1.0) * za - ua, -ua + tail)
-        g_k = np.where(exact, 1.0 + k * za - dua_k, -dua_k + (dub_k - dua_k) * inv)
-        g_s = np.where(exact, -k + k * ua, -dua_s + (dub_s - dua_s) * inv)
+        lp = np.where(exact, v[0] - ls + (k - 1.0) * za - ua, mass)
+        g_k = np.where(exact, 1.0 + k * za - dua_k, np.where(small, -dua_k + g_k_small, -dua_k + (dub_k - dua_k) * inv))
+        g_s = np.where(exact, -k + k * ua, np.where(small, -dua_s - k, -dua_s + (dub_s - dua_s) * inv))
     lp = np.where(np.isfinite(lp), lp, -1e6)
     tot = max(float(np.sum(wr)), 1e-300)
     f = -float(np.sum(wr * lp)) / tot

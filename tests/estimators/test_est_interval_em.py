@@ -11,7 +11,14 @@ from hypothesis import strategies as st
 
 from psg_data.errors import EstimatorError
 from psg_data.estimators import SurvivalMixture, fit_interval_mixture
-from psg_data.estimators._interval_em import _estep_exponential, _estep_lognormal, em_intervals, interval_log_likelihood
+from psg_data.estimators._interval_em import (
+    _estep_exponential,
+    _estep_lognormal,
+    _weibull_logp,
+    _weibull_nll_grad,
+    em_intervals,
+    interval_log_likelihood,
+)
 from psg_data.estimators._survival_training import mixture_median_s, run_intervals
 
 H = 3600.0
@@ -81,6 +88,17 @@ rows = st.lists(st.tuples(st.floats(0.0, 50.0), st.floats(0.0, 30.0), st.boolean
 # a Weibull component collapsing on a 0.2 ms exact duration made S(lo) = 0 for the other row (inf - inf = NaN)
 @example(rows=[(0.0, 0.0, False, False), (1.0, 1.0, False, False), (5.960464477539063e-08, 0.0, False, False)],
          family="weibull", k=2, seed=0)
+# an interval 1e-10 h wide at 1 h: Phi(b) - Phi(a) and the truncated moments cancelled to ~eps / width
+@example(rows=[(0.0, 0.0, False, False), (0.0, 0.0, True, False), (1.0, 1e-10, False, False)],
+         family="lognormal", k=1, seed=0)
+# an 8e-306 s wide interval: lam d subnormal made 1/(lam d) overflow, E[T] = -inf and lam jump to 2e300
+@example(rows=[(0.0, 0.0, False, False), (0.0, 2.225073858507203e-309, False, False), (1.0, 0.0, False, False)],
+         family="exponential", k=1, seed=0)
+# lo = 1.8e-320 s (subnormal): d / lo overflows, (lo/s)^k underflows to 0 and 0 * expm1(inf) was NaN
+@example(rows=[(0.0, 0.0, False, False), (0.0, 0.0, False, False), (5e-324, 4.0, False, False)],
+         family="weibull", k=1, seed=0)
+@example(rows=[(0.0, 0.0, False, False), (0.0, 0.0, False, False), (5e-324, 1.0, False, False)],
+         family="lognormal", k=1, seed=0)
 def test_log_likelihood_never_decreases(rows, family, k, seed) -> None:
     lo = np.array([r[0] for r in rows]) * H
     width = np.array([r[1] for r in rows]) * H
@@ -127,6 +145,51 @@ def test_closed_forms_against_quadrature() -> None:
         top = hi if np.isfinite(hi) else lo + 60 / lam
         m = integrate.quad(lambda t: t * dist.pdf(t), lo, top, epsabs=1e-12)[0] / p
         assert float(et[0, 0]) == pytest.approx(m, rel=1e-6)
+
+
+# widths near the underflow limit (lo = 0) and narrow against lo (relative width 1e-13 .. 1e-6)
+TINY = [(0.0, 8e-306), (0.0, 1e-300), (0.0, 1e-320), (0.0, 1e-12), (H, H * (1 + 1e-12)), (H, H * (1 + 1e-6)),
+        (10 * H, 10 * H * (1 + 1e-9)), (5.0, 5.0 * (1 + 1e-13))]
+
+
+@pytest.mark.parametrize("lo,hi", TINY)
+def test_tiny_widths_against_mpmath(lo: float, hi: float) -> None:
+    """log P and the E-step moments of every family for tiny widths, against 80-digit arithmetic."""
+    import mpmath
+
+    mpmath.mp.dps = 80
+    lo_, hi_ = np.array([lo]), np.array([hi])
+    L, U = mpmath.mpf(lo), mpmath.mpf(hi)  # the doubles themselves, exactly
+    for lam in (1 / (3 * H), 1 / 60.0, 1e-7):
+        logp, et = _estep_exponential(lo_, hi_, np.array([lam]))
+        lm = mpmath.mpf(lam)
+        p = mpmath.exp(-lm * L) * -mpmath.expm1(-lm * (U - L))
+        m = L + 1 / lm - (U - L) / mpmath.expm1(lm * (U - L))
+        assert float(logp[0, 0]) == pytest.approx(float(mpmath.log(p)), rel=1e-12)
+        assert float(et[0, 0]) == pytest.approx(float(m), rel=1e-12)
+    for mu, sd in ((math.log(3 * H), 0.8), (math.log(60.0), 0.5)):  # widths < 1e-5 in z = (ln t - mu) / sd
+        logp, ex, ex2 = _estep_lognormal(lo_, hi_, np.array([mu]), np.array([sd]))
+        a = -mpmath.inf if lo == 0 else (mpmath.log(L) - mu) / sd
+        b = (mpmath.log(U) - mu) / sd
+        # Phi(b) - Phi(a) without cancellation: the integral of phi over [a, b]
+        p = mpmath.quad(mpmath.npdf, [a, b]) if lo > 0 else mpmath.ncdf(b)
+        pa = 0 if lo == 0 else mpmath.npdf(a)
+        ez = (pa - mpmath.npdf(b)) / p
+        ez2 = 1 + ((0 if lo == 0 else a * pa) - b * mpmath.npdf(b)) / p
+        assert float(logp[0, 0]) == pytest.approx(float(mpmath.log(p)), rel=1e-10)
+        # lo = 0: phi(b) / Phi(b) is exp(log phi(b) - log Phi(b)), two numbers ~b^2 / 2 (b down to
+        # -1.4e4 here), so its relative error is ~eps b^2 (not a width effect: log hi does not underflow)
+        assert float(ex[0, 0]) == pytest.approx(float(mu + sd * ez), rel=1e-10 + 4e-16 * float(b * b))
+        assert float(ex2[0, 0]) == pytest.approx(float(sd * sd * ez2), rel=1e-7, abs=1e-12)
+    for k, s in ((0.5, 3 * H), (1.0, 3 * H), (2.0, 3 * H), (5.0, 3 * H), (1.5, 60.0)):
+        ua, ub = (L / s) ** k, (U / s) ** k
+        want = float(-ua + mpmath.log(-mpmath.expm1(-(ub - ua))))
+        got = float(_weibull_logp(lo_, hi_, np.array([k]), np.array([s]))[0, 0])
+        assert got == pytest.approx(want, rel=1e-11)
+        # the M-step objective is the same log P (it decides whether a step is taken)
+        f, g = _weibull_nll_grad(np.array([math.log(k), math.log(s)]), lo_, hi_, np.array([1.0]))
+        assert -f == pytest.approx(want, rel=1e-11)
+        assert np.all(np.isfinite(g))
 
 
 def test_likelihood_matches_direct_cdf_sum() -> None:
