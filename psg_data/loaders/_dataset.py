@@ -6,7 +6,10 @@ layout): reading frame *i* costs two ``pread`` calls either way, never a scan-wi
 
 A dataset is untrusted input (docs/SECURITY.md): every path it names is opened only if it stays
 inside the dataset (:mod:`psg_data.schemas._paths`), no image is read past the size its camera
-allows, and an image's header must fit its camera before a pixel is decoded.
+allows, and an image's header must fit its camera before a pixel is decoded. Every table, the
+generator model and every whole-file image are checked against their size and SHA-256 in
+``tables/files.parquet`` when read (:mod:`psg_data.loaders._checksums`); a scan archive is not
+hashed by the loader, so that one frame stays two reads (``validate`` checks archives).
 """
 
 from __future__ import annotations
@@ -26,9 +29,10 @@ from numpy.typing import NDArray
 
 from psg_data.errors import FormatError
 from psg_data.loaders._checks import check_frames, check_image_bytes, check_image_header, checked_table
+from psg_data.loaders._checksums import FileChecksums
 from psg_data.schemas._image_headers import max_encoded_bytes
 from psg_data.schemas._manifest import DatasetInfo, read_manifest
-from psg_data.schemas._paths import inside_dataset, open_inside, real_root
+from psg_data.schemas._paths import open_inside, real_root
 from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
 from psg_data.schemas._tables import TABLES, table_path
 
@@ -62,7 +66,11 @@ class Dataset:
             raise FormatError(f"{self.root}: not a directory; expected a psg-dataset directory")
         self.info: DatasetInfo = read_manifest(self.root)
         self._arrow: dict[str, pa.Table] = {}
-        self._images = _ImageFiles(self.root)
+        self._open_files()
+
+    def _open_files(self) -> None:
+        self._sums = FileChecksums(self.root, real_root(self.root), self.info.files_sha256)
+        self._images = _ImageFiles(self.root, self._sums)
 
     def close(self) -> None:
         """Close the image archives kept open for reading (reopened on demand)."""
@@ -87,13 +95,17 @@ class Dataset:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.root, self.info = state["root"], state["info"]
         self._arrow = {}
-        self._images = _ImageFiles(self.root)
+        self._open_files()
 
     def refresh(self) -> None:
         """Forget the tables and records read so far: the next use reads them again from disk
-        (after another writer, e.g. :func:`psg_data.labeling.label_dataset`, changed the dataset).
+        (after another writer, e.g. :func:`psg_data.labeling.label_dataset`, changed the dataset),
+        the manifest and the checksums of ``files.parquet`` included.
         """
+        self._images.close()
+        self.info = read_manifest(self.root)
         self._arrow = {}
+        self._open_files()
         for name in [k for k, v in type(self).__dict__.items() if isinstance(v, cached_property)]:
             self.__dict__.pop(name, None)
 
@@ -114,21 +126,46 @@ class Dataset:
         return (self.root / table_path(name)).is_file()
 
     def table(self, name: str) -> pa.Table:
-        """Table ``name`` as an Arrow table (cached)."""
+        """Table ``name`` as an Arrow table (cached), checked against its schema and its checksum.
+
+        Raises:
+            FormatError: missing, outside the dataset, unreadable, or its size or SHA-256 does not
+                fit ``tables/files.parquet`` (``files.parquet`` itself: the manifest's ``files_sha256``).
+        """
         if name not in self._arrow:
             import pyarrow as pa
             import pyarrow.parquet as pq
 
-            path = self.root / table_path(name)
+            rel = table_path(name)
+            path = self.root / rel
             if not path.is_file():
                 raise FormatError(f"{path}: missing table {name!r}")
-            inside_dataset(self._images.real_root, table_path(name), f"{self.root}: table {name!r}")
+            if name == "files":
+                files = self._sums.files_table()
+                if files is None:
+                    raise FormatError(f"{path}: missing table {name!r}")
+                self._arrow[name] = checked_table(name, files, str(path), self.info.major)
+                return self._arrow[name]
+            # the content is checked before the checksum, so that an error names what is wrong
+            # (a missing column, a bad value) where it can, and the checksum only when all else fits
+            data = self._sums.read_listed(rel, f"{self.root}: table {name!r}", check=False)
             try:
-                table = pq.read_table(path)
+                table = pq.read_table(pa.BufferReader(data))
             except (OSError, pa.ArrowException) as exc:
                 raise FormatError(f"{path}: unreadable Parquet ({exc})") from exc
-            self._arrow[name] = checked_table(name, table, str(path), self.info.major)
+            table = checked_table(name, table, str(path), self.info.major)
+            self._sums.check_bytes(rel, data)
+            self._arrow[name] = table
         return self._arrow[name]
+
+    def read_file(self, rel: str) -> bytes:
+        """The bytes of the dataset file ``rel`` (relative to the root, e.g. ``generator/process.json``),
+        checked to lie inside the dataset and to fit its size and SHA-256 in ``tables/files.parquet``.
+
+        Raises:
+            FormatError: as :meth:`table`.
+        """
+        return self._sums.read_listed(rel, f"{self.root}: {rel}")
 
     def df(self, name: str) -> pd.DataFrame:
         """Table ``name`` as a pandas DataFrame."""
@@ -306,13 +343,29 @@ class Scan:
         Raises:
             FormatError: an image file is missing or its byte range lies outside its archive.
         """
+        cbytes, dbytes = self._image_bytes(i, color, depth)
+        self._check_sums(i, cbytes, dbytes)
+        return cbytes, dbytes
+
+    def _image_bytes(self, i: int, color: bool, depth: bool) -> tuple[bytes, bytes]:
         if not 0 <= i < len(self):
             raise IndexError(f"scan {self.scan_id}: frame index {i} out of range 0..{len(self) - 1}")
         return (self._read("color", i) if color else b""), (self._read("depth", i) if depth else b"")
 
+    def _check_sums(self, i: int, cbytes: bytes, dbytes: bytes) -> None:
+        """Whole-file images against their checksums (an image in an archive is not hashed alone)."""
+        for kind, data in (("color", cbytes), ("depth", dbytes)):
+            if data and int(self._f[f"{kind}_offset"][i]) < 0:
+                self.dataset._sums.check_bytes(str(self._f[f"{kind}_path"][i]), data)
+
     def frame(self, i: int, *, color: bool = True, depth: bool = True) -> Frame:
-        """Frame ``i`` (random access: reads only that frame's two images)."""
-        cbytes, dbytes = self.image_bytes(i, color=color, depth=depth)
+        """Frame ``i`` (random access: reads only that frame's two images).
+
+        Raises:
+            FormatError: an image is missing, does not fit its camera, is damaged, or (a whole-file
+                image) does not fit its checksum; structure is checked first, the checksum last.
+        """
+        cbytes, dbytes = self._image_bytes(i, color, depth)
         import cv2
 
         cam = self.dataset.cameras[str(self._f["camera_id"][i])]
@@ -336,6 +389,7 @@ class Scan:
                 raise FormatError(f"{where}: depth must be single-channel uint16, got {raw.dtype} with shape "
                                   f"{raw.shape}")
             dm = np.multiply(raw, np.float32(cam.depth_scale_m), dtype=np.float32)
+        self._check_sums(i, cbytes, dbytes)
         return Frame(self.scan_id, int(self._f["frame_index"][i]), int(self._f["stamp_ns"][i]), rgb, dm, cam,
                      self._f["T"][i].copy())
 
@@ -425,17 +479,19 @@ class _ImageFiles:
 
     _MAX_OPEN = 64
 
-    def __init__(self, root: Path) -> None:
-        self.root = root
+    def __init__(self, root: Path, sums: FileChecksums) -> None:
+        self.root, self._sums = root, sums
         self._fds: dict[str, tuple[int, int]] = {}  # rel -> (descriptor, file size)
         self._dirs: set[str] = set()  # directories found inside the dataset
         self._lock = threading.Lock()
 
     def __getstate__(self) -> dict[str, Any]:
-        return {"root": self.root}  # descriptors and the lock stay in this process
+        return {"root": self.root, "sums": self._sums.root, "real": self._sums.real,
+                "files_sha256": self._sums.files_sha256}  # descriptors and the lock stay in this process
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["root"])  # type: ignore[misc]
+        sums = FileChecksums(state["sums"], state["real"], state["files_sha256"])
+        self.__init__(state["root"], sums)  # type: ignore[misc]
 
     @cached_property
     def real_root(self) -> str:

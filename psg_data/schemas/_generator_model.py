@@ -450,7 +450,10 @@ def load_process(source: Any) -> StepProcess:
         raise PsgDataError(f"{root}: no generator process ({PROCESS_FILE}); the exact model is stored only by "
                            "psg-data synth (generator steps-v2) datasets")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        # a Dataset also checks the file against its size and SHA-256 in tables/files.parquet
+        text = source.read_file(PROCESS_FILE).decode("utf-8") if hasattr(source, "read_file") and root.is_dir() \
+            else path.read_text(encoding="utf-8")
+        data = json.loads(text)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise PsgDataError(f"{path}: not valid JSON ({exc})") from None
     return StepProcess.from_dict(data, str(path))

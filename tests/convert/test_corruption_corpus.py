@@ -396,10 +396,28 @@ def _table(name: str) -> str:
 
 
 def edit_table(name: str, fn: Callable[[pa.Table], pa.Table]) -> Callable[[Path], None]:
+    """Rewrite table ``name`` with ``fn`` and re-seal its checksum, so the content check under test
+    answers (a table that no longer fits its checksum is refused for that first: tests/format)."""
     def damage(root: Path) -> None:
         p = root / _table(name)
         pq.write_table(fn(pq.read_table(p)), p)
+        _reseal(root, _table(name))
     return damage
+
+
+def _reseal(root: Path, rel: str) -> None:
+    import hashlib
+
+    fp = root / _table("files")
+    rows = pq.read_table(fp).to_pylist()
+    for r in rows:
+        if r["path"] == rel:
+            data = (root / rel).read_bytes()
+            r["size_bytes"], r["sha256"] = len(data), hashlib.sha256(data).hexdigest()
+    pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
+    m = json.loads((root / "dataset.json").read_text())
+    m["files_sha256"] = hashlib.sha256(fp.read_bytes()).hexdigest()
+    (root / "dataset.json").write_text(json.dumps(m))
 
 
 def edit_manifest(**changes: Any) -> Callable[[Path], None]:

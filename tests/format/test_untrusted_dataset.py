@@ -14,6 +14,7 @@ import builtins
 import io
 import json
 import os
+import re
 import shutil
 import struct
 import subprocess
@@ -511,18 +512,83 @@ def test_a_dataset_linked_as_a_whole_is_read(tmp_path: Path) -> None:
     assert validate_dataset(link) == []
 
 
-def test_forged_checksum_alone_is_a_validate_line(tmp_path: Path) -> None:
-    """A checksum that does not fit its file (content unchanged) is what validate's checksum check is
-    for; the loader does not hash (checksums detect accidents, not attacks: docs/SECURITY.md)."""
-    root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=1)
+def _forge_listed_checksum(root: Path, rel: str, *, reseal_manifest: bool) -> None:
+    """Write a checksum that does not fit ``rel`` into files.parquet (content unchanged)."""
     fp = root / "tables/files.parquet"
     rows = pq.read_table(fp).to_pylist()
-    rows[0]["sha256"] = "f" * 64
+    assert any(r["path"] == rel for r in rows), rel
+    for r in rows:
+        if r["path"] == rel:
+            r["sha256"] = "f" * 64
     pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
+    if reseal_manifest:
+        m = json.loads((root / "dataset.json").read_text())
+        m["files_sha256"] = sha256_file(fp)
+        (root / "dataset.json").write_text(json.dumps(m))
+
+
+def test_forged_files_table_is_refused_by_loader_and_validate(tmp_path: Path) -> None:
+    """files.parquet changed after writing (its SHA-256 no longer fits the manifest's)."""
+    root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=1)
+    _forge_listed_checksum(root, "tables/scans.parquet", reseal_manifest=False)
+    with pytest.raises(FormatError, match=r"tables/files\.parquet: sha256: .* does not match dataset\.json "
+                                          r"files_sha256"):
+        psg_data.open_dataset(root).table("scans")
     lines = [str(p) for p in validate_dataset(root)]
     assert any(ln.startswith("tables/files.parquet: sha256: checksum") for ln in lines), lines
-    m = json.loads((root / "dataset.json").read_text())
-    m["files_sha256"] = sha256_file(fp)
-    (root / "dataset.json").write_text(json.dumps(m))
-    lines = [str(p) for p in validate_dataset(root)]
-    assert lines == [f"{rows[0]['path']}: sha256: checksum mismatch: content differs from tables/files.parquet"]
+
+
+# what the loader reads whole, the file whose checksum is forged, and the reading
+FORGED = {
+    "table": ("tar", "tables/scans.parquet", lambda ds: ds.table("scans")),
+    "image file": ("files", "images/scan_000/color/000000.png", lambda ds: ds.scan("scan_000").frame(0)),
+    "depth file": ("files", "images/scan_000/depth/000000.png", lambda ds: ds.scan("scan_000").frame(0)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FORGED))
+def test_forged_checksum_is_refused_by_loader_and_validate(tmp_path: Path, name: str) -> None:
+    """A file whose content does not fit its checksum in files.parquet (the files table itself
+    consistent with the manifest): the loader refuses it when it reads the file, validate names it."""
+    layout, rel, use = FORGED[name]
+    root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=1, image_layout=layout)
+    use(psg_data.open_dataset(root))  # reads before forging
+    _forge_listed_checksum(root, rel, reseal_manifest=True)
+    with pytest.raises(FormatError, match=rf"{re.escape(rel)}: sha256: checksum [0-9a-f]{{12}}\.\.\. does not match "
+                                          r"tables/files\.parquet f{12}"):
+        use(psg_data.open_dataset(root))
+    assert [str(p) for p in validate_dataset(root)] == [
+        f"{rel}: sha256: checksum mismatch: content differs from tables/files.parquet"]
+
+
+def test_changed_table_is_refused_by_loader(tmp_path: Path) -> None:
+    """A table edited after writing, its checksum left as written (an accident, or a careless edit)."""
+    root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=1)
+    p = root / "tables/scans.parquet"
+    t = pq.read_table(p)
+    pq.write_table(t.slice(0, 1), p)
+    with pytest.raises(FormatError, match=r"tables/scans\.parquet: size_bytes: file has \d+ bytes, "
+                                          r"tables/files\.parquet says \d+"):
+        psg_data.open_dataset(root).scan_ids
+    assert any(ln.startswith("tables/scans.parquet: size_bytes:") for ln in map(str, validate_dataset(root)))
+
+
+def test_forged_generator_model_checksum_is_refused(tmp_path: Path) -> None:
+    from psg_data.synth import LabConfig, build_lab
+
+    root = build_lab(tmp_path / "lab", LabConfig(days=1, frames_per_scan=1, width=32, height=24))
+    load_process(psg_data.open_dataset(root))
+    _forge_listed_checksum(root, "generator/process.json", reseal_manifest=True)
+    with pytest.raises(FormatError, match=r"generator/process\.json: sha256: checksum"):
+        load_process(psg_data.open_dataset(root))
+    load_process(root / "generator/process.json")  # a path is a plain file: no dataset, no checksum
+
+
+def test_tar_archive_checksum_is_checked_by_validate_not_by_the_loader(tmp_path: Path) -> None:
+    """Documented choice (docs/SECURITY.md): the loader reads one frame of an archive as two byte
+    ranges and does not hash the whole archive; validate does."""
+    root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=2)
+    _forge_listed_checksum(root, "images/scan_000.tar", reseal_manifest=True)
+    assert psg_data.open_dataset(root).scan("scan_000").frame(1).color.shape == (24, 32, 3)
+    assert [str(p) for p in validate_dataset(root)] == [
+        "images/scan_000.tar: sha256: checksum mismatch: content differs from tables/files.parquet"]
