@@ -126,3 +126,25 @@ def _converted_datasets_agree(monkeypatch: pytest.MonkeyPatch, request: pytest.F
         return report
 
     monkeypatch.setattr(_pipeline, "_convert", checked)
+
+
+def reseal_checksums(root: Path) -> None:
+    """Make ``files.parquet`` and the manifest's ``files_sha256`` fit the dataset's files as they now
+    are: for a test that edits a table to build a case the checksum check would otherwise answer first."""
+    import hashlib
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    fp = root / "tables/files.parquet"
+    rows = pq.read_table(fp).to_pylist()
+    for r in rows:
+        p = root / r["path"]
+        if p.is_file():
+            data = p.read_bytes()
+            r["size_bytes"], r["sha256"] = len(data), hashlib.sha256(data).hexdigest()
+    pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
+    m = json.loads((root / "dataset.json").read_text())
+    m["files_sha256"] = hashlib.sha256(fp.read_bytes()).hexdigest()
+    (root / "dataset.json").write_text(json.dumps(m, indent=2))

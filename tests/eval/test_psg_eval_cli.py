@@ -19,6 +19,7 @@ from psg_data.estimators import register_estimator
 from psg_data.estimators._simple import LastSeenEstimator
 from psg_data.synth import LabConfig, build_lab
 from psg_data.writers import sha256_file
+from tests.conftest import reseal_checksums
 
 SMALL = LabConfig(seed=5, days=4, train_days=3, frames_per_scan=1, width=40, height=30)
 
@@ -141,6 +142,7 @@ def test_empty_test_split(lab: Path, tmp_path: Path) -> None:
     t = pq.read_table(p)
     t = t.set_column(t.column_names.index("split"), t.schema.field("split"), pa.array(["train"] * t.num_rows))
     pq.write_table(t, p)
+    reseal_checksums(root)
     res = run("--dataset", str(root), "-e", "last_seen", "--no-references", "--out", str(tmp_path / "x"))
     assert res.exit_code == 1
     assert "test split is empty" in res.stderr
