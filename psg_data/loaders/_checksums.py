@@ -5,14 +5,15 @@ Checksums detect accidents (bit rot, a truncated copy, a file edited by hand), n
 can edit a dataset can rewrite its checksums too (docs/SECURITY.md). A file whose content does not
 fit its recorded size or SHA-256 is refused with a :class:`~psg_data.errors.FormatError` naming
 the file, the field and what was expected. A file is hashed from the bytes that are parsed or
-decoded, once per process. A scan archive (``tar`` layout) is not hashed here: reading one frame
-stays two ``pread`` calls and a damaged frame does not make its scan's other frames unreadable;
-``validate`` checks archives against their checksums.
+decoded, once per process. A scan archive (``tar`` layout) is hashed only when the dataset is opened
+with ``verify_archives=True``: by default reading one frame stays two ``pread`` calls and a damaged
+frame does not make its scan's other frames unreadable; ``validate`` checks archives.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -78,6 +79,25 @@ class FileChecksums:
         if want is None or rel in self._verified:
             return
         self._compare(rel, len(data), hashlib.sha256(data).hexdigest(), want)
+
+    def check_fd(self, rel: str, fd: int, size: int) -> None:
+        """Like :meth:`check_bytes` for the open file ``fd`` of ``size`` bytes (read with ``pread``
+        in 1 MiB blocks; the caller holds any lock the descriptor needs).
+        """
+        want = self.expected(rel)
+        if want is None or rel in self._verified:
+            return
+        if size != want[0]:
+            self._compare(rel, size, "", want)
+        h = hashlib.sha256()
+        for offset in range(0, size, 1 << 20):
+            n = min(1 << 20, size - offset)
+            if hasattr(os, "pread"):
+                h.update(os.pread(fd, n, offset))
+            else:  # pragma: no cover - Windows
+                os.lseek(fd, offset, os.SEEK_SET)
+                h.update(os.read(fd, n))
+        self._compare(rel, size, h.hexdigest(), want)
 
     def _compare(self, rel: str, size: int, digest: str, want: tuple[int, str]) -> None:
         if size != want[0]:

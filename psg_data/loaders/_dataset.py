@@ -55,13 +55,21 @@ def _box(row: dict[str, Any]) -> Box:
 class Dataset:
     """A psg-dataset directory opened for reading.
 
+    Args:
+        root: dataset directory.
+        verify_archives: also hash each scan archive (tar layout) against ``tables/files.parquet``
+            the first time one of its frames is read: one extra sequential read of the archive per
+            process, and a damaged archive then yields no frame at all. Off by default: tables,
+            the generator model and whole-file images are always checked (docs/SECURITY.md).
+
     Attributes:
         root: dataset directory.
         info: the manifest.
     """
 
-    def __init__(self, root: str | Path) -> None:
+    def __init__(self, root: str | Path, *, verify_archives: bool = False) -> None:
         self.root = Path(root)
+        self.verify_archives = verify_archives
         if not self.root.is_dir():
             raise FormatError(f"{self.root}: not a directory; expected a psg-dataset directory")
         self.info: DatasetInfo = read_manifest(self.root)
@@ -70,7 +78,7 @@ class Dataset:
 
     def _open_files(self) -> None:
         self._sums = FileChecksums(self.root, real_root(self.root), self.info.files_sha256)
-        self._images = _ImageFiles(self.root, self._sums)
+        self._images = _ImageFiles(self.root, self._sums, self.verify_archives)
 
     def close(self) -> None:
         """Close the image archives kept open for reading (reopened on demand)."""
@@ -90,10 +98,11 @@ class Dataset:
         """Pickled as its directory and manifest: no open file, no cached table travels; a copy in
         another process (a DataLoader worker, a Dask task) reopens tables and archives on first use.
         """
-        return {"root": self.root, "info": self.info}
+        return {"root": self.root, "info": self.info, "verify_archives": self.verify_archives}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.root, self.info = state["root"], state["info"]
+        self.verify_archives = bool(state.get("verify_archives", False))
         self._arrow = {}
         self._open_files()
 
@@ -479,19 +488,20 @@ class _ImageFiles:
 
     _MAX_OPEN = 64
 
-    def __init__(self, root: Path, sums: FileChecksums) -> None:
-        self.root, self._sums = root, sums
+    def __init__(self, root: Path, sums: FileChecksums, verify_archives: bool = False) -> None:
+        self.root, self._sums, self._verify_archives = root, sums, verify_archives
         self._fds: dict[str, tuple[int, int]] = {}  # rel -> (descriptor, file size)
         self._dirs: set[str] = set()  # directories found inside the dataset
         self._lock = threading.Lock()
 
     def __getstate__(self) -> dict[str, Any]:
         return {"root": self.root, "sums": self._sums.root, "real": self._sums.real,
-                "files_sha256": self._sums.files_sha256}  # descriptors and the lock stay in this process
+                "files_sha256": self._sums.files_sha256,
+                "verify_archives": self._verify_archives}  # descriptors and the lock stay in this process
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         sums = FileChecksums(state["sums"], state["real"], state["files_sha256"])
-        self.__init__(state["root"], sums)  # type: ignore[misc]
+        self.__init__(state["root"], sums, state["verify_archives"])  # type: ignore[misc]
 
     @cached_property
     def real_root(self) -> str:
@@ -556,7 +566,14 @@ class _ImageFiles:
             if entry is None:
                 if len(self._fds) >= self._MAX_OPEN:
                     os.close(self._fds.pop(next(iter(self._fds)))[0])
-                entry = self._fds[rel] = self._open(rel, where)
+                entry = self._open(rel, where)
+                if self._verify_archives:
+                    try:
+                        self._sums.check_fd(rel, *entry)
+                    except FormatError:
+                        os.close(entry[0])
+                        raise
+                self._fds[rel] = entry
             return entry
 
     def close(self) -> None:
@@ -589,10 +606,14 @@ def backproject(frame: Frame, *, stride: int = 1, max_depth_m: float = np.inf
     return pw, col
 
 
-def open_dataset(path: str | Path) -> Dataset:
+def open_dataset(path: str | Path, *, verify_archives: bool = False) -> Dataset:
     """Open the psg-dataset at ``path`` (reads only the manifest; tables load on first use).
+
+    Args:
+        path: the dataset directory.
+        verify_archives: also hash each scan archive when first read (see :class:`Dataset`).
 
     Raises:
         FormatError: not a dataset, bad manifest, or a newer format major version.
     """
-    return Dataset(path)
+    return Dataset(path, verify_archives=verify_archives)

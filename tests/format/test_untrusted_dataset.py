@@ -14,6 +14,7 @@ import builtins
 import io
 import json
 import os
+import pickle
 import re
 import shutil
 import struct
@@ -585,10 +586,18 @@ def test_forged_generator_model_checksum_is_refused(tmp_path: Path) -> None:
 
 
 def test_tar_archive_checksum_is_checked_by_validate_not_by_the_loader(tmp_path: Path) -> None:
-    """Documented choice (docs/SECURITY.md): the loader reads one frame of an archive as two byte
-    ranges and does not hash the whole archive; validate does."""
+    """Documented choice (docs/SECURITY.md): by default the loader reads one frame of an archive as two
+    byte ranges and does not hash the whole archive (validate does); ``verify_archives=True`` does."""
     root = write_tiny_dataset(tmp_path / "ds", scans=1, frames=2)
+    psg_data.open_dataset(root, verify_archives=True).scan("scan_000").frame(1)
     _forge_listed_checksum(root, "images/scan_000.tar", reseal_manifest=True)
     assert psg_data.open_dataset(root).scan("scan_000").frame(1).color.shape == (24, 32, 3)
     assert [str(p) for p in validate_dataset(root)] == [
         "images/scan_000.tar: sha256: checksum mismatch: content differs from tables/files.parquet"]
+    ds = psg_data.open_dataset(root, verify_archives=True)
+    with pytest.raises(FormatError, match=r"images/scan_000\.tar: sha256: checksum [0-9a-f]{12}\.\.\. does not "
+                                          r"match tables/files\.parquet f{12}"):
+        ds.scan("scan_000").frame(1)
+    clone = pickle.loads(pickle.dumps(ds))  # a DataLoader worker's copy keeps the setting
+    with pytest.raises(FormatError, match="sha256: checksum"):
+        clone.scan("scan_000").frame(0)
