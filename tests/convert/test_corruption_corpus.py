@@ -34,7 +34,7 @@ from psg_data.cli.psg_data_cmd import main
 from psg_data.errors import FormatError
 from psg_data.loaders import open_dataset
 from psg_data.loaders.raw._transforms import matrix_to_quat_xyzw
-from tests.conftest import write_tiny_dataset
+from tests.conftest import reseal_checksums, write_tiny_dataset
 from tests.contract import assert_one_error, snapshot
 
 from .conftest import CAMERA, images, pose, write_bag
@@ -401,23 +401,8 @@ def edit_table(name: str, fn: Callable[[pa.Table], pa.Table]) -> Callable[[Path]
     def damage(root: Path) -> None:
         p = root / _table(name)
         pq.write_table(fn(pq.read_table(p)), p)
-        _reseal(root, _table(name))
+        reseal_checksums(root)
     return damage
-
-
-def _reseal(root: Path, rel: str) -> None:
-    import hashlib
-
-    fp = root / _table("files")
-    rows = pq.read_table(fp).to_pylist()
-    for r in rows:
-        if r["path"] == rel:
-            data = (root / rel).read_bytes()
-            r["size_bytes"], r["sha256"] = len(data), hashlib.sha256(data).hexdigest()
-    pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
-    m = json.loads((root / "dataset.json").read_text())
-    m["files_sha256"] = hashlib.sha256(fp.read_bytes()).hexdigest()
-    (root / "dataset.json").write_text(json.dumps(m))
 
 
 def edit_manifest(**changes: Any) -> Callable[[Path], None]:
