@@ -186,6 +186,25 @@ def _house_sight(dataset: Any) -> Any:
     return HouseSight.of_house(make_house(int(extra["seed"]), HouseParams(**geo)))
 
 
+def scene_settings(dataset: Any, name: str, settings: Mapping[str, Any] | None) -> dict[str, Any]:
+    """A method's settings on one scene: the user's, plus the scene's hints (``process_oracle``: its
+    generator model, and ``share_updates`` unless given; module docstring).
+    """
+    from psg_data.evaluation._hints import EstimatorSpec, dataset_hints, with_hints
+
+    given = dict(settings or {})
+    if name in BUILTIN_METHODS:
+        return given
+    spec = with_hints(EstimatorSpec(name, name, tuple(given.items())), dataset_hints(dataset))
+    out = dict(spec.settings)
+    if name == "process_oracle":
+        out.setdefault("share_updates", True)
+    return out
+
+
+BUILTIN_METHODS = ("oracle", "last_seen_map", "random_receptacle")
+
+
 def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
                   protocol: SimProtocol, labels: str = "gt", label_seed: int = 0,
                   keep: Sequence[int] = ()) -> dict[str, Any]:
@@ -232,10 +251,11 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
         qs = make_queries(env, protocol.queries_per_scene, seed=scene, horizon_s=protocol.horizon_s, windows=None)
         pairs = [(q, env.t_map_s) for q in qs]
     out: dict[str, Any] = {"records": [], "queries": [(q, t_m) for q, t_m in pairs], "trails": {}, "beliefs": {},
-                           "env": env.name}
+                           "env": env.name, "settings": {}}
     for label, spec in methods.items():
-        graph = PredictiveGraph(env.layout, method_filters(env, label, spec, settings.get(label), val_start),
-                                grid=env.grid)
+        given = scene_settings(ds, spec, settings.get(label))
+        out["settings"][label] = {k: v for k, v in given.items() if k != "dataset"}
+        graph = PredictiveGraph(env.layout, method_filters(env, label, spec, given, val_start), grid=env.grid)
         for q, t_m in pairs:
             fs = graph.filters_of(q.object_id)
             switches = 0

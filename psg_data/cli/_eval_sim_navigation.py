@@ -1,0 +1,124 @@
+"""``psg-eval --task navigation --dataset navigation-benchmark --protocol paper-sim-predictive|paper-sim-adaptive``.
+
+The work is in :mod:`psg_data.navigation._sim_benchmark` (protocols, agent) and
+:mod:`psg_data.evaluation._sim_navigation_report` (tables, paper rows, per-scene plot).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+from psg_data.cli._common import Progress
+from psg_data.cli._eval_provenance import provenance
+
+__all__ = ["run_sim_navigation_task", "sim_methods", "SIM_REFERENCES"]
+
+SIM_REFERENCES: list[tuple[str, str, tuple[tuple[str, Any], ...], str, str]] = [
+    ("oracle", "oracle", (), "ceiling", "the true receptacle at the query time"),
+    ("process_oracle", "process_oracle", (), "ceiling",
+     "exact posterior of the model that generated the scene, test-week regime included"),
+    ("process_oracle:model=train", "process_oracle", (("model", "train"),), "ceiling",
+     "exact posterior of the training model only: the best a predictor that does not adapt can do"),
+    ("last_seen_map", "last_seen_map", (), "baseline", "the last observed state of each edge"),
+    ("time_of_week_frequency", "time_of_week_frequency", (), "baseline",
+     "training frequency of presence per hour of the week"),
+    ("random_receptacle", "random_receptacle", (), "chance", "uniform random beliefs over the edges"),
+]
+"""(label, name, settings, role, description) of the reference rows."""
+
+
+def sim_methods(specs: list[Any], references: bool) -> tuple[dict[str, str], dict[str, dict[str, Any]],
+                                                              dict[str, tuple[str, str]]]:
+    """(label -> name, label -> settings, label -> (role, description)): references first, then the user's."""
+    methods: dict[str, str] = {}
+    settings: dict[str, dict[str, Any]] = {}
+    roles: dict[str, tuple[str, str]] = {}
+    have = {s.label for s in specs}
+    if references:
+        for label, name, sett, role, desc in SIM_REFERENCES:
+            roles[label] = (role, desc)
+            if label not in have:
+                methods[label], settings[label] = name, dict(sett)
+    for s in specs:
+        methods[s.label], settings[s.label] = s.name, dict(s.settings)
+    return methods, settings, roles
+
+
+def _executor(jobs: int) -> Any:
+    from psg_data.cli._eval_persistence import _executor as ex
+
+    return ex(jobs, None)
+
+
+def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: Path, *, quick: bool, jobs: int,
+                            no_plots: bool, quiet: bool, references: bool = True, label_seed: int = 0,
+                            table_format: str = "text") -> bool:
+    """Run a simulation protocol over its scenes, write the files, print the paper-shaped table."""
+    import time
+
+    from psg_data.datasets import navigation_benchmark
+    from psg_data.evaluation._sim_navigation_report import plot_scene_sr, sim_summary, sim_table_text
+    from psg_data.navigation._sim_benchmark import SIM_PROTOCOLS, run_sim_navigation
+
+    proto = SIM_PROTOCOLS[protocol].quick() if quick else SIM_PROTOCOLS[protocol]
+    t0 = time.perf_counter()
+    n_build = max(proto.scenes) + 1
+    with Progress("navigation benchmark scenes", total=n_build, unit="scenes", quiet=quiet) as prog:
+        root = navigation_benchmark(scenes=n_build, shift=proto.shift, progress=lambda k: prog.update(k))
+    paths = [root / f"scene_{k:02d}" for k in proto.scenes]
+    methods, settings, roles = sim_methods(specs, references)
+    with Progress(f"{proto.name}: {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
+            _executor(jobs) as executor:
+        def progress(done: int, _total: int) -> None:
+            prog.done = done
+            prog.update(0)
+
+        records, outs = run_sim_navigation(paths, methods, settings, proto, labels=labels, label_seed=label_seed,
+                                           executor=executor, progress=progress)
+    names = list(methods)
+    per_scene, summary = sim_summary(records, names)
+    seconds = round(time.perf_counter() - t0, 2)
+    config = {"protocol": proto.name, **proto.to_dict(), "labels": labels, "label_seed": label_seed,
+              "methods": names, "setting": "adaptive" if proto.adaptive else "predictive",
+              "door_belief": "truth", "unreachable": "exclude", "absent_in_overall": "abort_is_success",
+              "seeds": list(proto.scenes), "env": "navigation-benchmark", "dataset": str(root),
+              "settings": {k: v for k, v in outs[proto.scenes[0]]["settings"].items()}}
+    info = provenance({"task": "navigation", "dataset_label": "navigation-benchmark", "dataset": str(root),
+                       "seconds": seconds, "jobs": jobs})
+    text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths))
+    _write(out, records, per_scene, summary, config, roles, info, text)
+    if not no_plots:
+        plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
+                      title=f"{proto.name}, labels {labels}: overall SR per scene (scene = house seed)")
+    if table_format == "text":
+        click.echo("")
+        click.echo(text, nl=False)
+    else:
+        from psg_data.evaluation._navigation_report import navigation_results
+        from psg_data.evaluation._tables import print_results
+
+        print_results(navigation_results(_result(records, per_scene, summary, config), roles=roles, info=info),
+                      fmt=table_format)
+    return True
+
+
+def _result(records: Any, per_scene: Any, summary: Any, config: dict[str, Any]) -> Any:
+    from psg_data.navigation import NavigationResult
+
+    return NavigationResult(records, per_scene, summary, {}, config)
+
+
+def _write(out: Path, records: Any, per_scene: Any, summary: Any, config: dict[str, Any],
+           roles: dict[str, tuple[str, str]], info: dict[str, Any], text: str) -> None:
+    """results.json / table.txt / summary.csv (the results schema), records.parquet, per_seed.csv (per scene),
+    results.csv, sim_table.txt (the paper-shaped table) and config.json."""
+    from psg_data.evaluation._navigation_report import write_navigation_results
+    from psg_data.writers._safe_output import write_atomically
+
+    write_navigation_results(_result(records, per_scene, summary, config), out, roles=roles, info=info)
+    write_atomically(out / "sim_table.txt", lambda tmp: tmp.write_text(text))
+    write_atomically(out / "sim_config.json", lambda tmp: tmp.write_text(json.dumps(config, indent=1, default=str)))
