@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -102,7 +102,8 @@ def demo(*, rebuild: bool = False, progress: Callable[..., Any] | None = None) -
 
 
 def navigation_benchmark(*, rebuild: bool = False, progress: Callable[..., Any] | None = None,
-                         scenes: int = NAVIGATION_BENCHMARK_SCENES, shift: float | None = None) -> Path:
+                         scenes: int = NAVIGATION_BENCHMARK_SCENES, shift: float | None = None,
+                         which: Sequence[int] | None = None) -> Path:
     """Folder of the navigation benchmark: ``scene_00`` ... ``scene_14``, one psg-dataset per house.
 
     Each scene is :func:`psg_data.synth.build_house` of ``HouseConfig(seed=k)`` (5-8 rooms, 100-150
@@ -117,11 +118,12 @@ def navigation_benchmark(*, rebuild: bool = False, progress: Callable[..., Any] 
         scenes: number of scenes (house seeds 0..scenes-1).
         shift: the test-time shift knob (None: the default, 0.5; 0: no shift, the test week follows the
             training dynamics, as the predictive navigation protocol needs); its own cache folder.
+        which: build only these house seeds (default ``range(scenes)``).
     """
     version = _benchmark_version(shift)
     root = cache_dir() / f"navigation-benchmark-{version}"
     with _lock(cache_dir() / f".navigation-benchmark-{version}.lock"):
-        for k in range(scenes):
+        for k in (range(scenes) if which is None else which):
             scene = root / f"scene_{k:02d}"
             if rebuild or not _is_complete(scene) or not _has_labels(scene):
                 from psg_data.labeling import label_dataset

@@ -66,9 +66,8 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
 
     proto = SIM_PROTOCOLS[protocol].quick() if quick else SIM_PROTOCOLS[protocol]
     t0 = time.perf_counter()
-    n_build = max(proto.scenes) + 1
-    with Progress("navigation benchmark scenes", total=n_build, unit="scenes", quiet=quiet) as prog:
-        root = navigation_benchmark(scenes=n_build, shift=proto.shift, progress=lambda k: prog.update(k))
+    with Progress("navigation benchmark scenes", total=len(proto.scenes), unit="scenes", quiet=quiet) as prog:
+        root = navigation_benchmark(shift=proto.shift, which=proto.scenes, progress=lambda k: prog.update(k))
     paths = [root / f"scene_{k:02d}" for k in proto.scenes]
     methods, settings, roles = sim_methods(specs, references)
     with Progress(f"{proto.name}: {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
