@@ -93,6 +93,7 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     if not no_plots:
         plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
                       title=f"{proto.name}, labels {labels}: overall SR per scene (scene = house seed)")
+        _maps(out, paths[0], proto, outs[proto.scenes[0]], records, names, roles, labels, label_seed)
     if table_format == "text":
         click.echo("")
         click.echo(text, nl=False)
@@ -105,6 +106,49 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     return True
 
 
+def pick_disagreement(records: Any, labels: list[str]) -> int | None:
+    """A query id of the records' first scene on which ``labels`` disagree most (success, then first
+    receptacle), dynamic targets first; None without records.
+    """
+    if records.empty:
+        return None
+    rec = records[(records["seed"] == records["seed"].iloc[0]) & records["method"].isin(labels)]
+    sig = rec.assign(sig=rec["success"].astype(str) + "|" + rec["predicted_receptacle"].astype(str),
+                     dyn=rec["category"] == "dynamic")
+    score = sig.groupby("query_id").agg(wins=("success", "nunique"), kinds=("sig", "nunique"), dyn=("dyn", "all"))
+    return int(score.sort_values(["wins", "dyn", "kinds"], ascending=False, kind="stable").index[0])
+
+
+def _maps(out: Path, path: Path, proto: Any, raw: dict[str, Any], records: Any, names: list[str],
+          roles: dict[str, tuple[str, str]], labels: str, label_seed: int) -> None:
+    """map_<label>.png: one query of the first house on which the methods disagree, each method's walk and beliefs."""
+    from psg_data.loaders import open_dataset
+    from psg_data.maps._planner import PlanningCache
+    from psg_data.navigation import NavigationEnv, plot_query
+    from psg_data.navigation._sim_benchmark import scene_split_ids
+
+    shown = [n for n in names if roles.get(n, ("method", ""))[0] == "method"] + \
+        [n for n in ("process_oracle", "process_oracle:model=train", "last_seen_map") if n in names]
+    qid = pick_disagreement(records, shown)
+    if qid is None:
+        return
+    q, t_m = next((q, t) for q, t in raw["queries"] if q.query_id == qid)
+    ds = open_dataset(path)
+    ids = scene_split_ids(ds)
+    env = NavigationEnv.from_dataset(ds, map_scans=ids["train"] + ids["val"], labels=labels, label_seed=label_seed)
+    cache = PlanningCache(env.grid, reach_m=proto.reach_m)
+    rec = records[(records["seed"] == q.seed) & (records["query_id"] == qid)].set_index("method")
+    for label in shown:
+        r = rec.loc[label]
+        title = (f"{label}: {r['outcome']} after {r['path_m']:.1f} m, {int(r['n_switches'])} target switches "
+                 f"({proto.name}, house {q.seed}, query {qid})\n{q.object_id} ({q.category}): on "
+                 f"{q.gt_receptacle or 'nothing'}; on {q.map_receptacle or 'nothing'} at the last map update, "
+                 f"{(q.t_s - t_m) / 3600:.0f} h before the query")
+        plot_query(env, q, out / f"map_{label.replace(':', '_').replace('=', '-')}.png",
+                   beliefs=raw["beliefs"].get((label, qid)), trail=raw["trails"].get((label, qid)), cache=cache,
+                   title=title)
+
+
 def _result(records: Any, per_scene: Any, summary: Any, config: dict[str, Any]) -> Any:
     from psg_data.navigation import NavigationResult
 
@@ -114,7 +158,8 @@ def _result(records: Any, per_scene: Any, summary: Any, config: dict[str, Any]) 
 def _write(out: Path, records: Any, per_scene: Any, summary: Any, config: dict[str, Any],
            roles: dict[str, tuple[str, str]], info: dict[str, Any], text: str) -> None:
     """results.json / table.txt / summary.csv (the results schema), records.parquet, per_seed.csv (per scene),
-    results.csv, sim_table.txt (the paper-shaped table) and config.json."""
+    results.csv, sim_table.txt (the paper-shaped table) and config.json.
+    """
     from psg_data.evaluation._navigation_report import write_navigation_results
     from psg_data.writers._safe_output import write_atomically
 

@@ -76,7 +76,8 @@ def _cell(row: Any, key: str, kind: str) -> str:
         return "-"
     if kind == "std":
         return f"{scale * m:.1f} ± {scale * float(row[f'{key}_std']):.1f}"
-    lo, hi = float(row[f"{key}_ci_low"]), float(row[f"{key}_ci_high"])
+    lo, hi = max(float(row[f"{key}_ci_low"]), 0.0), float(row[f"{key}_ci_high"])
+    hi = hi if key == "absent_dist_m" else min(hi, 1.0)  # the interval within the metric's range
     return f"[{scale * lo:.1f}, {scale * hi:.1f}]" if math.isfinite(lo) and math.isfinite(hi) else "-"
 
 
@@ -97,9 +98,11 @@ def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[s
     ours = []
     for _, r in summary.iterrows():
         role = roles.get(str(r["method"]), ("method", ""))[0]
-        ours.append([f"{r['method']}" + (f" [{role}]" if role != "method" else "")] + [_cell(r, k, "std") for k in _KEYS])
+        name = f"{r['method']}" + (f" [{role}]" if role != "method" else "")
+        ours.append([name] + [_cell(r, k, "std") for k in _KEYS])
     lines += _grid(head, ours)
-    lines += ["", "95 % intervals (bootstrap over queries, whole queries resampled within each column):", ""]
+    lines += ["", "95 % intervals over queries (whole queries resampled within each column; expanded percentile "
+                  "bootstrap, jackknife-t under 10 queries; clipped to the metric's range):", ""]
     lines += _grid(head, [[row[0]] + [_cell(r, k, "ci") for k in _KEYS]
                           for row, (_, r) in zip(ours, summary.iterrows())])
     paper = PAPER_SIM_ROWS.get(protocol.split("+")[0], [])
@@ -109,8 +112,9 @@ def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[s
                       "± std across scenes):", ""]
         lines += _grid(head, [[f"paper: {meth} [{perc}]"] + [f"{v:.1f} ± {s:.1f}" for v, s in vals]
                               for perc, meth, vals in paper])
-    lines += ["", f"counts: static presence {counts['Static presence']}, dynamic presence {counts['Dynamic presence']}, "
-              f"absence {counts['Absence']}, unreachable present targets (left out) {int(r0['n_unreachable'])}",
+    lines += ["", f"counts: static presence {counts['Static presence']}, dynamic presence "
+              f"{counts['Dynamic presence']}, absence {counts['Absence']}, unreachable present targets (left out) "
+              f"{int(r0['n_unreachable'])}",
               "± : standard deviation across scenes (ddof 1; the paper's ±); SR / SPL / AR in %, Dist in metres "
               "walked on absent targets; Overall counts a correct abort as a success (SPL 1)"]
     refs = [f"{m} = {d}" for m, (role, d) in roles.items() if role != "method"]
@@ -129,7 +133,7 @@ def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Ma
 
     methods = list(dict.fromkeys(per_scene["method"]))
     scenes = sorted(set(int(s) for s in per_scene["seed"]))
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.7 * len(scenes) + 3), 4.2))
+    fig, ax = plt.subplots(figsize=(max(8.0, 0.7 * len(scenes) + 4), 4.4))
     markers = "os^vD<>PX*hp"
     for k, m in enumerate(methods):
         d = per_scene[per_scene["method"] == m].set_index("seed")

@@ -12,10 +12,11 @@ targets during navigation by consuming new observations". :func:`run_adaptive_ep
 2. The agent walks the shortest path (A* field of the planning cache, true door states: the
    ``sim`` protocols' door rule) towards the best candidate in steps of ``look_every_m``.
 3. After each step it looks (:class:`HouseSight`: line of sight through open doorways, as the
-   privileged labels' sensor, within AI2-THOR's object visibility distance of 1.5 m): every receptacle of the target's edges
-   that comes into view for the first time in the episode updates its filter with ``y = 1`` if the
-   object is on it and ``y = 0`` if not (one observation per receptacle per episode: the state does
-   not change during an episode, so repeated looks add no information, only double counting).
+   privileged labels' sensor, within AI2-THOR's object visibility distance of 1.5 m): every
+   receptacle of the target's edges that comes into view for the first time in the episode
+   updates its filter with ``y = 1`` if the object is on it and ``y = 0`` if not (one observation
+   per receptacle per episode: the state does not change during an episode, so repeated looks add
+   no information, only double counting).
    Beliefs are recomputed; if another receptacle is now the best candidate the agent switches
    (``n_switches``; a switch spends no attempt). If the object itself is in view the agent goes to
    the receptacle holding it (even one outside its edges: it has seen it).
@@ -68,7 +69,8 @@ class HouseSight:
         return cls(layout, {r.receptacle_id: (float(r.box.center_m[0]), float(r.box.center_m[1]))
                             for r in layout.receptacles}, range_m)
 
-    def visible(self, xy: Sequence[float], receptacles: Sequence[str], door_open: Mapping[str, bool]) -> set[str]:
+    def visible(self, xy: Sequence[float] | NDArray[np.float64], receptacles: Sequence[str],
+                door_open: Mapping[str, bool]) -> set[str]:
         """The receptacles among ``receptacles`` in sight of ``xy`` (metres) under ``door_open``."""
         recs = [r for r in receptacles if r in self.receptacle_xy]
         if not recs:

@@ -116,7 +116,7 @@ SIM_PROTOCOLS: dict[str, SimProtocol] = {
 
 
 def scene_split_ids(dataset: Any) -> dict[str, list[str]]:
-    """split -> scan ids (train / val / test) of a benchmark scene."""
+    """Split -> scan ids (train / val / test) of a benchmark scene."""
     sc = dataset.df("scans")
     return {s: sc.loc[sc["split"] == s, "scan_id"].tolist() for s in ("train", "val", "test")}
 
@@ -182,7 +182,7 @@ def _house_sight(dataset: Any) -> Any:
     from psg_data.synth._house_layout import HouseParams, make_house
 
     extra = dataset.info.extra
-    geo = {k: tuple(v) if isinstance(v, list) else v for k, v in dict(extra["geometry"]).items()}
+    geo: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in dict(extra["geometry"]).items()}
     return HouseSight.of_house(make_house(int(extra["seed"]), HouseParams(**geo)))
 
 
@@ -285,7 +285,8 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
 def run_sim_navigation(paths: Sequence[Path], methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
                        protocol: SimProtocol, *, labels: str = "gt", label_seed: int = 0, executor: Any = None,
                        progress: Callable[[int, int], None] | None = None) -> tuple[Any, dict[int, dict[str, Any]]]:
-    """Every scene of ``protocol`` (``paths[k]`` is house ``protocol.scenes[k]``): (records DataFrame, per-scene raw output).
+    """Every scene of ``protocol`` (``paths[k]`` is house ``protocol.scenes[k]``): (records DataFrame, raw
+    output per scene).
 
     With an ``executor`` (``submit`` / futures) scenes run in parallel; results are ordered by scene.
     """
