@@ -315,3 +315,22 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     assert (out / "scene_sr.png").is_file()
     oracle = rows["oracle"]["values"]["overall_sr"]["mean"]
     assert math.isfinite(oracle) and oracle == pytest.approx(1.0)
+
+
+def test_both_process_oracle_readings_agree_without_a_shift(tmp_path: Path) -> None:
+    """At shift 0 the training model is the generating model: the two ceiling rows are the same walks."""
+    import pandas as pd
+
+    from psg_data.navigation._sim_benchmark import run_sim_scene
+    from psg_data.synth import HouseConfig, HouseParams, HouseProcessParams, build_house
+
+    root = build_house(tmp_path / "scene_05", HouseConfig(seed=5, geometry=HouseParams(n_objects=5),
+                                                          schedules=HouseProcessParams(shift=0.0)))
+    methods = {"process_oracle": "process_oracle", "process_oracle:model=train": "process_oracle"}
+    out = run_sim_scene(root, 5, methods, {"process_oracle:model=train": {"model": "train"}}, _protocol(True, 10))
+    df = pd.DataFrame(out["records"])
+    a, b = (df[df["method"] == m].reset_index(drop=True) for m in methods)
+    cols = ["query_id", "outcome", "success", "path_m", "visited", "best_belief"]
+    pd.testing.assert_frame_equal(a[cols], b[cols])
+    assert out["settings"]["process_oracle:model=train"]["model"] == "train"
+    assert out["settings"]["process_oracle"]["share_updates"] is True
