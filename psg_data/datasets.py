@@ -195,7 +195,8 @@ BUILTIN: dict[str, BuiltinDataset] = {
     "navigation-benchmark": BuiltinDataset(
         "navigation-benchmark", "the paper's simulation benchmark: 15 procedural houses, one dataset per scene "
         "(navigation_benchmark_scenes), built once into the cache", None,
-        "psg-eval --dataset navigation-benchmark (the persistence task over its scenes)",
+        "psg-eval --dataset navigation-benchmark (the persistence task over its scenes; --task navigation with "
+        "--protocol paper-sim-predictive or paper-sim-adaptive)",
         scans=NAVIGATION_BENCHMARK_SCENES),
 }
 """The built-in dataset names (name -> :class:`BuiltinDataset`)."""

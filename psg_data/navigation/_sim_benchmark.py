@@ -59,7 +59,8 @@ from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream
 from psg_data.navigation._env import WEEK_S, NavigationEnv
 from psg_data.navigation._queries import Query, make_queries
 
-__all__ = ["SimProtocol", "SIM_PROTOCOLS", "run_sim_scene", "run_sim_navigation", "scene_split_ids"]
+__all__ = ["SimProtocol", "SIM_PROTOCOLS", "run_sim_scene", "run_sim_navigation", "scene_split_ids", "method_filters",
+           "scene_settings"]
 
 log = logging.getLogger(__name__)
 
