@@ -15,7 +15,7 @@ import click
 from psg_data.cli._common import Progress
 from psg_data.cli._eval_provenance import provenance
 
-__all__ = ["run_sim_navigation_task", "sim_methods", "SIM_REFERENCES"]
+__all__ = ["run_sim_navigation_task", "sim_methods", "SIM_REFERENCES", "check_sim_options"]
 
 SIM_REFERENCES: list[tuple[str, str, tuple[tuple[str, Any], ...], str, str]] = [
     ("oracle", "oracle", (), "ceiling", "the true receptacle at the query time"),
@@ -29,6 +29,21 @@ SIM_REFERENCES: list[tuple[str, str, tuple[tuple[str, Any], ...], str, str]] = [
     ("random_receptacle", "random_receptacle", (), "chance", "uniform random beliefs over the edges"),
 ]
 """(label, name, settings, role, description) of the reference rows."""
+
+
+def check_sim_options(protocol: str, *, queries: int | None, seeds: Any, reachable_only: bool,
+                      door_belief: str | None, windows: str, delta: str, lab_seeds: Any) -> None:
+    """Refuse the lab protocols' settings that a paper-sim protocol fixes (one ``error:`` line each)."""
+    from psg_data.errors import EvaluationError
+
+    fixed = {"--queries": queries is not None, "--seeds": seeds is not None, "--reachable-only": reachable_only,
+             "--door-belief": door_belief is not None, "--windows": windows != "auto",
+             "--delta": str(delta).strip() not in ("0.2", "0.20"), "--lab-seeds": lab_seeds is not None}
+    given = [k for k, v in fixed.items() if v]
+    if given:
+        raise EvaluationError(f"{', '.join(given)} with --protocol {protocol}: the protocol fixes its scenes, "
+                              "queries (25 per house), delta 0.2, the true door states and query times around "
+                              "the clock; use --quick for the small form")
 
 
 def sim_methods(specs: list[Any], references: bool) -> tuple[dict[str, str], dict[str, dict[str, Any]],

@@ -213,6 +213,11 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     require_hints(specs, available_hints(dataset), "the " + (dataset or "demo") + " dataset")
     nav_options = None
     sim = task == "navigation" and protocol.startswith("paper-sim")
+    if sim:
+        from psg_data.cli._eval_sim_navigation import check_sim_options
+
+        check_sim_options(protocol, queries=queries, seeds=seeds, reachable_only=reachable_only,
+                          door_belief=door_belief, windows=windows, delta=delta, lab_seeds=lab_seeds)
     if task in ("navigation", "doors") and not sim:
         from psg_data.cli._eval_navigation import door_task_options, navigation_options
 

@@ -287,6 +287,9 @@ def test_cli_refuses_sim_protocols_elsewhere_and_quick_alone() -> None:
     assert r.exit_code == 1 and "--quick" in r.output
     r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "-e", "fremen"])
     assert r.exit_code == 1 and "paper-sim-predictive" in r.output
+    r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
+                                  "paper-sim-predictive", "--queries", "10", "--delta", "0.3", "-e", "fremen"])
+    assert r.exit_code == 1 and "--queries, --delta with --protocol paper-sim-predictive" in r.output
 
 
 @pytest.mark.slow
