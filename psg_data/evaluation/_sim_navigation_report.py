@@ -17,7 +17,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["PAPER_SIM_ROWS", "PAPER_SIM_COUNTS", "sim_summary", "sim_table_text", "plot_scene_sr", "SIM_COLUMNS"]
+__all__ = ["PAPER_SIM_ROWS", "PAPER_SIM_COUNTS", "sim_summary", "sim_table_text", "plot_scene_sr", "SIM_COLUMNS",
+           "headroom_line"]
 
 SIM_COLUMNS = (("Static presence", ("static_sr", "static_spl")), ("Dynamic presence", ("dynamic_sr", "dynamic_spl")),
                ("Absence", ("absent_ar", "absent_dist_m")), ("Overall", ("overall_sr", "overall_spl")))
@@ -117,23 +118,44 @@ def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[s
               f"{int(r0['n_unreachable'])}",
               "± : standard deviation across scenes (ddof 1; the paper's ±); SR / SPL / AR in %, Dist in metres "
               "walked on absent targets; Overall counts a correct abort as a success (SPL 1)"]
+    head_line = headroom_line(summary, roles)
+    if head_line:
+        lines.append(head_line)
     refs = [f"{m} = {d}" for m, (role, d) in roles.items() if role != "method"]
     if refs:
         lines.append("reference rows: " + "; ".join(refs))
     return "\n".join(lines) + "\n"
 
 
-def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Mapping[str, tuple[str, str]]) -> Path:
-    """Overall SR per scene (x) and method (markers), PNG."""
-    import matplotlib
+def headroom_line(summary: Any, roles: Mapping[str, tuple[str, str]]) -> str:
+    """What the table can detect, in overall SR: the ceiling against the best baseline and chance, and the
+    adaptation gap (``process_oracle`` minus ``process_oracle:model=train``); "" without those rows.
+    """
+    sr = {str(r["method"]): 100 * float(r["overall_sr_mean"]) for _, r in summary.iterrows()}
+    base = {m: v for m, v in sr.items() if roles.get(m, ("", ""))[0] == "baseline"}
+    chance = [v for m, v in sr.items() if roles.get(m, ("", ""))[0] == "chance"]
+    if "process_oracle" not in sr or not base:
+        return ""
+    best = max(base, key=lambda m: base[m])
+    out = (f"headroom (overall SR): process_oracle {sr['process_oracle']:.1f} against the best baseline {best} "
+           f"{base[best]:.1f}" + (f" and chance {chance[0]:.1f}" if chance else ""))
+    if "process_oracle:model=train" in sr:
+        out += (f"; adaptation gap process_oracle - process_oracle:model=train "
+                f"{sr['process_oracle'] - sr['process_oracle:model=train']:+.1f} points")
+    return out
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Mapping[str, tuple[str, str]]) -> Path:
+    """Overall SR per scene (x) and method (markers), PNG (a ``Figure``, no pyplot: the user's backend stays)."""
     import numpy as np
+    from matplotlib.figure import Figure
+
+    from psg_data.evaluation._persistence_plots import save_figure
 
     methods = list(dict.fromkeys(per_scene["method"]))
     scenes = sorted(set(int(s) for s in per_scene["seed"]))
-    fig, ax = plt.subplots(figsize=(max(8.0, 0.7 * len(scenes) + 4), 4.4))
+    fig = Figure(figsize=(max(8.0, 0.7 * len(scenes) + 4), 4.4))
+    ax = fig.add_subplot(1, 1, 1)
     markers = "os^vD<>PX*hp"
     for k, m in enumerate(methods):
         d = per_scene[per_scene["method"] == m].set_index("seed")
@@ -149,6 +171,5 @@ def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Ma
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     out = Path(out_path)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
+    save_figure(fig, out)
     return out

@@ -308,6 +308,7 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
                                   "--out", str(out), "--quiet"])
     assert r.exit_code == 0, r.output
     assert "paper: Ours (Perpetua*) [Privileged]" in r.output and "process_oracle:model=train" in r.output
+    assert "headroom (overall SR): process_oracle" in r.output and "adaptation gap" in r.output
     res = json.loads((out / "results.json").read_text())
     rows = {row["method"]: row for row in res["tables"][0]["rows"]}
     assert {"oracle", "process_oracle", "process_oracle:model=train", "fremen", "random_receptacle"} <= set(rows)
