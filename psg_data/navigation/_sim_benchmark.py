@@ -58,6 +58,7 @@ from psg_data.errors import EvaluationError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream
 from psg_data.navigation._env import WEEK_S, NavigationEnv
 from psg_data.navigation._queries import Query, make_queries
+from psg_data.navigation._runner import BUILTIN_METHODS
 
 __all__ = ["SimProtocol", "SIM_PROTOCOLS", "run_sim_scene", "run_sim_navigation", "scene_split_ids", "method_filters",
            "scene_settings"]
@@ -133,14 +134,10 @@ def method_filters(env: NavigationEnv, name: str, spec: str, settings: Mapping[s
     updated with the validation week. Built-ins ``oracle``, ``last_seen_map``, ``random_receptacle``.
     """
     from psg_data.graph._fit import resolve_estimator
-    from psg_data.navigation._baselines import last_seen_filters, oracle_filters, random_filters
+    from psg_data.navigation._runner import build_filters
 
-    if spec == "oracle":
-        return dict(oracle_filters(env.object_ids, sorted(env.receptacles), env.gt_at))
-    if spec == "last_seen_map":
-        return dict(last_seen_filters(env.map_streams))
-    if spec == "random_receptacle":
-        return dict(random_filters(env.map_streams, seed=int(dict(settings or {}).get("seed", 0))))
+    if isinstance(spec, str) and spec in BUILTIN_METHODS:
+        return build_filters(env, spec, settings=settings)  # the map streams are all they read
     est = resolve_estimator(spec, settings)
     parts = [_split_stream(s, val_start_s) for s in env.map_streams]
     train = [a for a, _ in parts if len(a)]
@@ -201,9 +198,6 @@ def scene_settings(dataset: Any, name: str, settings: Mapping[str, Any] | None) 
     if name == "process_oracle":
         out.setdefault("share_updates", True)
     return out
-
-
-BUILTIN_METHODS = ("oracle", "last_seen_map", "random_receptacle")
 
 
 def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
