@@ -200,6 +200,21 @@ def scene_settings(dataset: Any, name: str, settings: Mapping[str, Any] | None) 
     return out
 
 
+def _adaptive_query(graph: Any, q: Query, t_m: float, test: Mapping[EdgeKey, EdgeStream], cache: Any, cfg: Any,
+                    sight: Any, look_every_m: float) -> tuple[Any, int]:
+    """One adaptive episode: copies of the object's filters fed the test week up to ``t_m``, then the walk."""
+    from psg_data.navigation._sim_agent import run_adaptive_episode
+
+    fs = copy.deepcopy(graph.filters_of(q.object_id))  # one deepcopy for all of them: a shared tracker stays shared
+    for r, f in fs.items():
+        s = test.get((q.object_id, r))
+        if s is not None:
+            m = s.t_s <= t_m
+            if m.any():
+                f.update_many(s.t_s[m], s.y[m])
+    return run_adaptive_episode(cache, q, fs, cfg, sight, look_every_m=look_every_m)
+
+
 def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
                   protocol: SimProtocol, labels: str = "gt", label_seed: int = 0,
                   keep: Sequence[int] = ()) -> dict[str, Any]:
@@ -211,7 +226,8 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
         methods: label -> registry name or built-in.
         settings: label -> estimator settings.
         protocol: the protocol.
-        labels: label source of the map and test observations (``gt`` or ``privileged``).
+        labels: label source of the map and test observations (``gt``, ``privileged``, ``noisy:P``); the
+            adaptive agent's own sight during an episode is exact whatever the source.
         label_seed: seed of noisy sources and sightings.
         keep: query ids whose trails and beliefs are returned (figures).
 
@@ -222,7 +238,6 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
     from psg_data.loaders import open_dataset
     from psg_data.maps._planner import PlanningCache
     from psg_data.navigation._agent import AgentConfig, episode_record, run_episode
-    from psg_data.navigation._sim_agent import run_adaptive_episode
 
     ds = open_dataset(path)
     ids = scene_split_ids(ds)
@@ -252,21 +267,13 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
         out["settings"][label] = {k: v for k, v in given.items() if k != "dataset"}
         graph = PredictiveGraph(env.layout, method_filters(env, label, spec, given, val_start), grid=env.grid)
         for q, t_m in pairs:
-            fs = graph.filters_of(q.object_id)
-            switches = 0
             if protocol.adaptive:
-                fs = copy.deepcopy(fs)  # one deepcopy of the object's filters: a shared tracker stays shared
-                for r, f in fs.items():
-                    s = test.get((q.object_id, r))
-                    if s is not None:
-                        m = s.t_s <= t_m
-                        if m.any():
-                            f.update_many(s.t_s[m], s.y[m])
-                ep, switches = run_adaptive_episode(cache, q, fs, cfg, sight, look_every_m=protocol.look_every_m)
+                ep, switches = _adaptive_query(graph, q, t_m, test, cache, cfg, sight, protocol.look_every_m)
             else:
                 bel = {r: float(v[0]) for r, v in graph.object_probabilities(q.object_id, [q.t_s]).items()} \
                     if q.object_id in graph.objects else {}
-                ep = run_episode(cache, q, fs, cfg, beliefs=bel, observation=env.observation)
+                ep, switches = run_episode(cache, q, graph.filters_of(q.object_id), cfg, beliefs=bel,
+                                           observation=env.observation), 0
             out["records"].append(episode_record(
                 ep, method=label, seed=scene, delta=protocol.delta, t_s=q.t_s, t_map_s=t_m, start_x_m=q.start_xy[0],
                 start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle, map_receptacle=q.map_receptacle,
