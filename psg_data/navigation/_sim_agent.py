@@ -66,6 +66,7 @@ class HouseSight:
 
     @classmethod
     def of_house(cls, layout: Any, range_m: float = 1.5) -> HouseSight:
+        """The sight of a :class:`psg_data.synth.HouseLayout` (receptacle centres from its boxes)."""
         return cls(layout, {r.receptacle_id: (float(r.box.center_m[0]), float(r.box.center_m[1]))
                             for r in layout.receptacles}, range_m)
 

@@ -98,6 +98,7 @@ class SimProtocol:
 
     @property
     def n_queries(self) -> int:
+        """Queries of the protocol (scenes x queries per scene)."""
         return len(self.scenes) * self.queries_per_scene
 
     def quick(self) -> SimProtocol:
@@ -105,6 +106,7 @@ class SimProtocol:
         return replace(self, name=self.name + "+quick", scenes=self.scenes[:2], queries_per_scene=6)
 
     def to_dict(self) -> dict[str, Any]:
+        """The protocol as a JSON-ready dictionary (stored with the results)."""
         d = asdict(self)
         d["scenes"] = list(self.scenes)
         return d
