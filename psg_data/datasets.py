@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -102,7 +102,8 @@ def demo(*, rebuild: bool = False, progress: Callable[..., Any] | None = None) -
 
 
 def navigation_benchmark(*, rebuild: bool = False, progress: Callable[..., Any] | None = None,
-                         scenes: int = NAVIGATION_BENCHMARK_SCENES) -> Path:
+                         scenes: int = NAVIGATION_BENCHMARK_SCENES, shift: float | None = None,
+                         which: Sequence[int] | None = None) -> Path:
     """Folder of the navigation benchmark: ``scene_00`` ... ``scene_14``, one psg-dataset per house.
 
     Each scene is :func:`psg_data.synth.build_house` of ``HouseConfig(seed=k)`` (5-8 rooms, 100-150
@@ -115,27 +116,48 @@ def navigation_benchmark(*, rebuild: bool = False, progress: Callable[..., Any] 
         rebuild: rebuild every scene even if a valid copy is cached.
         progress: called as ``progress(1)`` per scene built.
         scenes: number of scenes (house seeds 0..scenes-1).
+        shift: the test-time shift knob (None: the default, 0.5; 0: no shift, the test week follows the
+            training dynamics, as the predictive navigation protocol needs); its own cache folder.
+        which: build only these house seeds (default ``range(scenes)``).
     """
-    root = cache_dir() / f"navigation-benchmark-{NAVIGATION_BENCHMARK_VERSION}"
-    with _lock(cache_dir() / f".navigation-benchmark-{NAVIGATION_BENCHMARK_VERSION}.lock"):
-        for k in range(scenes):
+    version = _benchmark_version(shift)
+    root = cache_dir() / f"navigation-benchmark-{version}"
+    with _lock(cache_dir() / f".navigation-benchmark-{version}.lock"):
+        for k in (range(scenes) if which is None else which):
             scene = root / f"scene_{k:02d}"
             if rebuild or not _is_complete(scene) or not _has_labels(scene):
                 from psg_data.labeling import label_dataset
-                from psg_data.synth import HouseConfig, build_house
+                from psg_data.synth import build_house
 
                 log.info("building navigation-benchmark scene %d into %s", k, scene)
-                build_house(scene, HouseConfig(seed=k), overwrite=True)
+                build_house(scene, _house_config(k, shift), overwrite=True)
                 label_dataset(scene, "privileged")
             if progress is not None:
                 progress(1)
     return root
 
 
-def navigation_benchmark_scenes(root: Path | None = None, scenes: int = NAVIGATION_BENCHMARK_SCENES) -> list[Path]:
+def navigation_benchmark_scenes(root: Path | None = None, scenes: int = NAVIGATION_BENCHMARK_SCENES, *,
+                                shift: float | None = None) -> list[Path]:
     """The scene folders of the navigation benchmark (built if needed), in seed order."""
-    root = root or navigation_benchmark(scenes=scenes)
+    root = root or navigation_benchmark(scenes=scenes, shift=shift)
     return [root / f"scene_{k:02d}" for k in range(scenes)]
+
+
+def _benchmark_version(shift: float | None) -> str:
+    """Cache key of the benchmark at a shift knob (the default keeps :data:`NAVIGATION_BENCHMARK_VERSION`)."""
+    if shift is None:
+        return NAVIGATION_BENCHMARK_VERSION
+    return NAVIGATION_BENCHMARK_VERSION.replace("-shift0.5-", f"-shift{float(shift):g}-")
+
+
+def _house_config(seed: int, shift: float | None) -> Any:
+    from psg_data.synth import HouseConfig
+    from psg_data.synth._house_process import HouseProcessParams
+
+    if shift is None:
+        return HouseConfig(seed=seed)
+    return HouseConfig(seed=seed, schedules=HouseProcessParams(shift=float(shift)))
 
 
 def _has_labels(root: Path) -> bool:
@@ -173,7 +195,8 @@ BUILTIN: dict[str, BuiltinDataset] = {
     "navigation-benchmark": BuiltinDataset(
         "navigation-benchmark", "the paper's simulation benchmark: 15 procedural houses, one dataset per scene "
         "(navigation_benchmark_scenes), built once into the cache", None,
-        "psg-eval --dataset navigation-benchmark (the persistence task over its scenes)",
+        "psg-eval --dataset navigation-benchmark (the persistence task over its scenes; --task navigation with "
+        "--protocol paper-sim-predictive or paper-sim-adaptive)",
         scans=NAVIGATION_BENCHMARK_SCENES),
 }
 """The built-in dataset names (name -> :class:`BuiltinDataset`)."""

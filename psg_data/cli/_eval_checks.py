@@ -65,14 +65,28 @@ def check_lab_seeds(lab_seeds: tuple[int, ...] | None, dataset: str | None, task
                               "gt and noisy:P labels exist; build it (psg-data synth) and label it for other sources")
 
 
-def check_builtin_task(dataset: str | None, task: str, lab_seeds: tuple[int, ...] | int | None) -> None:
-    """The navigation benchmark is scored by the persistence task (its navigation protocols are not built yet)."""
+def check_builtin_task(dataset: str | None, task: str, lab_seeds: tuple[int, ...] | int | None, *,
+                       protocol: str = "sim", quick: bool = False) -> None:
+    """The navigation benchmark takes the persistence task and the paper-sim navigation protocols (and
+    those protocols take only the navigation benchmark).
+    """
+    sim = protocol.startswith("paper-sim")
+    if quick and not (task == "navigation" and sim):
+        raise EvaluationError("--quick: the small form of a paper-sim protocol (--task navigation --dataset "
+                              "navigation-benchmark --protocol paper-sim-predictive|paper-sim-adaptive)")
+    if task == "navigation" and sim and dataset != "navigation-benchmark":
+        raise EvaluationError(f"--protocol {protocol}: the simulation protocols run on the benchmark's houses; use "
+                              "--dataset navigation-benchmark")
     if dataset != "navigation-benchmark":
         return
-    if task != "persistence":
-        raise EvaluationError(f"--task {task} on navigation-benchmark: only --task persistence is available on the "
-                              "navigation benchmark so far; pass one scene (--dataset "
-                              "<cache>/navigation-benchmark-*/scene_00) to the navigation or door task")
+    if task == "navigation" and not sim:
+        raise EvaluationError(f"--protocol {protocol} on navigation-benchmark: its navigation protocols are "
+                              "paper-sim-predictive and paper-sim-adaptive; pass one scene (--dataset "
+                              "<cache>/navigation-benchmark-*/scene_00) to the lab protocols")
+    if task not in ("persistence", "navigation"):
+        raise EvaluationError(f"--task {task} on navigation-benchmark: the benchmark takes --task persistence and "
+                              "--task navigation (paper-sim protocols); pass one scene (--dataset "
+                              "<cache>/navigation-benchmark-*/scene_00) to the door task")
     if lab_seeds is not None:
         raise EvaluationError("--lab-seeds with navigation-benchmark: its 15 scenes are the draws already")
 

@@ -105,10 +105,15 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
                    "observation flipped (seeded; the paper's noised ground truth, the same in every task); "
                    "privileged, detections:FILE, observed (door states read from the depth; doors only) from the "
                    "dataset's labels table (psg-data label). Scoring always uses the schedule.")
-@click.option("--protocol", type=click.Choice(["sim", "paper-real"]), default="sim", show_default=True,
+@click.option("--protocol", type=click.Choice(["sim", "paper-real", "paper-sim-predictive", "paper-sim-adaptive"]),
+              default="sim", show_default=True,
               help="Navigation queries: sim (--queries per seed, random starts, natural mix) or paper-real (25: 10 "
                    "static, 10 dynamic, 5 absent, one fixed start, adaptive, predicted doors; the paper's real-world "
-                   "table).")
+                   "table); with --dataset navigation-benchmark: paper-sim-predictive (250 queries over 10 unshifted "
+                   "houses) or paper-sim-adaptive (125 queries over 5 houses with the shifted test week, filters fed "
+                   "the test week up to each query's last map update, an agent that adapts while it walks).")
+@click.option("--quick", is_flag=True,
+              help="With a paper-sim protocol: its small form (2 scenes, 6 queries each; for CI and a first look).")
 @click.option("--door-belief", type=click.Choice(["truth", "predicted", "last-map", "all-open"]), default=None,
               help="Navigation: door states the agent plans with (default: truth for sim, predicted for paper-real).")
 @click.option("--seeds", type=SeedsType(), default=None, metavar="N|S,S,...|A-B",
@@ -154,6 +159,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
          setting: str, horizon: str, windows: str, weighting: str, labels: str, protocol: str,
          door_belief: str | None, seeds: tuple[int, ...] | None, lab_seeds: tuple[int, ...] | None,
          label_seed: int, queries: int | None, delta: str, reachable_only: bool, out: Path | None, overwrite: bool,
+         quick: bool,
          jobs: int, scheduler: str | None, rerun_file: Path | None, list_estimators: bool, no_plots: bool,
          table_format: str, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1) next to a ceiling, baselines
@@ -173,6 +179,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
       psg-eval --task navigation -e perpetua_star -e fremen    # SR / SPL / AR / DIST
       psg-eval --task navigation --delta 0.05,0.1,0.2,0.3 -e perpetua_star
       psg-eval --task navigation --dataset /data/lab --labels noisy:0.1 --protocol paper-real -e perpetua_star
+      psg-eval --task navigation --dataset navigation-benchmark --protocol paper-sim-adaptive -e perpetua_star -e fremen
       psg-eval --task doors --dataset /data/lab -e perpetua_star   # blocked first plans, extra metres
       psg-eval compare res/a res/b                             # tabulate earlier runs
     """
@@ -201,11 +208,17 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
     deltas = parse_deltas(delta, task)
     p_opts = persistence_options(setting=setting, horizon=horizon, weighting=weighting, windows=windows, seeds=seeds)
-    check_builtin_task(dataset, task, lab_seeds)
+    check_builtin_task(dataset, task, lab_seeds, protocol=protocol, quick=quick)
     check_lab_seeds(lab_seeds, dataset, task, labels)
     require_hints(specs, available_hints(dataset), "the " + (dataset or "demo") + " dataset")
     nav_options = None
-    if task in ("navigation", "doors"):
+    sim = task == "navigation" and protocol.startswith("paper-sim")
+    if sim:
+        from psg_data.cli._eval_sim_navigation import check_sim_options
+
+        check_sim_options(protocol, queries=queries, seeds=seeds, reachable_only=reachable_only,
+                          door_belief=door_belief, windows=windows, delta=delta, lab_seeds=lab_seeds)
+    if task in ("navigation", "doors") and not sim:
         from psg_data.cli._eval_navigation import door_task_options, navigation_options
 
         q_seeds = list(seeds or range(3))
@@ -227,6 +240,12 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
             ok = run_persistence(specs, dataset, p_opts, labels, jobs, tmp, no_plots, quiet, references=references,
                                  lab_seeds=lab_seeds, scheduler=scheduler, rerun_file=rerun_file, overwrite=overwrite,
                                  label_seed=label_seed, table_format=table_format)
+        elif sim:
+            from psg_data.cli._eval_sim_navigation import run_sim_navigation_task
+
+            ok = run_sim_navigation_task(specs, protocol, labels, tmp, quick=quick, jobs=jobs, no_plots=no_plots,
+                                         quiet=quiet, references=references, label_seed=label_seed,
+                                         table_format=table_format)
         elif task == "doors":
             ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references,
                                 table_format=table_format)

@@ -24,6 +24,10 @@
   real-world layout), baselines 'oracle', 'last_seen_map' and 'random_receptacle', per-method door
   beliefs, a delta sweep; scoring in :mod:`psg_data.evaluation._navigation_scores`, tables and
   files in :mod:`psg_data.evaluation`.
+- Simulation protocols (:mod:`._sim_benchmark`, :mod:`._sim_agent`): the paper's
+  ``paper-sim-predictive`` / ``paper-sim-adaptive`` on the navigation benchmark's houses
+  (:data:`SIM_PROTOCOLS`, :func:`run_sim_navigation`), the adaptive agent that looks while it walks,
+  updates its filters and switches targets (:func:`run_adaptive_episode`, :class:`HouseSight`).
 - Plots (:mod:`._plots`): :func:`plot_query`, :func:`plot_snapshot` (a predictive graph's snapshot on the map).
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
@@ -114,6 +118,16 @@ from psg_data.navigation._runner import (
     run_navigation,
     score_records,
 )
+from psg_data.navigation._sim_agent import HouseSight, run_adaptive_episode
+from psg_data.navigation._sim_benchmark import (
+    SIM_PROTOCOLS,
+    SimProtocol,
+    method_filters,
+    run_sim_navigation,
+    run_sim_scene,
+    scene_settings,
+    scene_split_ids,
+)
 
 __all__ = [
     "OccupancyGrid",
@@ -197,4 +211,13 @@ __all__ = [
     "walk_summary",
     "DOOR_MODE_LABELS",
     "plot_door_query",
+    "SimProtocol",
+    "SIM_PROTOCOLS",
+    "run_sim_scene",
+    "run_sim_navigation",
+    "method_filters",
+    "scene_settings",
+    "scene_split_ids",
+    "HouseSight",
+    "run_adaptive_episode",
 ]

@@ -75,10 +75,12 @@ def test_scenes_are_draws_with_both_oracle_readings(scenes: list[Path]) -> None:
     assert gen < train  # the shifted test week: the generating model knows the shift
 
 
-def test_cli_refuses_what_the_benchmark_does_not_offer_yet() -> None:
+def test_cli_refuses_what_the_benchmark_does_not_offer() -> None:
     from psg_data.cli.psg_eval_cmd import main
 
     r = CliRunner().invoke(main, ["--dataset", "navigation-benchmark", "--task", "navigation", "--quiet"])
-    assert r.exit_code == 1 and "only --task persistence" in r.output
+    assert r.exit_code == 1 and "paper-sim-predictive and paper-sim-adaptive" in r.output  # not the lab's sim
+    r = CliRunner().invoke(main, ["--dataset", "navigation-benchmark", "--task", "doors", "--quiet"])
+    assert r.exit_code == 1 and "--task doors on navigation-benchmark" in r.output
     r = CliRunner().invoke(main, ["--dataset", "navigation-benchmark", "--lab-seeds", "2", "--quiet"])
     assert r.exit_code == 1 and "draws already" in r.output

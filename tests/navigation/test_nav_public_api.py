@@ -9,7 +9,8 @@ import sys
 import psg_data.navigation as nav
 
 SUBMODULES = ["psg_data.navigation." + m for m in ("_env", "_queries", "_baselines", "_agent", "_runner", "_plots",
-                                                     "_options", "_doors", "_door_dataset")]
+                                                     "_options", "_doors", "_door_dataset",
+                                                     "_sim_agent", "_sim_benchmark")]
 SUBMODULES += ["psg_data.maps._grid", "psg_data.maps._planner", "psg_data.graph._sources"]
 """Modules whose public names psg_data.navigation exports (the maps and label sources moved below it, issue 26)."""
 

@@ -1,0 +1,183 @@
+"""``psg-eval --task navigation --dataset navigation-benchmark --protocol paper-sim-predictive|paper-sim-adaptive``.
+
+The work is in :mod:`psg_data.navigation._sim_benchmark` (protocols, agent) and
+:mod:`psg_data.evaluation._sim_navigation_report` (tables, paper rows, per-scene plot).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+from psg_data.cli._common import Progress
+from psg_data.cli._eval_provenance import provenance
+
+__all__ = ["run_sim_navigation_task", "sim_methods", "SIM_REFERENCES", "check_sim_options"]
+
+SIM_REFERENCES: list[tuple[str, str, tuple[tuple[str, Any], ...], str, str]] = [
+    ("oracle", "oracle", (), "ceiling", "the true receptacle at the query time"),
+    ("process_oracle", "process_oracle", (), "ceiling",
+     "exact posterior of the model that generated the scene, test-week regime included"),
+    ("process_oracle:model=train", "process_oracle", (("model", "train"),), "ceiling",
+     "exact posterior of the training model only: the best a predictor that does not adapt can do"),
+    ("last_seen_map", "last_seen_map", (), "baseline", "the last observed state of each edge"),
+    ("time_of_week_frequency", "time_of_week_frequency", (), "baseline",
+     "training frequency of presence per hour of the week"),
+    ("random_receptacle", "random_receptacle", (), "chance", "uniform random beliefs over the edges"),
+]
+"""(label, name, settings, role, description) of the reference rows."""
+
+
+def check_sim_options(protocol: str, *, queries: int | None, seeds: Any, reachable_only: bool,
+                      door_belief: str | None, windows: str, delta: str, lab_seeds: Any) -> None:
+    """Refuse the lab protocols' settings that a paper-sim protocol fixes (one ``error:`` line each)."""
+    from psg_data.errors import EvaluationError
+
+    fixed = {"--queries": queries is not None, "--seeds": seeds is not None, "--reachable-only": reachable_only,
+             "--door-belief": door_belief is not None, "--windows": windows != "auto",
+             "--delta": str(delta).strip() not in ("0.2", "0.20"), "--lab-seeds": lab_seeds is not None}
+    given = [k for k, v in fixed.items() if v]
+    if given:
+        raise EvaluationError(f"{', '.join(given)} with --protocol {protocol}: the protocol fixes its scenes, "
+                              "queries (25 per house), delta 0.2, the true door states and query times around "
+                              "the clock; use --quick for the small form")
+
+
+def sim_methods(specs: list[Any], references: bool) -> tuple[dict[str, str], dict[str, dict[str, Any]],
+                                                              dict[str, tuple[str, str]]]:
+    """(label -> name, label -> settings, label -> (role, description)): references first, then the user's."""
+    methods: dict[str, str] = {}
+    settings: dict[str, dict[str, Any]] = {}
+    roles: dict[str, tuple[str, str]] = {}
+    have = {s.label for s in specs}
+    if references:
+        for label, name, sett, role, desc in SIM_REFERENCES:
+            roles[label] = (role, desc)
+            if label not in have:
+                methods[label], settings[label] = name, dict(sett)
+    for s in specs:
+        methods[s.label], settings[s.label] = s.name, dict(s.settings)
+    return methods, settings, roles
+
+
+def _executor(jobs: int) -> Any:
+    from psg_data.cli._eval_persistence import _executor as ex
+
+    return ex(jobs, None)
+
+
+def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: Path, *, quick: bool, jobs: int,
+                            no_plots: bool, quiet: bool, references: bool = True, label_seed: int = 0,
+                            table_format: str = "text") -> bool:
+    """Run a simulation protocol over its scenes, write the files, print the paper-shaped table."""
+    import time
+
+    from psg_data.datasets import navigation_benchmark
+    from psg_data.evaluation._sim_navigation_report import plot_scene_sr, sim_summary, sim_table_text
+    from psg_data.navigation._sim_benchmark import SIM_PROTOCOLS, run_sim_navigation
+
+    proto = SIM_PROTOCOLS[protocol].quick() if quick else SIM_PROTOCOLS[protocol]
+    t0 = time.perf_counter()
+    with Progress("navigation benchmark scenes", total=len(proto.scenes), unit="scenes", quiet=quiet) as prog:
+        root = navigation_benchmark(shift=proto.shift, which=proto.scenes, progress=lambda k: prog.update(k))
+    paths = [root / f"scene_{k:02d}" for k in proto.scenes]
+    methods, settings, roles = sim_methods(specs, references)
+    with Progress(f"{proto.name}: {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
+            _executor(jobs) as executor:
+        def progress(done: int, _total: int) -> None:
+            prog.done = done
+            prog.update(0)
+
+        records, outs = run_sim_navigation(paths, methods, settings, proto, labels=labels, label_seed=label_seed,
+                                           executor=executor, progress=progress)
+    names = list(methods)
+    per_scene, summary = sim_summary(records, names)
+    seconds = round(time.perf_counter() - t0, 2)
+    config = {"protocol": proto.name, **proto.to_dict(), "labels": labels, "label_seed": label_seed,
+              "methods": names, "setting": "adaptive" if proto.adaptive else "predictive",
+              "door_belief": "truth", "unreachable": "exclude", "absent_in_overall": "abort_is_success",
+              "seeds": list(proto.scenes), "env": "navigation-benchmark", "dataset": str(root),
+              "settings": {k: v for k, v in outs[proto.scenes[0]]["settings"].items()}}
+    info = provenance({"task": "navigation", "dataset_label": "navigation-benchmark", "dataset": str(root),
+                       "seconds": seconds, "jobs": jobs})
+    text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths))
+    _write(out, records, per_scene, summary, config, roles, info, text)
+    if not no_plots:
+        plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
+                      title=f"{proto.name}, labels {labels}: overall SR per scene (scene = house seed)")
+        _maps(out, paths[0], proto, outs[proto.scenes[0]], records, names, roles, labels, label_seed)
+    if table_format == "text":
+        click.echo("")
+        click.echo(text, nl=False)
+    else:
+        from psg_data.evaluation._navigation_report import navigation_results
+        from psg_data.evaluation._tables import print_results
+
+        print_results(navigation_results(_result(records, per_scene, summary, config), roles=roles, info=info),
+                      fmt=table_format)
+    return True
+
+
+def pick_disagreement(records: Any, labels: list[str]) -> int | None:
+    """A query id of the records' first scene on which ``labels`` disagree most (success, then first
+    receptacle), dynamic targets first; None without records.
+    """
+    if records.empty:
+        return None
+    rec = records[(records["seed"] == records["seed"].iloc[0]) & records["method"].isin(labels)]
+    sig = rec.assign(sig=rec["success"].astype(str) + "|" + rec["predicted_receptacle"].astype(str),
+                     dyn=rec["category"] == "dynamic")
+    score = sig.groupby("query_id").agg(wins=("success", "nunique"), kinds=("sig", "nunique"), dyn=("dyn", "all"))
+    return int(score.sort_values(["wins", "dyn", "kinds"], ascending=False, kind="stable").index[0])
+
+
+def _maps(out: Path, path: Path, proto: Any, raw: dict[str, Any], records: Any, names: list[str],
+          roles: dict[str, tuple[str, str]], labels: str, label_seed: int) -> None:
+    """map_<label>.png: one query of the first house on which the methods disagree, each method's walk and beliefs."""
+    from psg_data.loaders import open_dataset
+    from psg_data.maps._planner import PlanningCache
+    from psg_data.navigation import NavigationEnv, plot_query
+    from psg_data.navigation._sim_benchmark import scene_split_ids
+
+    shown = [n for n in names if roles.get(n, ("method", ""))[0] == "method"] + \
+        [n for n in ("process_oracle", "process_oracle:model=train", "last_seen_map") if n in names]
+    qid = pick_disagreement(records, shown)
+    if qid is None:
+        return
+    q, t_m = next((q, t) for q, t in raw["queries"] if q.query_id == qid)
+    ds = open_dataset(path)
+    ids = scene_split_ids(ds)
+    env = NavigationEnv.from_dataset(ds, map_scans=ids["train"] + ids["val"], labels=labels, label_seed=label_seed)
+    cache = PlanningCache(env.grid, reach_m=proto.reach_m)
+    rec = records[(records["seed"] == q.seed) & (records["query_id"] == qid)].set_index("method")
+    for label in shown:
+        r = rec.loc[label]
+        title = (f"{label}: {r['outcome']} after {r['path_m']:.1f} m, {int(r['n_switches'])} target switches "
+                 f"({proto.name}, house {q.seed}, query {qid})\n{q.object_id} ({q.category}): on "
+                 f"{q.gt_receptacle or 'nothing'}; on {q.map_receptacle or 'nothing'} at the last map update, "
+                 f"{(q.t_s - t_m) / 3600:.0f} h before the query")
+        plot_query(env, q, out / f"map_{label.replace(':', '_').replace('=', '-')}.png",
+                   beliefs=raw["beliefs"].get((label, qid)), trail=raw["trails"].get((label, qid)), cache=cache,
+                   title=title)
+
+
+def _result(records: Any, per_scene: Any, summary: Any, config: dict[str, Any]) -> Any:
+    from psg_data.navigation import NavigationResult
+
+    return NavigationResult(records, per_scene, summary, {}, config)
+
+
+def _write(out: Path, records: Any, per_scene: Any, summary: Any, config: dict[str, Any],
+           roles: dict[str, tuple[str, str]], info: dict[str, Any], text: str) -> None:
+    """results.json / table.txt / summary.csv (the results schema), records.parquet, per_seed.csv (per scene),
+    results.csv, sim_table.txt (the paper-shaped table) and config.json.
+    """
+    from psg_data.evaluation._navigation_report import write_navigation_results
+    from psg_data.writers._safe_output import write_atomically
+
+    write_navigation_results(_result(records, per_scene, summary, config), out, roles=roles, info=info)
+    write_atomically(out / "sim_table.txt", lambda tmp: tmp.write_text(text))
+    write_atomically(out / "sim_config.json", lambda tmp: tmp.write_text(json.dumps(config, indent=1, default=str)))
