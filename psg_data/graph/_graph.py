@@ -425,7 +425,8 @@ class PredictiveGraph:
             if not any(r.floor_polygon_m is not None and len(r.floor_polygon_m) >= 3 for r in L.rooms.values()):
                 raise GraphError("plan: the layout has no room floor polygons to build a map from; pass grid=")
             self._grid = grid_from_geometry(list(L.rooms.values()), list(L.receptacles.values()),
-                                            list(L.doors.values()), **self.grid_options)
+                                            list(L.doors.values()), openings=list(L.openings.values()),
+                                            **self.grid_options)
         return self._grid
 
     def planning_cache(self, reach_m: float = 1.0) -> Any:

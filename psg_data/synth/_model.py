@@ -28,7 +28,7 @@ from psg_data.errors import PsgDataError
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
-from psg_data.synth._layout import RECEPTACLE_ID0, LabLayout, make_layout
+from psg_data.synth._layout import LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
 
@@ -76,6 +76,9 @@ class LabConfig:
         day_persistence: ``steps-v2``: probability that the next day of the same kind keeps the
             day's pattern (diagonal of the day-level matrix).
         max_dwell_steps: ``steps-v2``: longest stay drawn for an entity's best receptacle, steps.
+        layout: the lab geometry, ``two_routes`` (default: a door and an open passage in each inner
+            wall) or ``chain`` (doors only; what datasets without ``layout`` in their manifest used),
+            see :mod:`psg_data.synth._layout`.
     """
 
     seed: int = 0
@@ -95,6 +98,7 @@ class LabConfig:
     day_patterns: int = 5
     day_persistence: float = 0.6
     max_dwell_steps: int = 8
+    layout: str = "two_routes"
 
     def __post_init__(self) -> None:
         check_settings(LAB_SETTINGS, asdict(self), "synth", PsgDataError)
@@ -161,6 +165,7 @@ class LabConfig:
                 "timezone", "routine_strength", "day_patterns", "day_persistence", "max_dwell_steps"}
         kw: dict[str, Any] = {k: extra[k] for k in keys if k in extra}
         kw["generator"] = extra.get("schedule_generator", "continuous-v1")
+        kw["layout"] = extra.get("layout", "chain")  # datasets from before the two-route lab
         kw["shift_weekdays"] = tuple(extra.get("shift_weekdays", ("Mon", "Fri")))
         kw["scan_hours"] = tuple(extra.get("scan_hours", (9, 11, 13, 15)))
         if "noise" in extra:
@@ -185,6 +190,7 @@ LAB_SETTINGS = {
     "day_patterns": Integral(1, 12),
     "day_persistence": Real(0.0, 1.0, finite=True),
     "max_dwell_steps": Integral(1, 10**6),
+    "layout": Options(*LAYOUTS),
 }
 """The declared settings of :class:`LabConfig` (see :mod:`psg_data._settings`)."""
 
@@ -295,7 +301,7 @@ class LabModel:
         elif seed is not None:
             raise PsgDataError("LabModel: pass either config or seed, not both")
         self.config = config
-        self.layout: LabLayout = make_layout(config.seed)
+        self.layout: LabLayout = make_layout(config.seed, config.layout)
         self.schedule: LabSchedule | StepSchedule
         if config.generator == "continuous-v1":
             self.schedule = LabSchedule(self.layout, config.seed, config.date, config.days, config.timezone,
