@@ -286,6 +286,18 @@ def _expected_cost_episode(cache: PlanningCache, query: DoorQuery, p_open: Mappi
                        first_plan if first_plan is not None else np.zeros(0, np.int64), np.concatenate(trail))
 
 
+def _open_plan_blocked(cache: PlanningCache, query: DoorQuery) -> bool:
+    """Whether the shortest path with every door open meets a door closed at the query time (the query's
+    shortest route is cut: door knowledge can save distance on it)."""
+    W = cache.grid.shape[1]
+    start = int(query.start_cell[0] * W + query.start_cell[1])
+    path = cache.path(query.goal, cache.key({d: True for d in cache.grid.door_ids}), start)
+    if path is None:
+        return False
+    free = cache.free_flat(cache.key({d: bool(query.doors_open.get(d, True)) for d in cache.grid.door_ids}))
+    return bool((~free[path]).any())
+
+
 def make_door_queries(world: DoorWorld, n: int, *, seed: int = 0, hours: tuple[float, float] | None | str = "world"
                       ) -> list[DoorQuery]:
     """Seeded queries after the training window: a start cell in one room, a goal in another room.
@@ -464,9 +476,10 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
             runs.append((label, "threshold", belief, unseen))
             continue
         runs += [(label if r == "threshold" else f"{label} (expected cost)", r, belief, unseen) for r in rules]
+    open_blocked = [_open_plan_blocked(world.cache, q) for q in qs]
     for label, rule, belief, unseen in runs:
         eps, ps = [], []
-        for q in qs:
+        for q, ob in zip(qs, open_blocked):
             p = belief(q)
             ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label, no_path=no_path, rule=rule)
             eps.append(ep)
@@ -474,7 +487,7 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
             recs.append({"estimator": label, "rule": rule, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
                          "success": ep.success, "first_plan_blocked": ep.first_plan_blocked, "walked_m": ep.walked_m,
                          "shortest_m": ep.shortest_m, "extra_m": ep.extra_m, "n_replans": ep.n_replans,
-                         "fallback": ep.fallback, "declined": ep.declined, **{f"p_open:{d}": v for d, v in p.items()},
+                         "fallback": ep.fallback, "declined": ep.declined, "open_plan_blocked": ob, **{f"p_open:{d}": v for d, v in p.items()},
                          **{f"open:{d}": bool(q.doors_open.get(d, True)) for d in doors}})
         episodes[label], probs[label] = eps, ps
         rows.append(_door_row(label, eps, unseen))
