@@ -35,6 +35,9 @@ from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, Res
 __all__ = ["door_terms", "summarise_doors", "door_results", "DOOR_METRICS", "pick_blocked_door_query", "walk_summary",
            "DOOR_MODE_LABELS"]
 
+EXPECTED_COST_SUFFIX = " (expected cost)"
+"""Label suffix of an estimator's row under the expected-cost door rule (:data:`psg_data.navigation.DOOR_RULES`)."""
+
 DOOR_METRICS: dict[str, MetricInfo] = {
     "blocked_rate": MetricInfo("blocked_rate", "blocked %", "lower", "first plans through a door closed at the query "
                                "time", 100.0, 1),
@@ -101,6 +104,10 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
     summ = res.summary.set_index("estimator")
     names = list(summ.index)
     scores = summarise_doors(res.records, names)
+    for n in names:  # the expected-cost row of a reference estimator is a reference row too
+        base = n.removesuffix(EXPECTED_COST_SUFFIX)
+        if n not in roles and base != n and base in roles:
+            roles[n] = (roles[base][0], f"{roles[base][1]}, expected-cost door rule")
     rows = [ResultRow(n, roles.get(n, ("method", describe_method(n)))[0], scores[n],
                       roles.get(n, ("method", describe_method(n)))[1],
                       counts={"queries": int(summ.loc[n, "queries"]), "declined": int(summ.loc[n, "declined"])})
@@ -158,14 +165,18 @@ def _headroom_table(rows: list[ResultRow], res: Any, where: str) -> ResultTable 
 
 def pick_blocked_door_query(res: Any, label: str) -> int:
     """Index (in the first seed's queries) of a door query whose all-open first plan ran into a closed
-    door, preferring one where ``label`` planned around it and arrived, then one where ``label``
-    predicted the door closed and did not set off (nothing wasted), then one where ``label``'s own
-    first plan was blocked too; else 0.
+    door, preferring the paper's "Predictive Navigation" case: ``label`` predicted that door closed
+    (P(open) < 0.5), took the longer route and arrived (the longest such detour first); then one where
+    ``label`` planned around it and arrived, then one where ``label`` predicted the door closed and did
+    not set off (nothing wasted), then one where ``label``'s own first plan was blocked too; else 0.
     """
     first = res.first
     eps, base = first.episodes[label], first.episodes["all_open"]
     blocked = [i for i, b in enumerate(base) if b.first_plan_blocked]
-    pools = ([i for i in blocked if not eps[i].first_plan_blocked and eps[i].success],
+    around = [i for i in blocked if not eps[i].first_plan_blocked and eps[i].success]
+    paper = sorted((i for i in around if any(eps[i].p_open.get(d, 1.0) < 0.5 for d in base[i].doors_discovered)),
+                   key=lambda i: -(base[i].walked_m - eps[i].walked_m))
+    pools = (paper, around,
              [i for i in blocked if eps[i].declined],
              [i for i in blocked if eps[i].first_plan_blocked], blocked)
     return next((p[0] for p in pools if p), 0)

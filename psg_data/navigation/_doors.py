@@ -460,6 +460,8 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
     """
     import pandas as pd
 
+    from psg_data.evaluation._door_report import EXPECTED_COST_SUFFIX
+
     qs = list(queries) if queries is not None else make_door_queries(world, n_queries, seed=seed, hours=hours)
     if not qs:
         raise EvaluationError("run_door_navigation: no queries")
@@ -475,7 +477,7 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
         if label in DOOR_BASELINES:
             runs.append((label, "threshold", belief, unseen))
             continue
-        runs += [(label if r == "threshold" else f"{label} (expected cost)", r, belief, unseen) for r in rules]
+        runs += [(label if r == "threshold" else f"{label}{EXPECTED_COST_SUFFIX}", r, belief, unseen) for r in rules]
     open_blocked = [_open_plan_blocked(world.cache, q) for q in qs]
     for label, rule, belief, unseen in runs:
         eps, ps = [], []

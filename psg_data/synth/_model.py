@@ -1,8 +1,9 @@
 """``LabModel``: the synthetic lab (geometry, schedules, camera, scan trajectories) from a seed.
 
 Scan trajectories: the robot starts every scan in the dock room (room B) and visits the rooms it
-can reach through open doors (a closed door is never crossed; with the chain A-B-C a closed door
-hides the room behind it for that scan). Keyframe viewpoints are chosen greedily from a grid of
+can reach through open doors and open passages (a closed door is never crossed; in the ``chain``
+layout a closed door hides the room behind it for that scan, in ``two_routes`` the passages reach
+every room). Keyframe viewpoints are chosen greedily from a grid of
 candidate poses (positions in the free centre of each room, yaw every 15 deg, camera 1.25 m above
 the floor pitched 28 deg down) so that the top surfaces of as many receptacles as possible are seen;
 the frame budget is shared between the reachable rooms in proportion to their receptacles.
@@ -345,15 +346,15 @@ class LabModel:
         return SceneState(self.schedule.objects_at(stamp_ns), self.schedule.doors_at(stamp_ns))
 
     def reachable_rooms(self, doors_open: dict[str, bool]) -> list[str]:
-        """Rooms reachable from the dock room through open doors (breadth-first order)."""
+        """Rooms reachable from the dock room through open doors and open passages (breadth-first order)."""
         seen = [self.layout.dock_room]
         frontier = [self.layout.dock_room]
+        links = [(d.room_a, d.room_b) for d in self.layout.doors if doors_open.get(d.door_id, False)]
+        links += [(o.room_a, o.room_b) for o in self.layout.openings]
         while frontier:
             room = frontier.pop(0)
-            for d in self.layout.doors:
-                if not doors_open.get(d.door_id, False):
-                    continue
-                for a, b in ((d.room_a, d.room_b), (d.room_b, d.room_a)):
+            for ra, rb in links:
+                for a, b in ((ra, rb), (rb, ra)):
                     if a == room and b not in seen:
                         seen.append(b)
                         frontier.append(b)

@@ -161,3 +161,31 @@ def test_probabilities_outside_the_unit_interval_are_rejected() -> None:
     cache = PlanningCache(grid)
     with pytest.raises(Exception, match="P\\(open\\)"):
         expected_cost_route(cache, "T", start[0] * grid.shape[1] + start[1], {grid.door_ids[0]: 1.5})
+
+
+def test_reachability_scored_both_ways() -> None:
+    """SR all: a reachable goal counts when reached, an unreachable one when the robot did not set off;
+    extra blocked m: only the queries whose all-doors-open route meets a closed door."""
+    import pandas as pd
+
+    from psg_data.evaluation._door_report import door_terms
+
+    nan = float("nan")
+    df = pd.DataFrame({
+        "shortest_m": [5.0, 5.0, nan, nan, 8.0],
+        "walked_m": [5.0, 0.0, 0.0, 3.0, 10.0],
+        "success": [True, False, False, False, True],
+        "extra_m": [0.0, nan, nan, nan, 2.0],
+        "first_plan_blocked": [False, False, False, True, True],
+        "open_plan_blocked": [False, False, True, True, True],
+    })
+    t = door_terms(df)
+    num, den = t["SR_all"]
+    # reached / declined a reachable goal (failure) / correct decline / walked towards an unreachable goal / reached
+    assert num.tolist() == [1.0, 0.0, 1.0, 0.0, 1.0] and den.sum() == 5
+    num, den = t["SR"]
+    assert num.sum() / den.sum() == pytest.approx(2 / 3)
+    num, den = t["wasted_m"]
+    assert num.sum() / den.sum() == pytest.approx(1.5)
+    num, den = t["extra_blocked_m"]
+    assert den.tolist() == [0.0, 0.0, 0.0, 0.0, 1.0] and num.sum() == pytest.approx(2.0)
