@@ -118,8 +118,8 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
     notes = [f"{m.label} ({m.better} is better): {m.description}" for m in DOOR_METRICS.values()]
     notes.append(f"door queries: a start in one room, a goal receptacle in another, at a time of the test days inside "
                  f"{res.world.hours[0]:g}-{res.world.hours[1]:g} h local; doors with predicted P(open) < "
-                 f"{o.threshold} are planned closed (rows NAME; no_path={o.no_path}); rows NAME (expected cost) walk the "
-                 f"route of least expected walked distance under independent P(open), doors discovered on arrival "
+                 f"{o.threshold} are planned closed (rows NAME; no_path={o.no_path}); rows NAME (expected cost) walk "
+                 f"the route of least expected walked distance under independent P(open), doors discovered on arrival "
                  f"(psg_data.maps.expected_cost_route); door streams from {o.labels} "
                  f"({res.world.info.get('doors', {}).get('from', '?')})")
     if refs:
@@ -145,7 +145,8 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
 
 def _headroom_table(rows: list[ResultRow], res: Any, where: str) -> ResultTable | None:
     """The gap between ``oracle`` and ``all_open`` (what knowing the doors can buy), shown before the
-    estimator rows; None unless both reference rows ran."""
+    estimator rows; None unless both reference rows ran.
+    """
     by = {r.method: r for r in rows}
     if not {"oracle", "all_open"} <= set(by):
         return None

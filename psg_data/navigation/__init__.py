@@ -28,8 +28,8 @@
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
   (:func:`run_door_episode`; door rules :data:`DOOR_RULES`: the P(open) threshold, or
-  :func:`expected_cost_route` re-exported from :mod:`psg_data.maps`), :func:`run_door_navigation` (blocked first plans, extra distance,
-  SR, SPL per estimator vs. the all-doors-open planner), worlds from a dataset
+  :func:`expected_cost_route` re-exported from :mod:`psg_data.maps`), :func:`run_door_navigation`
+  (blocked first plans, extra distance, SR, SPL per estimator vs. the all-doors-open planner), worlds from a dataset
   (:meth:`DoorWorld.from_dataset`) or the unit-test :func:`door_loop_world`, the dataset door task
   :func:`run_door_task` (with objects behind predicted-closed doors, :func:`walk_summary`) and the
   figures :func:`plot_door_query` / :func:`plot_door_example`.
@@ -38,6 +38,7 @@
 from __future__ import annotations
 
 from psg_data.graph._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
+from psg_data.maps._door_risk import DoorRoute, expected_cost_route
 from psg_data.maps._grid import (
     OccupancyGrid,
     box_footprint,
@@ -50,7 +51,6 @@ from psg_data.maps._grid import (
     line_of_sight,
     points_in_polygon,
 )
-from psg_data.maps._door_risk import DoorRoute, expected_cost_route
 from psg_data.maps._planner import (
     SQRT2,
     GridPlanner,

@@ -50,9 +50,9 @@ from psg_data.maps._planner import PlanningCache
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-__all__ = ["DOOR_BASELINES", "DOOR_RULES", "DoorWorld", "DoorQuery", "DoorEpisode", "DoorNavigationResult", "fit_door_filters",
-           "door_open_probabilities", "run_door_episode", "make_door_queries", "run_door_navigation",
-           "door_loop_world", "plot_door_query"]
+__all__ = ["DOOR_BASELINES", "DOOR_RULES", "DoorWorld", "DoorQuery", "DoorEpisode", "DoorNavigationResult",
+           "fit_door_filters", "door_open_probabilities", "run_door_episode", "make_door_queries",
+           "run_door_navigation", "door_loop_world", "plot_door_query"]
 
 log = logging.getLogger(__name__)
 
@@ -288,7 +288,8 @@ def _expected_cost_episode(cache: PlanningCache, query: DoorQuery, p_open: Mappi
 
 def _open_plan_blocked(cache: PlanningCache, query: DoorQuery) -> bool:
     """Whether the shortest path with every door open meets a door closed at the query time (the query's
-    shortest route is cut: door knowledge can save distance on it)."""
+    shortest route is cut: door knowledge can save distance on it).
+    """
     W = cache.grid.shape[1]
     start = int(query.start_cell[0] * W + query.start_cell[1])
     path = cache.path(query.goal, cache.key({d: True for d in cache.grid.door_ids}), start)
@@ -477,7 +478,8 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
         if label in DOOR_BASELINES:
             runs.append((label, "threshold", belief, unseen))
             continue
-        runs += [(label if r == "threshold" else f"{label}{EXPECTED_COST_SUFFIX}", r, belief, unseen) for r in rules]
+        runs += [(label if r == "threshold" else f"{label}{EXPECTED_COST_SUFFIX}", r, belief, unseen)
+                 for r in rules]
     open_blocked = [_open_plan_blocked(world.cache, q) for q in qs]
     for label, rule, belief, unseen in runs:
         eps, ps = [], []
@@ -489,7 +491,8 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
             recs.append({"estimator": label, "rule": rule, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
                          "success": ep.success, "first_plan_blocked": ep.first_plan_blocked, "walked_m": ep.walked_m,
                          "shortest_m": ep.shortest_m, "extra_m": ep.extra_m, "n_replans": ep.n_replans,
-                         "fallback": ep.fallback, "declined": ep.declined, "open_plan_blocked": ob, **{f"p_open:{d}": v for d, v in p.items()},
+                         "fallback": ep.fallback, "declined": ep.declined, "open_plan_blocked": ob,
+                         **{f"p_open:{d}": v for d, v in p.items()},
                          **{f"open:{d}": bool(q.doors_open.get(d, True)) for d in doors}})
         episodes[label], probs[label] = eps, ps
         rows.append(_door_row(label, eps, unseen))

@@ -13,8 +13,10 @@ Two layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layout`
   the robot facing a closed door on the shortest path "generate[s] a longer but feasible path"
   (its Fig. "Predictive Navigation" and the extended real-world figure), which needs a second route.
 - ``chain``: the first layout, the doors are the only way between rooms (a closed door cuts the lab);
-  kept so that datasets built with it (no ``layout`` in their manifest) rebuild identically. Receptacles stand against the walls (back to the wall), leaving the
-centre of every room and the door swing areas free for the robot.
+  kept so that datasets built with it (no ``layout`` in their manifest) rebuild identically.
+
+Receptacles stand against the walls (back to the wall), leaving the centre of every room, the door
+swing areas and the passages free for the robot.
 """
 
 from __future__ import annotations
