@@ -83,6 +83,7 @@ class _Solver:
         self.doors = cache.grid.door_ids
         self.p = {d: float(p_open.get(d, 1.0)) for d in self.doors}
         self.memo: dict[tuple[int, tuple[int, ...]], tuple[float, DoorRoute | None]] = {}
+        self.blocked = {d: door_blocked_cells(cache, d) for d in self.doors}
 
     def value(self, cell: int, known: tuple[int, ...]) -> tuple[float, DoorRoute | None]:
         """(V, best route) at ``cell`` with ``known`` (per door: 1 open, 0 closed, -1 unknown)."""
@@ -114,7 +115,7 @@ class _Solver:
         cum = self.cache.step_lengths(path)
         first = {}
         for d in unknown:
-            hit = np.flatnonzero(door_blocked_cells(self.cache, d)[path])
+            hit = np.flatnonzero(self.blocked[d][path])
             if hit.size:
                 first[d] = int(hit[0])
         order = tuple(sorted(first, key=lambda d: first[d]))

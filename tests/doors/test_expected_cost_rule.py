@@ -106,18 +106,25 @@ def test_expected_cost_route_equals_brute_force(seed: int) -> None:
     assert math.isclose(mean, brute, rel_tol=1e-9, abs_tol=1e-9)
 
 
-def test_expected_cost_weighs_risk_where_the_threshold_declines() -> None:
-    """Only route through a door of P(open) 0.2: the threshold rule declines, the expected-cost rule goes."""
-    H, W = 5, 11
+def _wall_world(H: int, door_row: int, gap_row: int | None) -> OccupancyGrid:
+    """H x 11 cells of 1 m: a wall in column 5 with door 'd' at ``door_row`` and maybe an open gap;
+    receptacle T at (``door_row``, 10)."""
+    W = 11
     obs = np.zeros((H, W), dtype=bool)
     obs[:, 5] = True
     door = np.zeros((H, W), dtype=bool)
-    door[2, 5] = True
-    obs[2, 5] = False
+    door[door_row, 5] = True
+    obs[door_row, 5] = False
+    if gap_row is not None:
+        obs[gap_row, 5] = False
     rec = np.zeros((H, W), dtype=bool)
-    rec[2, 10] = True
-    grid = OccupancyGrid(obs | rec, np.array([0.0, 0.0]), 1.0, 0.0, {"d": door}, {"T": rec}, "test")
-    cache = PlanningCache(grid)
+    rec[door_row, 10] = True
+    return OccupancyGrid(obs | rec, np.array([0.0, 0.0]), 1.0, 0.0, {"d": door}, {"T": rec}, "test")
+
+
+def test_expected_cost_weighs_risk_where_the_threshold_declines() -> None:
+    """Only route through a door of P(open) 0.2: the threshold rule declines, the expected-cost rule goes."""
+    cache = PlanningCache(_wall_world(5, 2, None))
     q = DoorQuery(0, 0.0, (2, 0), "T", {"d": True})
     assert run_door_episode(cache, q, {"d": 0.2}).declined
     ep = run_door_episode(cache, q, {"d": 0.2}, rule="expected_cost")
@@ -130,17 +137,8 @@ def test_expected_cost_weighs_risk_where_the_threshold_declines() -> None:
 def test_expected_cost_takes_the_detour_when_the_door_is_likely_closed() -> None:
     """A door on the short route and an open gap on a long one: the choice flips where
     p * L_door + (1 - p) * (to the door and round by the gap) = L_gap."""
-    H, W = 12, 11
-    obs = np.zeros((H, W), dtype=bool)
-    obs[:, 5] = True
-    door = np.zeros((H, W), dtype=bool)
-    door[1, 5] = True
-    obs[1, 5] = False
-    obs[11, 5] = False  # the gap, far south
-    rec = np.zeros((H, W), dtype=bool)
-    rec[1, 10] = True
-    grid = OccupancyGrid(obs | rec, np.array([0.0, 0.0]), 1.0, 0.0, {"d": door}, {"T": rec}, "test")
-    cache = PlanningCache(grid)
+    cache = PlanningCache(_wall_world(12, 1, 11))  # the gap far south
+    W = 11
     s = 1 * W + 1
     direct = cache.distance("T", cache.key({"d": True}), s)
     gap = cache.distance("T", cache.key({"d": False}), s)
