@@ -91,3 +91,17 @@ def test_old_manifest_without_layout_rebuilds_the_chain() -> None:
     assert extra["layout"] == "two_routes"
     extra.pop("layout")
     assert LabConfig.from_extra(extra).layout == "chain"
+
+
+def test_synth_command_builds_the_chain_by_name(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from click.testing import CliRunner
+
+    from psg_data.cli.psg_data_cmd import main
+
+    out = tmp_path / "chain"
+    r = CliRunner().invoke(main, ["synth", str(out), "--layout", "chain", "--days", "1", "--frames-per-scan", "1",
+                                  "--resolution", "32x24", "-q"])
+    assert r.exit_code == 0, r.output
+    ds = open_dataset(out)
+    assert not ds.has_table("openings") and ds.openings == {}
+    assert LabModel.from_dataset(ds).config.layout == "chain"
