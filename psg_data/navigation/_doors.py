@@ -16,6 +16,11 @@ set. Extra distance: walked minus the shortest path under the true door states (
 episodes). Wasted distance: metres walked towards goals that no route reaches at the query time
 (ideal 0: the planner that knows the doors does not set off).
 
+With ``rule="expected_cost"`` the episode walks the route of :func:`psg_data.maps.expected_cost_route`
+instead: P(open) is used as a probability (the route of least expected walked distance when doors
+are discovered on arrival), the robot learns each door it reaches or walks through and replans, and it
+gives up only when no route with non-negligible P(open) is left.
+
 :func:`run_door_navigation` runs every method on the same queries and returns the table
 (estimator, queries, blocked_first_plans, blocked_rate, mean_extra_distance_m, SR, SPL); the
 methods are registry estimators plus the baselines ``all_open`` (assume every door open) and
