@@ -187,3 +187,25 @@ def test_reachability_scored_both_ways() -> None:
     assert num.sum() / den.sum() == pytest.approx(1.5)
     num, den = t["extra_blocked_m"]
     assert den.tolist() == [0.0, 0.0, 0.0, 0.0, 1.0] and num.sum() == pytest.approx(2.0)
+
+
+def test_figure_query_is_the_papers_case() -> None:
+    """The door figure prefers a query whose all-open plan met a closed door that the estimator predicted
+    closed, and which the estimator reached by another route (the longest saving first)."""
+    from types import SimpleNamespace as NS
+
+    from psg_data.evaluation._door_report import pick_blocked_door_query
+
+    def ep(blocked: bool, success: bool, walked: float, p: float = 1.0, found: tuple[str, ...] = ()) -> NS:
+        return NS(first_plan_blocked=blocked, success=success, declined=False, walked_m=walked,
+                  p_open={"d": p}, doors_discovered=list(found))
+
+    base = [ep(False, True, 5.0), ep(True, True, 12.0, found=("d",)), ep(True, True, 20.0, found=("d",)),
+            ep(True, True, 15.0, found=("d",))]
+    est = [ep(False, True, 5.0, 0.9), ep(False, True, 8.0, 0.6), ep(False, True, 9.0, 0.2), ep(False, True, 9.0, 0.3)]
+    res = NS(first=NS(episodes={"est": est, "all_open": base}))
+    # queries 2 and 3: predicted closed, went around; query 2 saves more (20 - 9 > 15 - 9)
+    assert pick_blocked_door_query(res, "est") == 2
+    est[2] = ep(True, True, 21.0, 0.2)
+    est[3] = ep(True, True, 16.0, 0.3)
+    assert pick_blocked_door_query(res, "est") == 1  # planned around without predicting it closed
