@@ -15,6 +15,10 @@ Two layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layout`
 - ``chain``: the first layout, the doors are the only way between rooms (a closed door cuts the lab);
   kept so that datasets built with it (no ``layout`` in their manifest) rebuild identically.
 
+Both layouts of a seed share the door positions and each room's furniture categories; the
+furniture is placed from the same random stream around different keep-out zones, so positions
+differ and two receptacles of the same footprint may swap categories (and ids) between layouts.
+
 Receptacles stand against the walls (back to the wall), leaving the centre of every room, the door
 swing areas and the passages free for the robot.
 """

@@ -105,3 +105,17 @@ def test_synth_command_builds_the_chain_by_name(tmp_path) -> None:  # type: igno
     ds = open_dataset(out)
     assert not ds.has_table("openings") and ds.openings == {}
     assert LabModel.from_dataset(ds).config.layout == "chain"
+
+
+@pytest.mark.parametrize("seed", [0, 2, 5])
+def test_layouts_share_doors_and_each_rooms_furniture(seed: int) -> None:
+    a, b = make_layout(seed, "chain"), make_layout(seed, "two_routes")
+    assert [d.door_id for d in a.doors] == [d.door_id for d in b.doors]
+    assert all(np.allclose(x.box.center_m, y.box.center_m) for x, y in zip(a.doors, b.doors))
+    for room in a.room_ids:
+        cats_a = sorted(r.category or "" for r in a.receptacles if r.room_id == room)
+        cats_b = sorted(r.category or "" for r in b.receptacles if r.room_id == room)
+        assert cats_a == cats_b
+    # the passages stand in the inner walls, clear of the doors
+    for o, d in zip(b.openings, b.doors):
+        assert o.box.center_m[0] == d.box.center_m[0] and abs(o.box.center_m[1] - d.box.center_m[1]) > 1.2
