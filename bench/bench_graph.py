@@ -61,7 +61,8 @@ def _big_graph(lab, n_objects: int):  # type: ignore[no-untyped-def]
             f = lab.estimator.make_filter((f"obj{i:04d}", r))
             f.update_many(s.t_s, s.y)
             filters[(f"obj{i:04d}", r)] = f
-    layout = SceneLayout(lab.layout.rooms, lab.layout.receptacles, lab.layout.doors, {}, lab.timezone)
+    layout = SceneLayout(lab.layout.rooms, lab.layout.receptacles, lab.layout.doors, {}, lab.timezone,
+                         lab.layout.openings)
     return PredictiveGraph(layout, filters, {d: lab.door_filter(d) for d in lab.doors}, estimator=lab.estimator)
 
 

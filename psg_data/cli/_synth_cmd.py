@@ -39,13 +39,16 @@ def _resolution(_ctx: click.Context, _param: click.Parameter, value: str) -> tup
                    "continuous-time one.")
 @click.option("--routine-strength", type=click.FloatRange(0.0, 1.0), default=0.8, show_default=True,
               help="steps-v2: probability that the routine sets the state at a step (0 random walk, 1 clockwork).")
+@click.option("--layout", type=click.Choice(["two_routes", "chain"]), default="two_routes", show_default=True,
+              help="two_routes: a door and an open passage in each inner wall (a closed door forces a detour); "
+                   "chain: doors only (the former lab, where a closed door cuts a room off).")
 @click.option("--overwrite", is_flag=True,
               help="Replace OUT if it is a psg-dataset psg-data wrote (by synth or convert; recordings psg-data synth "
                    "wrote with --format ros1|...) or an empty folder; anything else is refused.")
 @quiet_option
 @handle_errors
 def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, resolution: tuple[int, int],
-              shift: str, generator: str, routine_strength: float, overwrite: bool, quiet: bool) -> None:
+              shift: str, generator: str, routine_strength: float, layout: str, overwrite: bool, quiet: bool) -> None:
     """Build the synthetic three-room lab (3 rooms, 2 doors, 28 receptacles, 21 objects).
 
     With no options it writes the default lab: 84 scans (21 days x 4 two-hour intervals from 09,
@@ -59,6 +62,7 @@ def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, r
       psg-data synth /tmp/lab_shift --shift long-weekend --seed 3 --overwrite
       psg-data synth /tmp/small --days 2 --frames-per-scan 3 --resolution 80x60
       psg-data synth /tmp/clockwork --routine-strength 1
+      psg-data synth /tmp/chain --layout chain
     """
     from psg_data.synth import LabConfig
     from psg_data.synth._model import check_memory
@@ -66,7 +70,7 @@ def synth_cmd(out: Path, fmt: str, seed: int, days: int, frames_per_scan: int, r
     setup_logging(quiet)
     config = LabConfig(seed=seed, days=days, frames_per_scan=frames_per_scan, width=resolution[0],
                        height=resolution[1], shift=None if shift == "none" else shift, generator=generator,
-                       routine_strength=routine_strength)
+                       routine_strength=routine_strength, layout=layout)
     check_memory(config)
     try:
         _synth(out, fmt, config, overwrite, quiet)

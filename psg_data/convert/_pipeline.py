@@ -512,7 +512,7 @@ def _log_warnings(src: Path, report: ConversionReport, by_scan: dict[str, ScanRe
 def _set_side_tables(writer: DatasetWriter, side: SideData, side_dir: Path | None, scan_ids: set[str]) -> None:
     from psg_data.errors import FormatError
 
-    for name in ("rooms", "receptacles", "doors", "objects", "door_states", "schedule"):
+    for name in ("rooms", "receptacles", "doors", "openings", "objects", "door_states", "schedule"):
         rows = side.tables.get(name)
         if rows is None:
             continue

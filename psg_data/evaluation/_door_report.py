@@ -5,6 +5,11 @@ door queries):
 
 - ``blocked %``: first plans through a door closed at the query time (lower is better);
 - ``SR %`` / ``SPL %``: over the goals a route reaches at the query time;
+- ``SR all %``: over every query, scoring reachability both ways: a reachable goal counts when
+  reached, an unreachable one (no route at the query time) when the robot did not set off (a
+  correct decline; a walk towards it is a failure and its metres are ``wasted m``);
+- ``extra blocked m``: mean extra distance on the queries whose shortest route with every door
+  open meets a closed door (the same queries for every method: where door knowledge can pay);
 - ``extra m``: walked minus shortest under the true doors, successful episodes (lower is better);
 - ``wasted m``: metres walked towards goals no route reaches (ideal 0; lower is better);
 - counts: queries, declined (did not set off: the predicted doors leave no route).
@@ -30,14 +35,21 @@ from psg_data.evaluation._results import EvalResults, MetricInfo, ResultRow, Res
 __all__ = ["door_terms", "summarise_doors", "door_results", "DOOR_METRICS", "pick_blocked_door_query", "walk_summary",
            "DOOR_MODE_LABELS"]
 
+EXPECTED_COST_SUFFIX = " (expected cost)"
+"""Label suffix of an estimator's row under the expected-cost door rule (:data:`psg_data.navigation.DOOR_RULES`)."""
+
 DOOR_METRICS: dict[str, MetricInfo] = {
     "blocked_rate": MetricInfo("blocked_rate", "blocked %", "lower", "first plans through a door closed at the query "
                                "time", 100.0, 1),
     "SR": MetricInfo("SR", "SR %", "higher", "reached the goal, over the goals a route reaches at the query time",
                      100.0, 1),
     "SPL": MetricInfo("SPL", "SPL %", "higher", "SR weighted by shortest / walked path (true doors)", 100.0, 1),
+    "SR_all": MetricInfo("SR_all", "SR all %", "higher", "every query: a reachable goal reached, or an unreachable "
+                         "one declined without walking", 100.0, 1),
     "mean_extra_distance_m": MetricInfo("mean_extra_distance_m", "extra m", "lower", "walked minus shortest under the "
                                         "true doors, successful episodes", 1.0, 2),
+    "extra_blocked_m": MetricInfo("extra_blocked_m", "extra blocked m", "lower", "extra m on the queries whose "
+                                  "all-doors-open shortest route meets a closed door", 1.0, 2),
     "wasted_m": MetricInfo("wasted_m", "wasted m", "lower", "walked towards goals no route reaches (ideal 0)", 1.0, 2),
 }
 
@@ -52,9 +64,13 @@ def door_terms(df: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     ok_extra = np.isfinite(extra)
     den = np.maximum(walked, np.where(reach, short, 0.0))
     spl = np.divide(np.where(reach, short, 0.0), den, out=np.ones(len(df)), where=den > 0) * succ
+    ok_all = np.where(reach, succ, walked == 0.0)
+    ob = (df["open_plan_blocked"].to_numpy(bool) if "open_plan_blocked" in df else np.zeros(len(df), bool)) & ok_extra
     return {"blocked_rate": (df["first_plan_blocked"].to_numpy(float), np.ones(len(df))),
             "SR": (succ * reach * 1.0, reach * 1.0), "SPL": (spl * reach, reach * 1.0),
+            "SR_all": (ok_all * 1.0, np.ones(len(df))),
             "mean_extra_distance_m": (np.where(ok_extra, extra, 0.0), ok_extra * 1.0),
+            "extra_blocked_m": (np.where(ob, extra, 0.0), ob * 1.0),
             "wasted_m": (np.where(reach, 0.0, walked), (~reach) * 1.0)}
 
 
@@ -71,7 +87,7 @@ def summarise_doors(records: Any, names: list[str], *, seed: int = 0) -> dict[st
             by_seed = [float(np.sum(a) / np.sum(b)) for a, b in
                        (door_terms(g)[m] for _, g in df.groupby("seed")) if np.sum(b) > 0]
             std = float(np.std(by_seed, ddof=1)) if len(by_seed) > 1 else 0.0
-            if iv.n == 0 and m in ("mean_extra_distance_m", "wasted_m"):
+            if iv.n == 0 and m in ("mean_extra_distance_m", "wasted_m", "extra_blocked_m"):
                 per[m] = Summary(0.0, 0.0, math.nan, math.nan, 0, "none", "queries")
             else:
                 per[m] = Summary(iv.estimate, std, iv.low, iv.high, iv.n, iv.method, "queries")
@@ -88,6 +104,10 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
     summ = res.summary.set_index("estimator")
     names = list(summ.index)
     scores = summarise_doors(res.records, names)
+    for n in names:  # the expected-cost row of a reference estimator is a reference row too
+        base = n.removesuffix(EXPECTED_COST_SUFFIX)
+        if n not in roles and base != n and base in roles:
+            roles[n] = (roles[base][0], f"{roles[base][1]}, expected-cost door rule")
     rows = [ResultRow(n, roles.get(n, ("method", describe_method(n)))[0], scores[n],
                       roles.get(n, ("method", describe_method(n)))[1],
                       counts={"queries": int(summ.loc[n, "queries"]), "declined": int(summ.loc[n, "declined"])})
@@ -98,7 +118,9 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
     notes = [f"{m.label} ({m.better} is better): {m.description}" for m in DOOR_METRICS.values()]
     notes.append(f"door queries: a start in one room, a goal receptacle in another, at a time of the test days inside "
                  f"{res.world.hours[0]:g}-{res.world.hours[1]:g} h local; doors with predicted P(open) < "
-                 f"{o.threshold} are planned closed; no_path={o.no_path}; door streams from {o.labels} "
+                 f"{o.threshold} are planned closed (rows NAME; no_path={o.no_path}); rows NAME (expected cost) walk "
+                 f"the route of least expected walked distance under independent P(open), doors discovered on arrival "
+                 f"(psg_data.maps.expected_cost_route); door streams from {o.labels} "
                  f"({res.world.info.get('doors', {}).get('from', '?')})")
     if refs:
         notes.append("reference rows: " + "; ".join(f"{r.method} = {r.description}" for r in refs))
@@ -107,8 +129,9 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
     where = (info or {}).get("dataset_label") or res.world.name
     title = (f"Door navigation on {where} (doors from {o.labels}; {o.n_queries} queries x {len(o.seeds)} sets): first "
              "plans through closed doors")
-    tables = [ResultTable("doors", title, list(DOOR_METRICS.values()), rows, notes,
-                          count_columns=["queries", "declined"])]
+    tables = [t for t in [_headroom_table(rows, res, where)] if t is not None]
+    tables.append(ResultTable("doors", title, list(DOOR_METRICS.values()), rows, notes,
+                              count_columns=["queries", "declined"]))
     if res.objects is not None:
         obj = navigation_results(res.objects, roles={"oracle": ("ceiling", "the true receptacle and doors")})
         t = obj.tables[0]
@@ -120,16 +143,41 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
                                                         "n": s.n if s else 0, "confidence": 0.95})
 
 
+def _headroom_table(rows: list[ResultRow], res: Any, where: str) -> ResultTable | None:
+    """The gap between ``oracle`` and ``all_open`` (what knowing the doors can buy), shown before the
+    estimator rows; None unless both reference rows ran.
+    """
+    by = {r.method: r for r in rows}
+    if not {"oracle", "all_open"} <= set(by):
+        return None
+    keys = ("SPL", "extra_blocked_m", "blocked_rate")
+    o, a = by["oracle"].values, by["all_open"].values
+    n_ob = int(res.records.loc[res.records["estimator"] == "all_open", "open_plan_blocked"].sum()) \
+        if "open_plan_blocked" in res.records else 0
+    notes = [f"headroom: oracle - all_open = {100 * (o['SPL'].mean - a['SPL'].mean):+.1f} SPL points over reachable "
+             f"goals; {a['extra_blocked_m'].mean - o['extra_blocked_m'].mean:+.2f} m less extra distance on the "
+             f"{n_ob} queries whose all-doors-open shortest route meets a closed door; all_open's first plan is "
+             f"blocked on {100 * a['blocked_rate'].mean:.1f} % of the queries",
+             "a door estimator can gain at most this much over assuming every door open"]
+    return ResultTable("door_headroom", f"Door task headroom on {where}: the true doors against all doors open",
+                       [DOOR_METRICS[k] for k in keys], [by["oracle"], by["all_open"]], notes,
+                       count_columns=["queries"])
+
+
 def pick_blocked_door_query(res: Any, label: str) -> int:
     """Index (in the first seed's queries) of a door query whose all-open first plan ran into a closed
-    door, preferring one where ``label`` planned around it and arrived, then one where ``label``
-    predicted the door closed and did not set off (nothing wasted), then one where ``label``'s own
-    first plan was blocked too; else 0.
+    door, preferring the paper's "Predictive Navigation" case: ``label`` predicted that door closed
+    (P(open) < 0.5), took the longer route and arrived (the longest such detour first); then one where
+    ``label`` planned around it and arrived, then one where ``label`` predicted the door closed and did
+    not set off (nothing wasted), then one where ``label``'s own first plan was blocked too; else 0.
     """
     first = res.first
     eps, base = first.episodes[label], first.episodes["all_open"]
     blocked = [i for i, b in enumerate(base) if b.first_plan_blocked]
-    pools = ([i for i in blocked if not eps[i].first_plan_blocked and eps[i].success],
+    around = [i for i in blocked if not eps[i].first_plan_blocked and eps[i].success]
+    paper = sorted((i for i in around if any(eps[i].p_open.get(d, 1.0) < 0.5 for d in base[i].doors_discovered)),
+                   key=lambda i: -(base[i].walked_m - eps[i].walked_m))
+    pools = (paper, around,
              [i for i in blocked if eps[i].declined],
              [i for i in blocked if eps[i].first_plan_blocked], blocked)
     return next((p[0] for p in pools if p), 0)

@@ -11,7 +11,10 @@ Metrics (one row per method; the paper's "Predictive Navigation" layout):
   success; its SPL term is 1 only if the agent aborted without moving, else 0) or ``"exclude"``.
 
 Unreachable present targets are counted in ``n_unreachable`` and, by default
-(``unreachable="exclude"``), left out of SR and SPL; ``"failure"`` counts them as failures.
+(``unreachable="exclude"``), left out of SR and SPL; ``"failure"`` counts them as failures;
+``"like_absent"`` scores reachability both ways: they leave the static / dynamic columns and enter
+the overall SR / SPL like absent targets (a correct abort is a success, a walk towards them a
+failure), see :data:`UNREACHABLE_RULES`.
 
 Every metric is a ratio over queries, ``sum_q num_q / sum_q den_q`` (:func:`query_terms`: e.g.
 dynamic SR has ``num = success`` and ``den = 1`` on the reachable dynamic queries), so the estimate
@@ -30,12 +33,14 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
 
-__all__ = ["METRICS", "ABSENT_RULES", "query_terms", "score_records", "summarise_navigation", "COUNTS"]
+__all__ = ["METRICS", "ABSENT_RULES", "UNREACHABLE_RULES", "query_terms", "score_records", "summarise_navigation",
+           "COUNTS"]
 
 METRICS = ("static_sr", "static_spl", "dynamic_sr", "dynamic_spl", "absent_ar", "absent_dist_m",
            "overall_sr", "overall_spl")
 ABSENT_RULES = ("abort_is_success", "abort_is_success_spl_path", "exclude")
 COUNTS = ("n_queries", "n_static", "n_dynamic", "n_absent", "n_unreachable")
+UNREACHABLE_RULES = ("exclude", "failure", "like_absent")
 
 
 def _spl_terms(s: NDArray[np.bool_], l_: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -51,12 +56,13 @@ def query_terms(df: Any, *, absent_in_overall: str = "abort_is_success", unreach
     Args:
         df: per-query records (columns of :func:`psg_data.navigation.episode_record`).
         absent_in_overall: how absent queries count in the overall SR/SPL, one of :data:`ABSENT_RULES`.
-        unreachable: "exclude" (queries whose target cannot be reached are left out) or "failure".
+        unreachable: "exclude" (queries whose target cannot be reached are left out), "failure" or
+            "like_absent" (scored in the overall columns like absent targets), :data:`UNREACHABLE_RULES`.
     """
     if absent_in_overall not in ABSENT_RULES:
         raise EvaluationError(f"absent_in_overall: expected one of {ABSENT_RULES}, got {absent_in_overall!r}")
-    if unreachable not in ("exclude", "failure"):
-        raise EvaluationError(f"unreachable: expected 'exclude' or 'failure', got {unreachable!r}")
+    if unreachable not in UNREACHABLE_RULES:
+        raise EvaluationError(f"unreachable: expected one of {UNREACHABLE_RULES}, got {unreachable!r}")
     cat = df["category"].to_numpy()
     reach = df["reachable"].to_numpy(bool)
     succ = df["success"].to_numpy(bool)
@@ -64,16 +70,16 @@ def query_terms(df: Any, *, absent_in_overall: str = "abort_is_success", unreach
     p = df["path_m"].to_numpy(np.float64)
     l_ = df["shortest_path_m"].to_numpy(np.float64)
     present = cat != "absent"
-    scored = present & (reach if unreachable == "exclude" else True)
+    scored = present & (True if unreachable == "failure" else reach)
     l_safe = np.where(np.isfinite(l_), l_, p)  # unreachable ones only enter as failures (S = 0)
-    ab = cat == "absent"
+    ab = (cat == "absent") | (present & ~reach if unreachable == "like_absent" else False)
     out: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     spl_all = _spl_terms(succ, l_safe, p)
     for c in ("static", "dynamic"):
         m = (scored & (cat == c)).astype(np.float64)
         out[f"{c}_sr"] = (succ * m, m)
         out[f"{c}_spl"] = (spl_all * m, m)
-    abf = ab.astype(np.float64)
+    abf = (cat == "absent").astype(np.float64)
     out["absent_ar"] = (abort * abf, abf)
     out["absent_dist_m"] = (p * abf, abf)
     sel = (scored | (ab if absent_in_overall != "exclude" else False)).astype(np.float64)

@@ -425,7 +425,8 @@ class PredictiveGraph:
             if not any(r.floor_polygon_m is not None and len(r.floor_polygon_m) >= 3 for r in L.rooms.values()):
                 raise GraphError("plan: the layout has no room floor polygons to build a map from; pass grid=")
             self._grid = grid_from_geometry(list(L.rooms.values()), list(L.receptacles.values()),
-                                            list(L.doors.values()), **self.grid_options)
+                                            list(L.doors.values()), openings=list(L.openings.values()),
+                                            **self.grid_options)
         return self._grid
 
     def planning_cache(self, reach_m: float = 1.0) -> Any:
@@ -438,14 +439,19 @@ class PredictiveGraph:
         return self._caches[key]
 
     def plan(self, start_xy: Sequence[float], object_id: str, t: TimeLike, *, delta: float = 0.2,
-             threshold: float = 0.5, exclude: Iterable[str] = (), reach_m: float = 1.0) -> Plan:
+             threshold: float = 0.5, exclude: Iterable[str] = (), reach_m: float = 1.0,
+             door_rule: str = "threshold") -> Plan:
         """The navigation agent's plan to find ``object_id`` at ``t`` from ``start_xy`` (world x, y, metres).
 
         Candidates are the object's receptacles with P(present) >= ``delta`` not in ``exclude``,
-        ranked by probability (ties by id); doors with P(open) < ``threshold`` are planned closed;
-        the target is the first candidate reachable under those doors, the path a shortest path to
-        its approach set (cells within ``reach_m`` in line of sight). The same rules as the
-        navigation task's agent (:func:`psg_data.navigation.run_episode`).
+        ranked by probability (ties by id); with ``door_rule="threshold"`` doors with P(open) <
+        ``threshold`` are planned closed, the target is the first candidate reachable under those
+        doors and the path a shortest path to its approach set (cells within ``reach_m`` in line of
+        sight): the same rules as the navigation task's agent (:func:`psg_data.navigation.run_episode`).
+        With ``door_rule="expected_cost"`` each candidate's distance is the expected walked distance
+        of :func:`psg_data.maps.expected_cost_route` (P(open) as a probability, doors discovered on
+        arrival), the target the first candidate some route with non-negligible P(open) reaches, and
+        the path that rule's route (``doors_open``: the door states it assumes).
 
         Returns:
             A :class:`~psg_data.graph.Plan`.
@@ -453,7 +459,7 @@ class PredictiveGraph:
         from psg_data.graph._plan import make_plan
 
         return make_plan(self, start_xy, object_id, to_seconds(t, self.timezone), delta=delta, threshold=threshold,
-                         exclude=exclude, reach_m=reach_m)
+                         exclude=exclude, reach_m=reach_m, door_rule=door_rule)
 
     # -- storage -----------------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:

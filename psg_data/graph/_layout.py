@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.errors import GraphError
-from psg_data.schemas._records import Box, Door, ObjectInfo, Receptacle, Room
+from psg_data.schemas._records import Box, Door, ObjectInfo, Opening, Receptacle, Room
 
 __all__ = ["SceneLayout"]
 
@@ -25,6 +25,7 @@ class SceneLayout:
         doors: door_id -> record (doorway box, the two rooms it joins).
         objects: object_id -> record (name, description); objects have no fixed position.
         timezone: IANA site timezone (local time of strings and of the estimators' clocks).
+        openings: opening_id -> record: doorless passages between rooms (always traversable).
     """
 
     rooms: Mapping[str, Room] = field(default_factory=dict)
@@ -32,6 +33,7 @@ class SceneLayout:
     doors: Mapping[str, Door] = field(default_factory=dict)
     objects: Mapping[str, ObjectInfo] = field(default_factory=dict)
     timezone: str = "UTC"
+    openings: Mapping[str, Opening] = field(default_factory=dict)
 
     @classmethod
     def from_dataset(cls, dataset: Any) -> SceneLayout:
@@ -41,19 +43,22 @@ class SceneLayout:
         def table(name: str) -> dict[str, Any]:
             return dict(getattr(ds, name)) if ds.has_table(name) else {}
 
-        return cls(table("rooms"), table("receptacles"), table("doors"), table("objects"), ds.info.timezone or "UTC")
+        return cls(table("rooms"), table("receptacles"), table("doors"), table("objects"), ds.info.timezone or "UTC",
+                   table("openings"))
 
     @classmethod
     def of(cls, *, receptacles: Iterable[Receptacle] | Mapping[str, Receptacle] = (),
            doors: Iterable[Door] | Mapping[str, Door] = (), rooms: Iterable[Room] | Mapping[str, Room] = (),
-           objects: Iterable[str | ObjectInfo] = (), timezone: str = "UTC") -> SceneLayout:
+           objects: Iterable[str | ObjectInfo] = (), timezone: str = "UTC",
+           openings: Iterable[Opening] | Mapping[str, Opening] = ()) -> SceneLayout:
         """A layout from records (or id -> record mappings); objects may be given by id."""
         def by_id(items: Any, key: str) -> dict[str, Any]:
             return dict(items) if isinstance(items, Mapping) else {getattr(x, key): x for x in items}
 
         objs = {o: ObjectInfo(o, o) if isinstance(o, str) else o for o in objects}
         return cls(by_id(rooms, "room_id"), by_id(receptacles, "receptacle_id"), by_id(doors, "door_id"),
-                   {(k if isinstance(k, str) else k.object_id): v for k, v in objs.items()}, timezone)
+                   {(k if isinstance(k, str) else k.object_id): v for k, v in objs.items()}, timezone,
+                   by_id(openings, "opening_id"))
 
     def receptacle_xyz(self, receptacle_ids: Iterable[str]) -> NDArray[np.float64]:
         """(N, 3) box centres of the receptacles, metres (NaN for ids without a record)."""
@@ -82,7 +87,9 @@ class SceneLayout:
                 "doors": [{"door_id": d.door_id, "name": d.name, "room_a": d.room_a, "room_b": d.room_b,
                            "box": _box_dict(d.box)} for d in self.doors.values()],
                 "objects": [{"object_id": o.object_id, "name": o.name, "description": o.description}
-                            for o in self.objects.values()]}
+                            for o in self.objects.values()],
+                "openings": [{"opening_id": o.opening_id, "name": o.name, "room_a": o.room_a, "room_b": o.room_b,
+                              "box": _box_dict(o.box)} for o in self.openings.values()]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> SceneLayout:
@@ -99,7 +106,9 @@ class SceneLayout:
             doors = {x["door_id"]: Door(x["door_id"], x["name"], x["room_a"], x["room_b"], _box(x["box"]))
                      for x in d["doors"]}
             objs = {o["object_id"]: ObjectInfo(o["object_id"], o["name"], o.get("description")) for o in d["objects"]}
-            return cls(rooms, recs, doors, objs, str(d["timezone"]))
+            opens = {x["opening_id"]: Opening(x["opening_id"], x["name"], x["room_a"], x["room_b"], _box(x["box"]))
+                     for x in d.get("openings", [])}
+            return cls(rooms, recs, doors, objs, str(d["timezone"]), opens)
         except (KeyError, TypeError, ValueError) as exc:
             raise GraphError(f"layout: malformed ({type(exc).__name__}: {exc}); expected the fields SceneLayout."
                              "to_dict writes") from None

@@ -42,7 +42,8 @@ class Plan:
         candidates: receptacles with P >= delta, ranked (the agent tries them in this order).
         p: (K,) their P(object on receptacle), clipped to [0, 1].
         distances_m: (K,) shortest path lengths from the start to each candidate's approach set under
-            the planned doors, metres (inf: unreachable).
+            the planned doors, metres (inf: unreachable); with the ``expected_cost`` door rule the
+            expected walked distance of that rule's policy (inf: no route with non-negligible P(open)).
         target: the first reachable candidate (None unless ``go``).
         path_xy: (N, 2) world (x, y) of the path's cell centres to ``target``, metres (empty unless ``go``).
         path_m: its length, metres (NaN unless ``go``).
@@ -96,10 +97,12 @@ def _start_cell(cache: Any, cfg: Any, start_xy: Sequence[float]) -> int:
 
 
 def make_plan(graph: PredictiveGraph, start_xy: Sequence[float], object_id: str, t_s: float, *, delta: float,
-              threshold: float, exclude: Iterable[str], reach_m: float) -> Plan:
+              threshold: float, exclude: Iterable[str], reach_m: float, door_rule: str = "threshold") -> Plan:
     """:meth:`PredictiveGraph.plan` (see there)."""
     if not 0.0 <= delta <= 1.0:
         raise GraphError(f"delta must be in [0, 1], got {delta}")
+    if door_rule not in ("threshold", "expected_cost"):
+        raise GraphError(f"door_rule: expected 'threshold' or 'expected_cost', got {door_rule!r}")
     cache = graph.planning_cache(reach_m)
     grid = cache.grid
     raw = {r: float(v[0]) for r, v in graph.object_probabilities(object_id, [t_s]).items()}
@@ -112,12 +115,21 @@ def make_plan(graph: PredictiveGraph, start_xy: Sequence[float], object_id: str,
     cfg = cache.key(doors_open)
     start = _start_cell(cache, cfg, start_xy)
     cands = ranked_candidates(bel, delta, set(exclude))
-    dist = np.array([cache.distance(r, cfg, start) for r in cands], np.float64)
+    routes: dict[str, Any] = {}
+    if door_rule == "expected_cost":
+        from psg_data.maps._door_risk import expected_cost_route
+
+        routes = {r: expected_cost_route(cache, r, start, p_open) for r in cands}
+        dist = np.array([math.inf if routes[r] is None else routes[r].expected_m for r in cands], np.float64)
+    else:
+        dist = np.array([cache.distance(r, cfg, start) for r in cands], np.float64)
     reach = np.flatnonzero(np.isfinite(dist))
     target = cands[int(reach[0])] if reach.size else None
     path_xy, path_m = np.zeros((0, 2)), float("nan")
+    if target is not None and routes:
+        doors_open = dict(routes[target].assumed_open)
     if target is not None:
-        cells = cache.path(target, cfg, start)
+        cells = routes[target].path if routes else cache.path(target, cfg, start)
         W = grid.shape[1]
         path_xy = grid.cell_to_world(np.stack(np.divmod(cells, W), axis=1))
         path_m = float(cache.step_lengths(cells)[-1])

@@ -33,7 +33,7 @@ from psg_data.loaders._checksums import FileChecksums
 from psg_data.schemas._image_headers import max_encoded_bytes
 from psg_data.schemas._manifest import DatasetInfo, read_manifest
 from psg_data.schemas._paths import open_inside, real_root
-from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Receptacle, Room
+from psg_data.schemas._records import Box, CameraIntrinsics, Door, Frame, ObjectInfo, Opening, Receptacle, Room
 from psg_data.schemas._tables import TABLES, table_path
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -211,6 +211,14 @@ class Dataset:
     def doors(self) -> dict[str, Door]:
         return {r["door_id"]: Door(r["door_id"], r["name"], r["room_a"], r["room_b"], _box(r))
                 for r in self.table("doors").to_pylist()}
+
+    @cached_property
+    def openings(self) -> dict[str, Opening]:
+        """Doorless passages between rooms (the optional ``openings`` table; empty without it)."""
+        if not self.has_table("openings"):
+            return {}
+        return {r["opening_id"]: Opening(r["opening_id"], r["name"], r["room_a"], r["room_b"], _box(r))
+                for r in self.table("openings").to_pylist()}
 
     @cached_property
     def objects(self) -> dict[str, ObjectInfo]:

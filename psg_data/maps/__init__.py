@@ -7,11 +7,14 @@
   paths, octile costs, no corner cutting, through ``scipy.sparse.csgraph``; the pure-Python
   :func:`astar_reference` is the test oracle), :func:`grid_graph` and :class:`PlanningCache` (cached
   multi-source Dijkstra fields per receptacle approach set and door configuration).
+- Door risk (:mod:`._door_risk`): :func:`expected_cost_route`, the expected-cost door rule (routes
+  that weigh each door's P(open), discovered on arrival, replanned; exact under independent doors).
 
 No estimator and no task here: :mod:`psg_data.graph` plans on these maps, :mod:`psg_data.navigation`
 walks them (its public names re-export these).
 """
 
+from psg_data.maps._door_risk import MIN_P_OPEN, DoorRoute, door_blocked_cells, expected_cost_route
 from psg_data.maps._grid import (
     OccupancyGrid,
     box_footprint,
@@ -56,4 +59,8 @@ __all__ = [
     "grid_graph",
     "PlanningCache",
     "SQRT2",
+    "DoorRoute",
+    "expected_cost_route",
+    "door_blocked_cells",
+    "MIN_P_OPEN",
 ]

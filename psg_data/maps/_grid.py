@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from psg_data._geometry import box_footprint, points_in_polygon
 from psg_data.errors import EvaluationError
-from psg_data.schemas._records import Door, Receptacle, Room
+from psg_data.schemas._records import Door, Opening, Receptacle, Room
 
 __all__ = [
     "OccupancyGrid",
@@ -264,6 +264,7 @@ def grid_from_geometry(
     receptacles: Iterable[Receptacle],
     doors: Iterable[Door] = (),
     *,
+    openings: Iterable[Opening] = (),
     resolution_m: float = 0.05,
     robot_radius_m: float = 0.25,
     wall_thickness_m: float = 0.10,
@@ -275,7 +276,8 @@ def grid_from_geometry(
     ``wall_thickness_m`` thick (rooms sharing an edge are therefore separated by a wall) and
     everything outside the polygons is an obstacle; receptacle footprints (convex hull of the box
     corners seen from above) are obstacles; doorway cells (door box footprints) are cut out of the
-    walls and become obstacles only when the door is closed. Rooms without a polygon contribute
+    walls and become obstacles only when the door is closed; opening cells (doorless passages, their
+    box footprints) are cut out of the walls for good. Rooms without a polygon contribute
     nothing (their space counts as unknown, i.e. blocked); if no room has a polygon, the bounding
     box of the receptacles and doors grown by 1 m is taken as free space, without walls.
 
@@ -283,6 +285,7 @@ def grid_from_geometry(
         rooms: the rooms (floor polygons, world frame, metres).
         receptacles: the receptacles (their footprints are obstacles).
         doors: the doors (their doorways are kept per door).
+        openings: doorless passages (always free).
         resolution_m: cell size, metres.
         robot_radius_m: inflation radius, metres.
         wall_thickness_m: thickness of the walls drawn on the polygon outlines, metres.
@@ -325,6 +328,8 @@ def grid_from_geometry(
     door_cells, rec_cells = _door_and_receptacle_masks(grid_shape, centers, origin, resolution_m, receptacles, doors)
     for m in door_cells.values():
         obstacle &= ~m
+    for o in openings:
+        obstacle &= ~_mask_polygon(grid_shape, centers, box_footprint(o.box), origin, resolution_m)
     for m in rec_cells.values():
         obstacle |= m
     return OccupancyGrid(obstacle, origin, float(resolution_m), float(robot_radius_m), door_cells, rec_cells,
@@ -412,7 +417,9 @@ def grid_from_dataset(dataset: Any, *, source: str = "geometry", **kwargs: Any) 
     """Occupancy grid of a dataset: ``source="geometry"`` (rooms, receptacles, doors) or ``"scans"``."""
     if source == "geometry":
         doors = list(dataset.doors.values()) if dataset.has_table("doors") else []
-        return grid_from_geometry(list(dataset.rooms.values()), list(dataset.receptacles.values()), doors, **kwargs)
+        openings = list(getattr(dataset, "openings", {}).values())
+        return grid_from_geometry(list(dataset.rooms.values()), list(dataset.receptacles.values()), doors,
+                                  openings=openings, **kwargs)
     if source == "scans":
         return grid_from_scans(dataset, **kwargs)
     raise EvaluationError(f"grid source: expected 'geometry' or 'scans', got {source!r}")

@@ -31,8 +31,9 @@
 - Plots (:mod:`._plots`): :func:`plot_query`, :func:`plot_snapshot` (a predictive graph's snapshot on the map).
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
-  (:func:`run_door_episode`), :func:`run_door_navigation` (blocked first plans, extra distance,
-  SR, SPL per estimator vs. the all-doors-open planner), worlds from a dataset
+  (:func:`run_door_episode`; door rules :data:`DOOR_RULES`: the P(open) threshold, or
+  :func:`expected_cost_route` re-exported from :mod:`psg_data.maps`), :func:`run_door_navigation`
+  (blocked first plans, extra distance, SR, SPL per estimator vs. the all-doors-open planner), worlds from a dataset
   (:meth:`DoorWorld.from_dataset`) or the unit-test :func:`door_loop_world`, the dataset door task
   :func:`run_door_task` (with objects behind predicted-closed doors, :func:`walk_summary`) and the
   figures :func:`plot_door_query` / :func:`plot_door_example`.
@@ -41,6 +42,7 @@
 from __future__ import annotations
 
 from psg_data.graph._sources import ObservationModel, SourceObservations, grid_map_streams, source_observations
+from psg_data.maps._door_risk import DoorRoute, expected_cost_route
 from psg_data.maps._grid import (
     OccupancyGrid,
     box_footprint,
@@ -83,6 +85,7 @@ from psg_data.navigation._door_dataset import (
 )
 from psg_data.navigation._doors import (
     DOOR_BASELINES,
+    DOOR_RULES,
     DoorEpisode,
     DoorNavigationResult,
     DoorQuery,
@@ -194,6 +197,9 @@ __all__ = [
     "pick_door_example",
     "plot_door_example",
     "DOOR_BASELINES",
+    "DOOR_RULES",
+    "DoorRoute",
+    "expected_cost_route",
     "DoorWorld",
     "DoorQuery",
     "DoorEpisode",

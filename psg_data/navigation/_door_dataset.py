@@ -119,8 +119,10 @@ class DoorTaskOptions:
         label_seed: seed of on-the-fly noise.
         seeds: one door query set (and object query set) per seed.
         n_queries: door queries per seed (also the object queries per seed).
-        threshold: doors with predicted P(open) below it are planned closed.
+        threshold: doors with predicted P(open) below it are planned closed (the ``threshold`` rule).
         no_path: ``decline`` or ``optimistic`` (:func:`~psg_data.navigation.run_door_episode`).
+        rules: door rules of the estimator rows: ``threshold`` (row ``NAME``) and ``expected_cost``
+            (row ``NAME (expected cost)``, :func:`psg_data.maps.expected_cost_route`).
         objects: also run object navigation with each estimator's predicted doors next to all
             doors open and the true doors (objects behind predicted-closed doors).
         setting: agent setting of the object runs.
@@ -134,6 +136,7 @@ class DoorTaskOptions:
     n_queries: int = 250
     threshold: float = 0.5
     no_path: str = "decline"
+    rules: tuple[str, ...] = ("threshold", "expected_cost")
     objects: bool = True
     setting: str = "adaptive"
     grid_source: str = "geometry"
@@ -147,10 +150,11 @@ class DoorTaskOptions:
         if not 0.0 < self.threshold < 1.0:
             raise EvaluationError(f"threshold: {self.threshold}, expected in (0, 1)")
         object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        object.__setattr__(self, "rules", tuple(str(r) for r in self.rules))
 
     def to_dict(self) -> dict[str, Any]:
         """The options as a JSON-ready dictionary (stored with the results)."""
-        return {**asdict(self), "seeds": list(self.seeds)}
+        return {**asdict(self), "seeds": list(self.seeds), "rules": list(self.rules)}
 
 
 @dataclass
@@ -212,7 +216,7 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
     tables, records, first = [], [], None
     for seed in o.seeds:
         res = run_door_navigation(world, estimators, n_queries=o.n_queries, seed=seed, threshold=o.threshold,
-                                  settings=settings, no_path=o.no_path)
+                                  settings=settings, no_path=o.no_path, rules=o.rules)
         tables.append(res.table.assign(seed=seed))
         records.append(res.records.assign(seed=seed))
         if first is None:
@@ -233,7 +237,7 @@ def _door_summary(per_seed: Any, records: Any, n_seeds: int) -> Any:
 
     from psg_data.evaluation._door_report import summarise_doors
 
-    cols = ["blocked_rate", "mean_extra_distance_m", "SR", "SPL", "wasted_m"]
+    cols = ["blocked_rate", "mean_extra_distance_m", "SR", "SPL", "wasted_m", "SR_all", "extra_blocked_m"]
     g = per_seed.groupby("estimator", sort=False)
     names = list(g.groups)
     scores = summarise_doors(records, names)

@@ -16,6 +16,11 @@ set. Extra distance: walked minus the shortest path under the true door states (
 episodes). Wasted distance: metres walked towards goals that no route reaches at the query time
 (ideal 0: the planner that knows the doors does not set off).
 
+With ``rule="expected_cost"`` the episode walks the route of :func:`psg_data.maps.expected_cost_route`
+instead: P(open) is used as a probability (the route of least expected walked distance when doors
+are discovered on arrival), the robot learns each door it reaches or walks through and replans, and it
+gives up only when no route with non-negligible P(open) is left.
+
 :func:`run_door_navigation` runs every method on the same queries and returns the table
 (estimator, queries, blocked_first_plans, blocked_rate, mean_extra_distance_m, SR, SPL); the
 methods are registry estimators plus the baselines ``all_open`` (assume every door open) and
@@ -50,15 +55,18 @@ from psg_data.maps._planner import PlanningCache
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-__all__ = ["DOOR_BASELINES", "DoorWorld", "DoorQuery", "DoorEpisode", "DoorNavigationResult", "fit_door_filters",
-           "door_open_probabilities", "run_door_episode", "make_door_queries", "run_door_navigation",
-           "door_loop_world", "plot_door_query"]
+__all__ = ["DOOR_BASELINES", "DOOR_RULES", "DoorWorld", "DoorQuery", "DoorEpisode", "DoorNavigationResult",
+           "fit_door_filters", "door_open_probabilities", "run_door_episode", "make_door_queries",
+           "run_door_navigation", "door_loop_world", "plot_door_query"]
 
 log = logging.getLogger(__name__)
 
 DOOR_BASELINES = ("all_open", "oracle")
 TABLE_COLUMNS = ("estimator", "queries", "blocked_first_plans", "blocked_rate", "mean_extra_distance_m", "SR", "SPL")
 NO_PATH_RULES = ("decline", "optimistic")
+DOOR_RULES = ("threshold", "expected_cost")
+"""How the agent uses P(open): ``threshold`` (plan with doors of P < threshold closed) or
+``expected_cost`` (:func:`psg_data.maps.expected_cost_route`: minimise the expected walked distance)."""
 
 
 @dataclass
@@ -153,7 +161,8 @@ class DoorEpisode:
 
 
 def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str, float], *,
-                     threshold: float = 0.5, method: str = "", no_path: str = "decline") -> DoorEpisode:
+                     threshold: float = 0.5, method: str = "", no_path: str = "decline",
+                     rule: str = "threshold") -> DoorEpisode:
     """Run one door-aware query (module docstring).
 
     Args:
@@ -164,9 +173,16 @@ def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str
         method: label stored in the episode.
         no_path: what to do when the believed doors leave no path: ``decline`` (stop, report the
             goal unreachable) or ``optimistic`` (assume the doors not seen closed are open).
+        rule: ``threshold`` (above) or ``expected_cost`` (:func:`psg_data.maps.expected_cost_route`;
+            ``threshold`` and ``no_path`` are then unused: it gives up only when no route with
+            non-negligible P(open) is left).
     """
     if no_path not in NO_PATH_RULES:
         raise EvaluationError(f"no_path: expected one of {NO_PATH_RULES}, got {no_path!r}")
+    if rule not in DOOR_RULES:
+        raise EvaluationError(f"rule: expected one of {DOOR_RULES}, got {rule!r}")
+    if rule == "expected_cost":
+        return _expected_cost_episode(cache, query, p_open, method)
     grid = cache.grid
     W = grid.shape[1]
     doors = grid.door_ids
@@ -225,6 +241,67 @@ def run_door_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str
     return DoorEpisode(query.query_id, method, success, first_blocked, walked, shortest, n_replans, fallback_used,
                        declined, {d: float(p_open.get(d, 1.0)) for d in doors}, sorted(known_closed),
                        first_plan if first_plan is not None else np.zeros(0, np.int64), np.concatenate(trail))
+
+
+def _expected_cost_episode(cache: PlanningCache, query: DoorQuery, p_open: Mapping[str, float],
+                           method: str) -> DoorEpisode:
+    """:func:`run_door_episode` with the expected-cost rule: walk its route, learn doors on arrival, replan."""
+    from psg_data.maps._door_risk import door_blocked_cells, expected_cost_route
+
+    W = cache.grid.shape[1]
+    doors = cache.grid.door_ids
+    truth = {d: bool(query.doors_open.get(d, True)) for d in doors}
+    free_true = cache.free_flat(cache.key(truth))
+    start = int(query.start_cell[0] * W + query.start_cell[1])
+    shortest = cache.distance(query.goal, cache.key(truth), start)
+    shortest = shortest if math.isfinite(shortest) else float("nan")
+    p = {d: float(p_open.get(d, 1.0)) for d in doors}
+    known: dict[str, bool] = {}
+    cur, walked, n_replans, success, declined = start, 0.0, 0, False, False
+    trail: list[NDArray[np.int64]] = [np.array([cur], np.int64)]
+    first_plan: NDArray[np.int64] | None = None
+    first_blocked = False
+    for _ in range(len(doors) + 1):
+        route = expected_cost_route(cache, query.goal, cur, p, known)
+        if route is None:
+            declined = first_plan is None
+            break
+        path = route.path
+        blocked = np.flatnonzero(~free_true[path])
+        if first_plan is None:
+            first_plan, first_blocked = path, bool(blocked.size)
+        seg = path if not blocked.size else path[:int(blocked[0])]
+        for d in doors:  # doors walked through (their cells passed) are seen open
+            if truth[d] and seg.size and door_blocked_cells(cache, d)[seg].any():
+                known[d] = True
+        walked += float(cache.step_lengths(seg)[-1]) if seg.size else 0.0
+        trail.append(seg[1:])
+        cur = int(seg[-1]) if seg.size else cur
+        if not blocked.size:
+            success = True
+            break
+        cell = int(path[int(blocked[0])])
+        culprits = [d for d in doors if not truth[d] and door_blocked_cells(cache, d)[cell]]
+        if not culprits:
+            raise EvaluationError(f"door query {query.query_id}: path blocked by a non-door cell {cell}")
+        known.update({d: False for d in culprits})
+        n_replans += 1
+    return DoorEpisode(query.query_id, method, success, first_blocked, walked, shortest, n_replans, False,
+                       declined, p, sorted(d for d, v in known.items() if not v),
+                       first_plan if first_plan is not None else np.zeros(0, np.int64), np.concatenate(trail))
+
+
+def _open_plan_blocked(cache: PlanningCache, query: DoorQuery) -> bool:
+    """Whether the shortest path with every door open meets a door closed at the query time (the query's
+    shortest route is cut: door knowledge can save distance on it).
+    """
+    W = cache.grid.shape[1]
+    start = int(query.start_cell[0] * W + query.start_cell[1])
+    path = cache.path(query.goal, cache.key({d: True for d in cache.grid.door_ids}), start)
+    if path is None:
+        return False
+    free = cache.free_flat(cache.key({d: bool(query.doors_open.get(d, True)) for d in cache.grid.door_ids}))
+    return bool((~free[path]).any())
 
 
 def make_door_queries(world: DoorWorld, n: int, *, seed: int = 0, hours: tuple[float, float] | None | str = "world"
@@ -361,7 +438,7 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
                         hours: tuple[float, float] | None | str = "world", baselines: Sequence[str] = DOOR_BASELINES,
                         queries: Sequence[DoorQuery] | None = None, unseen_prior: float = 0.5,
                         settings: Mapping[str, Mapping[str, Any]] | None = None,
-                        no_path: str = "decline") -> DoorNavigationResult:
+                        no_path: str = "decline", rules: Sequence[str] = ("threshold",)) -> DoorNavigationResult:
     """Every method on the same door queries; the small comparison table.
 
     Args:
@@ -376,6 +453,9 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
         unseen_prior: P(open) of a door without training observations.
         settings: estimator name -> keyword settings.
         no_path: policy when the believed doors leave no path (:func:`run_door_episode`).
+        rules: door rules of the estimator rows (:data:`DOOR_RULES`); the ``threshold`` row is
+            labelled with the estimator's name, the ``expected_cost`` row ``NAME (expected cost)``.
+            The baselines (P(open) 0 or 1) run once: both rules plan alike on them.
 
     Returns:
         :class:`DoorNavigationResult`; table columns estimator, queries, blocked_first_plans,
@@ -386,6 +466,8 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
     """
     import pandas as pd
 
+    from psg_data.evaluation._door_report import EXPECTED_COST_SUFFIX
+
     qs = list(queries) if queries is not None else make_door_queries(world, n_queries, seed=seed, hours=hours)
     if not qs:
         raise EvaluationError("run_door_navigation: no queries")
@@ -393,17 +475,29 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
     rows, recs = [], []
     episodes: dict[str, list[DoorEpisode]] = {}
     probs: dict[str, list[dict[str, float]]] = {}
+    bad = [r for r in rules if r not in DOOR_RULES]
+    if bad or not rules:
+        raise EvaluationError(f"rules {list(rules)}: expected one or more of {DOOR_RULES}")
+    runs = []
     for label, belief, unseen in _door_methods(world, estimators, baselines, unseen_prior, settings):
+        if label in DOOR_BASELINES:
+            runs.append((label, "threshold", belief, unseen))
+            continue
+        runs += [(label if r == "threshold" else f"{label}{EXPECTED_COST_SUFFIX}", r, belief, unseen)
+                 for r in rules]
+    open_blocked = [_open_plan_blocked(world.cache, q) for q in qs]
+    for label, rule, belief, unseen in runs:
         eps, ps = [], []
-        for q in qs:
+        for q, ob in zip(qs, open_blocked):
             p = belief(q)
-            ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label, no_path=no_path)
+            ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label, no_path=no_path, rule=rule)
             eps.append(ep)
             ps.append(p)
-            recs.append({"estimator": label, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
+            recs.append({"estimator": label, "rule": rule, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
                          "success": ep.success, "first_plan_blocked": ep.first_plan_blocked, "walked_m": ep.walked_m,
                          "shortest_m": ep.shortest_m, "extra_m": ep.extra_m, "n_replans": ep.n_replans,
-                         "fallback": ep.fallback, "declined": ep.declined, **{f"p_open:{d}": v for d, v in p.items()},
+                         "fallback": ep.fallback, "declined": ep.declined, "open_plan_blocked": ob,
+                         **{f"p_open:{d}": v for d, v in p.items()},
                          **{f"open:{d}": bool(q.doors_open.get(d, True)) for d in doors}})
         episodes[label], probs[label] = eps, ps
         rows.append(_door_row(label, eps, unseen))

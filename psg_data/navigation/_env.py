@@ -222,7 +222,7 @@ class NavigationEnv:
         """
         L = lab.layout
         if grid is None:
-            grid = grid_from_geometry(L.rooms, L.receptacles, L.doors, resolution_m=resolution_m,
+            grid = grid_from_geometry(L.rooms, L.receptacles, L.doors, openings=L.openings, resolution_m=resolution_m,
                                       robot_radius_m=robot_radius_m)
         plans = [p for p in lab.scans if p.split == "train"]
         if not plans:

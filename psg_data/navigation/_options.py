@@ -104,8 +104,10 @@ class NavigationOptions:
             raise EvaluationError(f"door_belief: expected one of {DOOR_BELIEFS}, got {self.door_belief!r}")
         if self.absent_in_overall not in _ABSENT_RULES:
             raise EvaluationError(f"absent_in_overall: expected one of {_ABSENT_RULES}, got {self.absent_in_overall!r}")
-        if self.unreachable not in ("exclude", "failure"):
-            raise EvaluationError(f"unreachable: expected 'exclude' or 'failure', got {self.unreachable!r}")
+        from psg_data.evaluation._navigation_scores import UNREACHABLE_RULES
+
+        if self.unreachable not in UNREACHABLE_RULES:
+            raise EvaluationError(f"unreachable: expected one of {UNREACHABLE_RULES}, got {self.unreachable!r}")
         if not self.seeds:
             raise EvaluationError("navigation options: no seeds")
         if self.quotas is not None:

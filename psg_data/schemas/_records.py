@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CameraIntrinsics", "Box", "Room", "Receptacle", "Door", "ObjectInfo", "Frame"]
+__all__ = ["CameraIntrinsics", "Box", "Room", "Receptacle", "Door", "Opening", "ObjectInfo", "Frame"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,21 @@ class Receptacle:
 @dataclass(frozen=True)
 class Door:
     door_id: str
+    name: str
+    room_a: str
+    room_b: str
+    box: Box
+
+
+@dataclass(frozen=True)
+class Opening:
+    """A doorless passage between two rooms (an archway, an open doorway): always traversable.
+
+    ``box`` is the passage as an oriented box in the world frame (metres), like a door's doorway;
+    maps cut it out of the wall between the rooms for good.
+    """
+
+    opening_id: str
     name: str
     room_a: str
     room_b: str

@@ -212,6 +212,21 @@ _add(TableSpec(
 ))
 
 _add(TableSpec(
+    "openings",
+    pa.schema([
+        _f("opening_id", pa.string(), "unique opening id"),
+        _f("name", pa.string(), "human-readable name"),
+        _f("room_a", pa.string(), "first room the opening joins"),
+        _f("room_b", pa.string(), "second room the opening joins"),
+        *_BOX_FIELDS,
+    ]),
+    "Doorless passages between rooms (always traversable), as oriented boxes in the world frame.",
+    key=("opening_id",),
+    references=(("room_a", "rooms", "room_id"), ("room_b", "rooms", "room_id")),
+    required=False,
+))
+
+_add(TableSpec(
     "door_states",
     pa.schema([
         _f("scan_id", pa.string(), "scan during which the state holds"),

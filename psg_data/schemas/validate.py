@@ -332,8 +332,8 @@ def _check_cameras(c: _Collector, cols: dict[str, dict[str, list[Any]]]) -> dict
 
 
 def _check_boxes(c: _Collector, tables: dict[str, pa.Table]) -> None:
-    """Extents, centres and rotations of the receptacle and door boxes."""
-    for name in ("receptacles", "doors"):
+    """Extents, centres and rotations of the receptacle, door and opening boxes."""
+    for name in ("receptacles", "doors", "openings"):
         if name not in tables:
             continue
         rel = table_path(name)

@@ -60,6 +60,8 @@ def build_lab(out: str | Path, config: LabConfig | None = None, *, overwrite: bo
         w.set_rooms(L.rooms)
         w.set_receptacles(L.receptacles)
         w.set_doors(L.doors)
+        if L.openings:
+            w.set_openings(L.openings)
         w.set_objects([ObjectInfo(o.name, o.name, object_description(o)) for o in L.objects])
         door_rows: list[dict[str, Any]] = []
         sched_rows: list[dict[str, Any]] = []

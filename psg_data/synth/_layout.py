@@ -1,9 +1,26 @@
 """Geometry of the synthetic three-room lab: rooms, walls, doors, receptacles and object placement.
 
-World frame: x east, y north, z up, metres; the floor is ``z = 0``. The rooms form a chain along x,
+World frame: x east, y north, z up, metres; the floor is ``z = 0``. The rooms stand in a row along x,
 ``room_a | door_ab | room_b | door_bc | room_c``; walls are 0.1 m thick boxes centred on the room
-boundaries with doorways cut out. Receptacles stand against the walls (back to the wall), leaving the
-centre of every room and the door swing areas free for the robot.
+boundaries with doorways cut out.
+
+Two layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layout`):
+
+- ``two_routes`` (default since ``DEMO_VERSION`` ``...-tworoutes-...``): each inner wall also has a
+  doorless passage (an open archway, :class:`~psg_data.schemas.Opening`, 1.0 m wide) at the far end
+  of the wall from its door, so a closed door lengthens the way by a few metres and never isolates a
+  room: every room is reachable with both doors closed. This follows the paper's real-world lab, where
+  the robot facing a closed door on the shortest path "generate[s] a longer but feasible path"
+  (its Fig. "Predictive Navigation" and the extended real-world figure), which needs a second route.
+- ``chain``: the first layout, the doors are the only way between rooms (a closed door cuts the lab);
+  kept so that datasets built with it (no ``layout`` in their manifest) rebuild identically.
+
+Both layouts of a seed share the door positions and each room's furniture categories; the
+furniture is placed from the same random stream around different keep-out zones, so positions
+differ and two receptacles of the same footprint may swap categories (and ids) between layouts.
+
+Receptacles stand against the walls (back to the wall), leaving the centre of every room, the door
+swing areas and the passages free for the robot.
 """
 
 from __future__ import annotations
@@ -15,10 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data._geometry import yaw_rotation
-from psg_data.schemas._records import Box, Door, Receptacle, Room
+from psg_data.schemas._records import Box, Door, Opening, Receptacle, Room
 from psg_data.synth._catalog import FURNITURE, OBJECTS, ROOM_FURNITURE, ObjectSpec
 
-__all__ = ["LabLayout", "WallBox", "Instance", "make_layout",
+__all__ = ["LabLayout", "WallBox", "Instance", "make_layout", "LAYOUTS", "OPENING_WIDTH_M",
            "WALL_HEIGHT_M", "DOOR_WIDTH_M", "DOOR_HEIGHT_M", "WALL_THICKNESS_M",
            "ID_NONE", "ID_FLOOR", "ID_CEILING", "WALL_ID0", "DOOR_ID0", "RECEPTACLE_ID0", "OBJECT_ID0"]
 
@@ -29,6 +46,11 @@ WALL_THICKNESS_M = 0.10
 DOOR_WIDTH_M = 0.90
 DOOR_HEIGHT_M = 2.05
 LEAF_THICKNESS_M = 0.04
+OPENING_WIDTH_M = 1.00
+OPENING_HEIGHT_M = 2.20
+LAYOUTS = ("two_routes", "chain")
+"""Lab layouts (module docstring): ``two_routes`` (a door and an open passage in each inner wall) and
+``chain`` (doors only)."""
 
 # Instance ids of the renderer's per-pixel id image (int32).
 ID_NONE = 0
@@ -90,6 +112,7 @@ class LabLayout:
         walls: wall segments (solid boxes).
         door_hinges: per door, hinge position (x, y) and the swing direction (+1/-1 along x).
         dock_room: room where the robot starts every scan.
+        openings: doorless passages (``two_routes``: one per inner wall; ``chain``: none).
     """
 
     rooms: list[Room]
@@ -100,6 +123,7 @@ class LabLayout:
     door_hinges: list[tuple[float, float, float]]
     dock_room: str = "room_b"
     receptacle_colors: list[tuple[float, float, float]] = field(default_factory=list)
+    openings: list[Opening] = field(default_factory=list)
 
     # -- lookups --------------------------------------------------------------------------------
     @property
@@ -199,7 +223,15 @@ class LabLayout:
         return out
 
 
-def _wall_segments(door_ys: list[float]) -> list[WallBox]:
+def _opening_y(door_y: float) -> float:
+    """Centre (y) of the open passage of an inner wall: at the far end of the wall from its door."""
+    y0, y1 = _Y_RANGE
+    mid = (y0 + y1) / 2
+    margin = WALL_THICKNESS_M / 2 + 0.30 + OPENING_WIDTH_M / 2
+    return y1 - margin if door_y < mid else y0 + margin
+
+
+def _wall_segments(door_ys: list[float], open_ys: list[float | None]) -> list[WallBox]:
     t, h = WALL_THICKNESS_M / 2, WALL_HEIGHT_M
     y0, y1 = _Y_RANGE
     x_all = (_ROOMS[0][3][0], _ROOMS[-1][3][1])
@@ -209,12 +241,17 @@ def _wall_segments(door_ys: list[float]) -> list[WallBox]:
         WallBox((x_all[0] - t, y0 + t, 0.0), (x_all[0] + t, y1 - t, h)),  # west
         WallBox((x_all[1] - t, y0 + t, 0.0), (x_all[1] + t, y1 - t, h)),  # east
     ]
-    for k, yd in enumerate(door_ys):
+    for k, (yd, yo) in enumerate(zip(door_ys, open_ys)):
         x = _ROOMS[k][3][1]
-        a, b = yd - DOOR_WIDTH_M / 2, yd + DOOR_WIDTH_M / 2
-        walls += [WallBox((x - t, y0 + t, 0.0), (x + t, a, h)),
-                  WallBox((x - t, b, 0.0), (x + t, y1 - t, h)),
-                  WallBox((x - t, a, DOOR_HEIGHT_M), (x + t, b, h))]  # lintel
+        gaps = [(yd - DOOR_WIDTH_M / 2, yd + DOOR_WIDTH_M / 2, DOOR_HEIGHT_M)]
+        if yo is not None:
+            gaps.append((yo - OPENING_WIDTH_M / 2, yo + OPENING_WIDTH_M / 2, OPENING_HEIGHT_M))
+        lo, lintels = y0 + t, []
+        for a, b, top in sorted(gaps):  # wall pieces between the gaps, then the lintels over them
+            walls.append(WallBox((x - t, lo, 0.0), (x + t, a, h)))
+            lintels.append(WallBox((x - t, a, top), (x + t, b, h)))
+            lo = b
+        walls += [WallBox((x - t, lo, 0.0), (x + t, y1 - t, h)), *lintels]
     return walls
 
 
@@ -222,11 +259,19 @@ def _overlap(a: tuple[float, float, float, float], b: tuple[float, float, float,
     return not (a[1] + gap <= b[0] or b[1] + gap <= a[0] or a[3] + gap <= b[2] or b[3] + gap <= a[2])
 
 
-def make_layout(seed: int) -> LabLayout:
-    """Build the lab geometry from ``seed`` (door positions, furniture choice and placement)."""
+def make_layout(seed: int, layout: str = "two_routes") -> LabLayout:
+    """Build the lab geometry from ``seed`` (door positions, furniture choice and placement).
+
+    Args:
+        seed: the lab's seed.
+        layout: one of :data:`LAYOUTS` (module docstring).
+    """
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout: expected one of {LAYOUTS}, got {layout!r}")
     rng = np.random.default_rng([int(seed), 101])
     door_ys = [float(rng.uniform(1.3, 4.2)) for _ in range(len(_ROOMS) - 1)]
-    walls = _wall_segments(door_ys)
+    open_ys: list[float | None] = [_opening_y(y) if layout == "two_routes" else None for y in door_ys]
+    walls = _wall_segments(door_ys, open_ys)
     rooms: list[Room] = []
     for rid, name, _, (xa, xb), _ in _ROOMS:
         y0, y1 = _Y_RANGE
@@ -240,49 +285,78 @@ def make_layout(seed: int) -> LabLayout:
                           Box(np.array([x, yd, DOOR_HEIGHT_M / 2]),
                               np.array([WALL_THICKNESS_M + 0.04, DOOR_WIDTH_M, DOOR_HEIGHT_M]), np.eye(3))))
         hinges.append((x, yd - DOOR_WIDTH_M / 2 + 0.01, +1.0))  # leaves swing into the eastern room
+    openings: list[Opening] = []
+    for k, yo in enumerate(open_ys):
+        if yo is None:
+            continue
+        x = _ROOMS[k][3][1]
+        a, b = _ROOMS[k][0], _ROOMS[k + 1][0]
+        openings.append(Opening(f"passage_{a[-1]}{b[-1]}", f"open passage {a[-1].upper()}-{b[-1].upper()}", a, b,
+                                Box(np.array([x, yo, OPENING_HEIGHT_M / 2]),
+                                    np.array([WALL_THICKNESS_M + 0.04, OPENING_WIDTH_M, OPENING_HEIGHT_M]),
+                                    np.eye(3))))
 
     receptacles: list[Receptacle] = []
     colors: list[tuple[float, float, float]] = []
+    forbidden = []
+    for k, yd in enumerate(door_ys):  # door passage and swing zones on both sides of each doorway
+        x = _ROOMS[k][3][1]
+        dx = 1.1 if layout == "chain" else 0.9  # two_routes: room for the passages' zones too
+        forbidden.append((x - dx, x + dx, yd - 0.75, yd + 0.75))
+    for k, yo in enumerate(open_ys):  # and in front of the open passages
+        if yo is not None:
+            forbidden.append((_ROOMS[k][3][1] - 0.9, _ROOMS[k][3][1] + 0.9, yo - 0.65, yo + 0.65))
     for rid, name, theme, (xa, xb), n in _ROOMS:
         cats = list(ROOM_FURNITURE[theme])
         rng.shuffle(cats)
         cats = (cats * 2)[:n]
-        t = WALL_THICKNESS_M / 2
-        ix0, ix1, iy0, iy1 = xa + t, xb - t, _Y_RANGE[0] + t, _Y_RANGE[1] - t
-        forbidden = []
-        for k, yd in enumerate(door_ys):  # door passage and swing zones on both sides of each doorway
-            x = _ROOMS[k][3][1]
-            forbidden.append((x - 1.1, x + 1.1, yd - 0.75, yd + 0.75))
-        placed: list[tuple[float, float, float, float]] = list(forbidden)
-        count = 0
-        for cat in sorted(cats, key=lambda c: -FURNITURE[c].width_m):
-            spec = FURNITURE[cat]
-            w, d = spec.width_m, spec.depth_m
-            for _attempt in range(2000):
-                side = int(rng.integers(4))
-                if side in (0, 1):  # south / north wall: width along x
-                    cx = float(rng.uniform(ix0 + w / 2 + 0.05, ix1 - w / 2 - 0.05))
-                    cy = iy0 + d / 2 + 0.03 if side == 0 else iy1 - d / 2 - 0.03
-                    yaw = 0.0 if side == 0 else np.pi
-                    fp = (cx - w / 2, cx + w / 2, cy - d / 2, cy + d / 2)
-                else:  # west / east wall: width along y
-                    cy = float(rng.uniform(iy0 + w / 2 + 0.05, iy1 - w / 2 - 0.05))
-                    cx = ix0 + d / 2 + 0.03 if side == 2 else ix1 - d / 2 - 0.03
-                    yaw = -np.pi / 2 if side == 2 else np.pi / 2
-                    fp = (cx - d / 2, cx + d / 2, cy - w / 2, cy + w / 2)
-                if any(_overlap(fp, q, 0.15) for q in placed):
-                    continue
-                placed.append(fp)
-                count += 1
-                rec_id = f"{rid[-1]}{count:02d}_{cat}"
-                receptacles.append(Receptacle(
-                    rec_id, f"{cat.replace('_', ' ')} {count} ({name})", rid,
-                    Box(np.array([cx, cy, spec.height_m / 2]), np.array([w, d, spec.height_m]), yaw_rotation(yaw)),
-                    cat))
-                jitter = rng.uniform(-0.06, 0.06, 3)
-                c0, c1, c2 = (float(c) for c in np.clip(np.asarray(spec.color) + jitter, 0.05, 0.95))
-                colors.append((c0, c1, c2))
+        for _room_try in range(50):  # a draw that does not fit (rare) is redrawn from the same stream
+            got = _place_room(rng, rid, name, (xa, xb), cats, forbidden)
+            if got is not None:
+                receptacles += got[0]
+                colors += got[1]
                 break
-            else:  # pragma: no cover - the room sizes leave ample space
-                raise RuntimeError(f"could not place a {cat} in {rid}")
-    return LabLayout(rooms, doors, receptacles, list(OBJECTS), walls, hinges, "room_b", colors)
+        else:  # pragma: no cover - the room sizes leave ample space
+            raise RuntimeError(f"could not place the furniture of {rid}")
+    return LabLayout(rooms, doors, receptacles, list(OBJECTS), walls, hinges, "room_b", colors, openings)
+
+
+def _place_room(rng: np.random.Generator, rid: str, name: str, x_range: tuple[float, float], cats: list[str],
+                forbidden: list[tuple[float, float, float, float]]
+                ) -> tuple[list[Receptacle], list[tuple[float, float, float]]] | None:
+    """Receptacles (and colours) of one room against its walls, outside ``forbidden``; None if one does not fit."""
+    t = WALL_THICKNESS_M / 2
+    ix0, ix1, iy0, iy1 = x_range[0] + t, x_range[1] - t, _Y_RANGE[0] + t, _Y_RANGE[1] - t
+    placed: list[tuple[float, float, float, float]] = list(forbidden)
+    receptacles: list[Receptacle] = []
+    colors: list[tuple[float, float, float]] = []
+    for cat in sorted(cats, key=lambda c: -FURNITURE[c].width_m):
+        spec = FURNITURE[cat]
+        w, d = spec.width_m, spec.depth_m
+        for _attempt in range(2000):
+            side = int(rng.integers(4))
+            if side in (0, 1):  # south / north wall: width along x
+                cx = float(rng.uniform(ix0 + w / 2 + 0.05, ix1 - w / 2 - 0.05))
+                cy = iy0 + d / 2 + 0.03 if side == 0 else iy1 - d / 2 - 0.03
+                yaw = 0.0 if side == 0 else np.pi
+                fp = (cx - w / 2, cx + w / 2, cy - d / 2, cy + d / 2)
+            else:  # west / east wall: width along y
+                cy = float(rng.uniform(iy0 + w / 2 + 0.05, iy1 - w / 2 - 0.05))
+                cx = ix0 + d / 2 + 0.03 if side == 2 else ix1 - d / 2 - 0.03
+                yaw = -np.pi / 2 if side == 2 else np.pi / 2
+                fp = (cx - d / 2, cx + d / 2, cy - w / 2, cy + w / 2)
+            if any(_overlap(fp, q, 0.15) for q in placed):
+                continue
+            placed.append(fp)
+            count = len(receptacles) + 1
+            receptacles.append(Receptacle(
+                f"{rid[-1]}{count:02d}_{cat}", f"{cat.replace('_', ' ')} {count} ({name})", rid,
+                Box(np.array([cx, cy, spec.height_m / 2]), np.array([w, d, spec.height_m]), yaw_rotation(yaw)),
+                cat))
+            jitter = rng.uniform(-0.06, 0.06, 3)
+            c0, c1, c2 = (float(c) for c in np.clip(np.asarray(spec.color) + jitter, 0.05, 0.95))
+            colors.append((c0, c1, c2))
+            break
+        else:
+            return None
+    return receptacles, colors

@@ -1,8 +1,9 @@
 """``LabModel``: the synthetic lab (geometry, schedules, camera, scan trajectories) from a seed.
 
 Scan trajectories: the robot starts every scan in the dock room (room B) and visits the rooms it
-can reach through open doors (a closed door is never crossed; with the chain A-B-C a closed door
-hides the room behind it for that scan). Keyframe viewpoints are chosen greedily from a grid of
+can reach through open doors and open passages (a closed door is never crossed; in the ``chain``
+layout a closed door hides the room behind it for that scan, in ``two_routes`` the passages reach
+every room). Keyframe viewpoints are chosen greedily from a grid of
 candidate poses (positions in the free centre of each room, yaw every 15 deg, camera 1.25 m above
 the floor pitched 28 deg down) so that the top surfaces of as many receptacles as possible are seen;
 the frame budget is shared between the reachable rooms in proportion to their receptacles.
@@ -28,7 +29,7 @@ from psg_data.errors import PsgDataError
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
-from psg_data.synth._layout import RECEPTACLE_ID0, LabLayout, make_layout
+from psg_data.synth._layout import LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
 
@@ -76,6 +77,9 @@ class LabConfig:
         day_persistence: ``steps-v2``: probability that the next day of the same kind keeps the
             day's pattern (diagonal of the day-level matrix).
         max_dwell_steps: ``steps-v2``: longest stay drawn for an entity's best receptacle, steps.
+        layout: the lab geometry, ``two_routes`` (default: a door and an open passage in each inner
+            wall) or ``chain`` (doors only; what datasets without ``layout`` in their manifest used),
+            see :mod:`psg_data.synth._layout`.
     """
 
     seed: int = 0
@@ -95,6 +99,7 @@ class LabConfig:
     day_patterns: int = 5
     day_persistence: float = 0.6
     max_dwell_steps: int = 8
+    layout: str = "two_routes"
 
     def __post_init__(self) -> None:
         check_settings(LAB_SETTINGS, asdict(self), "synth", PsgDataError)
@@ -161,6 +166,7 @@ class LabConfig:
                 "timezone", "routine_strength", "day_patterns", "day_persistence", "max_dwell_steps"}
         kw: dict[str, Any] = {k: extra[k] for k in keys if k in extra}
         kw["generator"] = extra.get("schedule_generator", "continuous-v1")
+        kw["layout"] = extra.get("layout", "chain")  # datasets from before the two-route lab
         kw["shift_weekdays"] = tuple(extra.get("shift_weekdays", ("Mon", "Fri")))
         kw["scan_hours"] = tuple(extra.get("scan_hours", (9, 11, 13, 15)))
         if "noise" in extra:
@@ -185,6 +191,7 @@ LAB_SETTINGS = {
     "day_patterns": Integral(1, 12),
     "day_persistence": Real(0.0, 1.0, finite=True),
     "max_dwell_steps": Integral(1, 10**6),
+    "layout": Options(*LAYOUTS),
 }
 """The declared settings of :class:`LabConfig` (see :mod:`psg_data._settings`)."""
 
@@ -295,7 +302,7 @@ class LabModel:
         elif seed is not None:
             raise PsgDataError("LabModel: pass either config or seed, not both")
         self.config = config
-        self.layout: LabLayout = make_layout(config.seed)
+        self.layout: LabLayout = make_layout(config.seed, config.layout)
         self.schedule: LabSchedule | StepSchedule
         if config.generator == "continuous-v1":
             self.schedule = LabSchedule(self.layout, config.seed, config.date, config.days, config.timezone,
@@ -339,15 +346,15 @@ class LabModel:
         return SceneState(self.schedule.objects_at(stamp_ns), self.schedule.doors_at(stamp_ns))
 
     def reachable_rooms(self, doors_open: dict[str, bool]) -> list[str]:
-        """Rooms reachable from the dock room through open doors (breadth-first order)."""
+        """Rooms reachable from the dock room through open doors and open passages (breadth-first order)."""
         seen = [self.layout.dock_room]
         frontier = [self.layout.dock_room]
+        links = [(d.room_a, d.room_b) for d in self.layout.doors if doors_open.get(d.door_id, False)]
+        links += [(o.room_a, o.room_b) for o in self.layout.openings]
         while frontier:
             room = frontier.pop(0)
-            for d in self.layout.doors:
-                if not doors_open.get(d.door_id, False):
-                    continue
-                for a, b in ((d.room_a, d.room_b), (d.room_b, d.room_a)):
+            for ra, rb in links:
+                for a, b in ((ra, rb), (rb, ra)):
                     if a == room and b not in seen:
                         seen.append(b)
                         frontier.append(b)

@@ -218,6 +218,7 @@ def _write_side_files(ds: Any, out: Path, recordings: dict[str, str], optical: d
         "rooms": rows("rooms"),
         "receptacles": rows("receptacles"),
         "doors": rows("doors"),
+        **({"openings": rows("openings")} if ds.has_table("openings") else {}),
         "objects": rows("objects"),
     }
     (out / "site.json").write_text(json.dumps(site, indent=1) + "\n", encoding="utf-8")

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from psg_data.errors import FormatError
 from psg_data.schemas._checksum import sha256_file
 from psg_data.schemas._manifest import DatasetInfo
-from psg_data.schemas._records import CameraIntrinsics, Door, ObjectInfo, Receptacle, Room
+from psg_data.schemas._records import CameraIntrinsics, Door, ObjectInfo, Opening, Receptacle, Room
 from psg_data.schemas._tables import (
     ARCHIVE_MEMBER_TEMPLATES,
     ARCHIVE_PATH_TEMPLATE,
@@ -529,6 +529,12 @@ class DatasetWriter:
         self._tables["doors"] = to_arrow("doors", [
             {"door_id": d.door_id, "name": d.name, "room_a": d.room_a, "room_b": d.room_b, **_box_cols(d.box)}
             for d in doors])
+
+    def set_openings(self, openings: Iterable[Opening]) -> None:
+        """Set the optional ``openings`` table (doorless passages between rooms)."""
+        self._tables["openings"] = to_arrow("openings", [
+            {"opening_id": o.opening_id, "name": o.name, "room_a": o.room_a, "room_b": o.room_b, **_box_cols(o.box)}
+            for o in openings])
 
     def set_objects(self, objects: Iterable[ObjectInfo]) -> None:
         """Set the ``objects`` table."""

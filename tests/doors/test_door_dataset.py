@@ -118,7 +118,15 @@ def test_door_task_and_objects_behind_doors(labelled_lab) -> None:  # type: igno
     opts = DoorTaskOptions(labels="gt", seeds=(0, 1), n_queries=30)
     res = run_door_task(labelled_lab, [("tow", "time_of_week_frequency")], opts)
     s = res.summary.set_index("estimator")
-    assert list(s.index) == ["all_open", "oracle", "tow"] and (s["queries"] == 60).all() and (s["seeds"] == 2).all()
+    assert list(s.index) == ["all_open", "oracle", "tow", "tow (expected cost)"]
+    assert (s["queries"] == 60).all() and (s["seeds"] == 2).all()
+    assert set(res.records["rule"]) == {"threshold", "expected_cost"}
+    # the headroom table comes first, with the two reference rows
+    from psg_data.evaluation import door_results
+
+    tables = door_results(res).tables
+    assert [t.name for t in tables[:2]] == ["door_headroom", "doors"]
+    assert [r.method for r in tables[0].rows] == ["oracle", "all_open"] and "headroom" in tables[0].notes[0]
     assert np.isclose(s.loc["tow", "blocked_rate"], res.per_seed[res.per_seed.estimator == "tow"].blocked_rate.mean())
     objs = res.objects.summary.set_index("method")
     assert list(objs.index) == ["oracle", "tow [doors all open]", "tow [doors predicted]", "tow [doors known]"]

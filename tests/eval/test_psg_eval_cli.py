@@ -248,7 +248,7 @@ def test_doors_task_table_files_and_figure(lab: Path, tmp_path: Path) -> None:
               "--queries", "60", "--out", str(out), "--quiet")
     assert res.exit_code == 0, res.output + str(res.exception)
     summary = pd.read_csv(out / "results.csv").set_index("estimator")
-    assert set(summary.index) == {"all_open", "oracle", "perpetua_star"}
+    assert set(summary.index) == {"all_open", "oracle", "perpetua_star", "perpetua_star (expected cost)"}
     assert (summary["queries"] == 120).all()
     assert summary.loc["oracle", "blocked_first_plans"] == 0 and summary.loc["oracle", "wasted_m"] == 0.0
     assert summary.loc["all_open", "declined"] == 0
@@ -257,11 +257,12 @@ def test_doors_task_table_files_and_figure(lab: Path, tmp_path: Path) -> None:
     m = per_seed.groupby("estimator").blocked_rate.mean()
     np.testing.assert_allclose(summary.loc[m.index, "blocked_rate"], m)
     rec = pd.read_csv(out / "records.csv")
-    assert len(rec) == 3 * 120 and rec["p_open:door_ab"].between(0, 1).all()
+    assert len(rec) == 4 * 120 and rec["p_open:door_ab"].between(0, 1).all()
     info = json.loads((out / "results.json").read_text())["info"]
     assert info["task"] == "doors" and info["seeds"] == [0, 1] and info["labels"] == "gt"
     _assert_png(out / "door_plan_perpetua_star.png")
     assert "perpetua_star" in res.output and "blocked %" in res.output
+    assert res.output.index("headroom") < res.output.index("perpetua_star (expected cost)")  # headroom first
     assert (out / "objects" / "summary.csv").is_file()
     cmp = run("compare", str(out))
     assert cmp.exit_code == 0 and "[doors]" in cmp.output

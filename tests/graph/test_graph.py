@@ -231,6 +231,30 @@ def test_plan_is_the_agents_ranking_and_a_shortest_path(graph_dataset: Path) -> 
     assert office and all(np.isinf(shut.distances_m[list(shut.candidates).index(r)]) for r in office)
 
 
+def test_plan_with_the_expected_cost_door_rule(graph_dataset: Path) -> None:
+    """door1 at P(open) 0.2 is the only way to the office: the threshold rule finds no route there, the
+    expected-cost rule plans through it, at the expected walked distance of psg_data.maps.expected_cost_route."""
+    from psg_data.maps import expected_cost_route
+
+    g = PredictiveGraph.from_dataset(graph_dataset, "perpetua_star").with_door_filters({"door1": _Const(0.2)})
+    t = T_QUERY
+    kept = [r for r in g.plan((1.5, 1.5), "book", t, delta=0.0).candidates if not r.startswith("o_")]
+    thr = g.plan((1.5, 1.5), "book", t, delta=0.0, exclude=kept)
+    assert thr.outcome == "no_path"
+    exp = g.plan((1.5, 1.5), "book", t, delta=0.0, exclude=kept, door_rule="expected_cost")
+    assert exp.outcome == "go" and exp.target is not None and exp.doors_open["door1"]
+    cache = g.planning_cache()
+    W = g.grid.shape[1]
+    start = exp.start_cell[0] * W + exp.start_cell[1]
+    for r, d in zip(exp.candidates, exp.distances_m):
+        route = expected_cost_route(cache, r, start, {"door1": 0.2})
+        assert route is not None and d == pytest.approx(route.expected_m)
+    end = tuple(g.grid.world_to_cell(exp.path_xy[-1]))
+    assert cache.approach(exp.target, cache.key({"door1": True}))[end]
+    with pytest.raises(GraphError, match="door_rule"):
+        g.plan((1.5, 1.5), "book", t, door_rule="guess")
+
+
 class _Const:
     def __init__(self, v: float) -> None:
         self.v, self.last_t_s = v, None

@@ -50,7 +50,8 @@ def test_same_seed_identical_tables(tmp_path: Path, small_dataset_path: Path, sm
 
 
 def test_trajectory_respects_closed_doors(small_lab: LabModel) -> None:
-    lab = LabModel(LabConfig(seed=0, days=7, frames_per_scan=6, width=32, height=24))
+    # the chain layout: a closed door hides the room behind it
+    lab = LabModel(LabConfig(seed=0, days=7, frames_per_scan=6, width=32, height=24, layout="chain"))
     seen_closed = 0
     for p in lab.scans:
         rooms = {lab.layout.room_of_point(T[:2, 3]) for T in p.poses}
@@ -61,6 +62,16 @@ def test_trajectory_respects_closed_doors(small_lab: LabModel) -> None:
                 far = d.room_a if d.room_b == lab.layout.dock_room else d.room_b
                 assert far not in rooms
     assert seen_closed > 0
+
+
+def test_two_route_scans_reach_every_room() -> None:
+    # the two-route lab: the open passages reach every room whatever the doors
+    lab = LabModel(LabConfig(seed=0, days=7, frames_per_scan=6, width=32, height=24))
+    closed = 0
+    for p in lab.scans:
+        assert sorted(p.reachable_rooms) == sorted(lab.layout.room_ids)
+        closed += sum(not o for o in p.state.doors_open.values())
+    assert closed > 0
 
 
 def _ray_box_t(o: np.ndarray, d: np.ndarray, box) -> np.ndarray:  # type: ignore[no-untyped-def]

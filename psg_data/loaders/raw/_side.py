@@ -5,6 +5,7 @@ Layout (see docs/RAW_FORMATS.md)::
 
     recordings/
       site.json             # or site.yaml: name, timezone, cameras, rooms, receptacles, doors, objects
+                            #   (and optionally openings: doorless passages, boxes like doors)
       door_states.csv       # scan_id,door_id,state           (or .json / .yaml: a list of rows)
       schedule.csv          # scan_id,object_id,receptacle_id (empty receptacle_id = absent)
       scans.csv             # scan_id,recording,split         (optional)
@@ -29,7 +30,7 @@ from psg_data.errors import ConversionError
 
 __all__ = ["SideData", "read_side_files", "SIDE_TABLES", "SITE_NAMES"]
 
-SIDE_TABLES = ("rooms", "receptacles", "doors", "objects", "door_states", "schedule", "scans")
+SIDE_TABLES = ("rooms", "receptacles", "doors", "openings", "objects", "door_states", "schedule", "scans")
 SITE_NAMES = ("site.json", "site.yaml", "site.yml")
 _EXTS = (".csv", ".json", ".yaml", ".yml")
 _LIST_COLS = ("center_m", "extent_m", "rotation", "floor_polygon_m")
