@@ -36,3 +36,13 @@ def test_damaged_database_converts_or_fails_cleanly(tmp_path: Path, pristine: by
     db = work / "map.db"
     db.write_bytes(_mutate(pristine, *d))
     converts_or_fails_cleanly(db, "converted")
+
+
+def test_schema_damaged_into_invalid_utf8_fails_cleanly(tmp_path: Path, pristine: bytes) -> None:
+    """Found by the fuzz test above: a damaged index name in the schema makes even SQLite's error
+    message invalid UTF-8 (``malformed database schema (IDX_Node_i\\xe4)``); still one error line."""
+    at = pristine.find(b"IDX_Node_")
+    assert at > 0, "the writer's database has no Node index; pick another name to damage"
+    db = tmp_path / "map.db"
+    db.write_bytes(pristine[:at + 10] + b"\xe4" + pristine[at + 11:])
+    converts_or_fails_cleanly(db, "converted")

@@ -334,13 +334,15 @@ class RtabmapDatabase:
             raise
 
     def _rows(self, sql: str, what: str, args: tuple[object, ...] = ()) -> list[tuple[object, ...]]:
-        """Every row of a query; an SQLite error (locked, malformed, ...) as a ConversionError."""
+        """Every row of a query; an SQLite error (locked, malformed, ...) as a ConversionError, and so
+        is text that is not UTF-8 (in a damaged file, even SQLite's own error message may be such text).
+        """
         try:
             return self.con.execute(sql, args).fetchall()
-        except sqlite3.Error as exc:
+        except (sqlite3.Error, UnicodeDecodeError) as exc:
             raise self._error(exc, what) from None
 
-    def _error(self, exc: sqlite3.Error, what: str) -> ConversionError:
+    def _error(self, exc: sqlite3.Error | UnicodeDecodeError, what: str) -> ConversionError:
         msg = str(exc)
         if "locked" in msg or "busy" in msg:
             return ConversionError(f"{self.where}: {what}: database is locked by another writer; close RTAB-Map "
