@@ -140,6 +140,8 @@ def main() -> int:
     ap.add_argument("--group", action="append", default=[], help="group to run (repeatable; see pyproject.toml)")
     ap.add_argument("--max-children", type=int, default=1, help="parallel mutant runs (default: 1)")
     ap.add_argument("--report-only", action="store_true", help="only count the results of earlier runs")
+    ap.add_argument("--only", action="append", default=[], metavar="GLOB",
+                    help="test only the mutants whose names match (mutmut's names, e.g. '*PerpetuaStarFilter*')")
     ap.add_argument("--survivors", action="store_true",
                     help="re-test only the group's survivors (after adding tests that should kill them)")
     args = ap.parse_args()
@@ -152,7 +154,7 @@ def main() -> int:
     start = time.time()
     load = Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").is_file() else "?"
     for group in [] if args.report_only else args.group or list(groups):
-        names = _survivors(group) if args.survivors else []
+        names = _survivors(group) if args.survivors else args.only
         if args.survivors and not names:
             continue
         work = prepare(group, settings, groups)
