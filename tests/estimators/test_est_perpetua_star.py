@@ -23,7 +23,8 @@ from psg_data.estimators import (
     render_llm_prompt,
 )
 from psg_data.estimators._mixture import MixtureFilter
-from psg_data.estimators._perpetua_star import PerpetuaStarFilter, discounted_cumsum
+from psg_data.estimators._perpetua_star import PerpetuaStarFilter, _edge_key_of, discounted_cumsum
+from psg_data.estimators._priors import OraclePrior
 from psg_data.estimators._survival_training import mixture_median_s
 
 PER = SurvivalMixture("lognormal", np.array([0.5, 0.5]), np.log([3600.0, 8 * 3600.0]), np.array([0.3, 0.5]))
@@ -204,3 +205,71 @@ def test_segmentation_settings_for_sparse_scans() -> None:
     assert r["present_runs"] + r["absent_runs"] <= 3 and f["present_runs"] >= 6
     with pytest.raises(EstimatorError, match="min_segment"):
         get_estimator("perpetua_star", min_segment=0).fit(streams)
+
+
+# ---------------------------------------------------------------- issue 33: state, keys, priors
+
+
+def test_state_round_trip_keeps_every_setting() -> None:
+    f = PerpetuaStarFilter(("obj", "rec"), PER, EMG, 0.1, 0.2, ConstantPrior(0.3), gamma=None, half_life_s=7200.0,
+                           alpha0_per_s=1e-4, prior_floor=1e-2, escape=2e-4, escape_first=5e-4,
+                           anneal_prediction=True, name="perpetua_star_annealed")
+    rng = np.random.default_rng(0)
+    t = 1.7e9 + np.cumsum(rng.uniform(600, 3600, 60))
+    f.update_many(t, (np.arange(60) // 7 % 2).astype(np.int8))
+    assert f.n_restarts > 0
+    state = f.get_state()
+    g = PerpetuaStarFilter.from_state(state)
+    assert g.get_state() == state
+    assert g.edge == ("obj", "rec") and g.phase == f.phase and g.n_restarts == f.n_restarts
+    q = t[-1] + np.linspace(0.0, 86400.0, 7)
+    np.testing.assert_array_equal(g.predict(q), f.predict(q))
+
+
+def test_edge_keys_in_every_spelling() -> None:
+    for k in ("obj/rec", "obj|rec", "obj@rec", " obj / rec ", ("obj", "rec")):
+        assert _edge_key_of(k) == ("obj", "rec")
+    assert _edge_key_of("a/b/c") == ("a", "b/c")  # the first separator splits
+    with pytest.raises(EstimatorError, match=r"^schedule key 'objrec': expected \(object, receptacle\) or "
+                                             r"'object/receptacle'$"):
+        _edge_key_of("objrec")
+
+
+def test_oracle_prior_from_the_ground_truth_argument_of_its_own_edge() -> None:
+    streams = [s for s in conformance_streams(days=7) if s.edge == ("obj_a", "rec_1")]
+    plain = [EdgeStream(s.edge, s.t_s, s.y) for s in streams]  # no ground truth in meta
+    gt_t = np.asarray(streams[0].meta["gt_t_s"], dtype=np.float64)
+    gt_x = np.asarray(streams[0].meta["gt_state"], dtype=np.float64)
+    other = (gt_t, 1.0 - gt_x)  # another edge's ground truth, listed first
+    est = get_estimator("perpetua_star_oracle", ground_truth={"obj_b/rec_1": other, "obj_a/rec_1": (gt_t, gt_x)})
+    est.fit(plain, timezone="America/Toronto")
+    want = OraclePrior.from_ground_truth(gt_t, gt_x, est.clock_)
+    q = gt_t[::97]
+    np.testing.assert_array_equal(est.priors_[("obj_a", "rec_1")](q), want(q))
+    with pytest.raises(EstimatorError, match=r"prior='oracle' needs ground truth for edge \('obj_a', 'rec_1'\)"):
+        get_estimator("perpetua_star_oracle").fit(plain)
+
+
+def test_schedule_prior_per_edge_also_for_edges_without_training_streams() -> None:
+    streams = conformance_streams(days=4)
+    text = "Schedule: ['Mon: 08:00 - Mon: 18:00', 'Wed: 08:00 - Wed: 18:00']"
+    listed = ["Tue: 09:00 - Tue: 10:00"]
+    est = get_estimator("perpetua_star_schedule", schedule_inside=0.8, schedule_outside=0.3,
+                        schedules={"obj_a/rec_1": text, ("ghost", "rec_9"): listed})
+    assert est.get_params()["prior"] == "schedule"
+    est.fit(streams, timezone="America/Toronto")
+    q = float(streams[0].t_s[0]) + np.arange(0.0, 7 * 86400.0, 3600.0)
+    want = SchedulePrior(parse_llm_schedule(text), 0.8, 0.3, "America/Toronto")(q)
+    np.testing.assert_array_equal(est.priors_[("obj_a", "rec_1")](q), want)
+    assert set(np.unique(want)) == {0.3, 0.8}
+    ghost = SchedulePrior(parse_llm_schedule(repr(listed)), 0.8, 0.3, "America/Toronto")(q)
+    np.testing.assert_array_equal(est.priors_[("ghost", "rec_9")](q), ghost)
+    unscheduled = next(s.edge for s in streams if s.edge != ("obj_a", "rec_1"))
+    assert est.priors_[unscheduled](q).tolist() == [0.5] * q.size
+    # a filter restored through the estimator predicts as the one it came from
+    f = est.make_filter(("obj_a", "rec_1"))
+    f.update_many(streams[0].t_s, streams[0].y)
+    g = est.filter_from_state(f.get_state())
+    np.testing.assert_array_equal(g.predict(q), f.predict(q))
+    with pytest.raises(EstimatorError, match=r"^perpetua_star_schedule: prior='schedule' needs schedules="):
+        get_estimator("perpetua_star_schedule").fit(streams)
