@@ -273,3 +273,69 @@ def test_schedule_prior_per_edge_also_for_edges_without_training_streams() -> No
     np.testing.assert_array_equal(g.predict(q), f.predict(q))
     with pytest.raises(EstimatorError, match=r"^perpetua_star_schedule: prior='schedule' needs schedules="):
         get_estimator("perpetua_star_schedule").fit(streams)
+
+
+def _half_life_filter(prior=None) -> PerpetuaStarFilter:
+    return PerpetuaStarFilter(("o", "r"), PER, EMG, 0.1, 0.1, ConstantPrior(0.5) if prior is None else prior,
+                              gamma=None, half_life_s=3600.0, alpha0_per_s=1e-4, prior_floor=1e-3)
+
+
+def test_half_life_forgetting_discounts_by_half_per_half_life_in_the_scalar_path() -> None:
+    # L_N = 0.5 ** ((t_N - t_N-1) / half_life) * L_N-1 + (log p(Y_1:N | m) - log p(Y_1:N-1 | m)), L_0 = increment
+    t = 1.7e9 + np.array([0.0, 1800.0, 9000.0, 9000.0, 16200.0])
+    y = np.ones(5, dtype=np.int8)
+    f = _half_life_filter()
+    per, emg = MixtureFilter(PER, 0.1, 0.1), MixtureFilter(EMG, 0.1, 0.1, emergence=True)
+    want, ev_prev, prev_t = np.zeros(2), np.zeros(2), None
+    for ti, yi in zip(t.tolist(), y.tolist()):
+        f.update(ti, yi)
+        per.update(ti, yi)
+        emg.update(ti, yi)
+        ev = np.array([per.log_evidence(), emg.log_evidence()])
+        g = 1.0 if prev_t is None else 0.5 ** ((ti - prev_t) / 3600.0)
+        want = g * want + (ev - ev_prev)
+        ev_prev, prev_t = ev, ti
+    assert f.n_restarts == 0
+    np.testing.assert_allclose(f.L, want, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_half_life_batches_with_a_time_varying_prior_equal_one_at_a_time(seed: int) -> None:
+    prior = SchedulePrior(parse_llm_schedule("['Mon: 08:00 - Mon: 18:00', 'Tue: 08:00 - Fri: 18:00']"), 0.8, 0.15,
+                          "UTC")
+    rng = np.random.default_rng(seed)
+    n = 400
+    t = 1.7e9 + np.cumsum(rng.uniform(60, 5400, n))
+    x = (np.mod(t, 86400) < 50000).astype(np.int8)
+    y = np.where(rng.random(n) < 0.15, 1 - x, x).astype(np.int8)
+    a, b = _half_life_filter(prior), _half_life_filter(prior)
+    a.update_many(t, y)
+    for ti, yi in zip(t.tolist(), y.tolist()):
+        b.update(ti, yi)
+    assert a.n_restarts == b.n_restarts > 0 and a.phase == b.phase
+    np.testing.assert_allclose(a.L, b.L, rtol=1e-9, atol=1e-9)
+    q = t[-1] + np.linspace(0, 86400, 9)
+    np.testing.assert_allclose(a.predict(q), b.predict(q), atol=1e-9)
+
+
+def test_estimator_settings_reach_its_filters() -> None:
+    from psg_data.estimators._common import escape_floors
+
+    streams = conformance_streams(days=4)
+    defaults = get_estimator("perpetua_star").get_params()
+    assert defaults["time_unit_s"] == 60.0 and defaults["max_components"] == 5  # alpha0 per minute (the paper)
+    assert get_estimator("perpetua_star_oracle", gamma=0.9).get_params()["gamma"] == 0.9
+    est = get_estimator("perpetua_star_annealed", prior="none", gamma=0.95, escape=1e-8).fit(streams)
+    seen = streams[0].edge
+    f = est.make_filter(seen)
+    s = f.get_state()
+    assert (s["estimator"], s["edge"], s["gamma"], s["anneal_prediction"]) == (
+        "perpetua_star_annealed", list(seen), 0.95, True)
+    assert s["escape"] == list(escape_floors(1e-8)) and s["escape"][0] != s["escape"][1]
+    assert s["per_survival"] == est.survivals_[seen][0].to_dict()
+    # an edge never trained on: the default mixtures and the flat prior
+    u = est.make_filter(("never", "seen"))
+    us = u.get_state()
+    assert us["per_survival"] == est.default_survivals_[0].to_dict()
+    assert us["emg_survival"] == est.default_survivals_[1].to_dict()
+    assert u.predict(np.array([1.7e9])).tolist() == [0.5]
