@@ -339,3 +339,59 @@ def test_estimator_settings_reach_its_filters() -> None:
     assert us["per_survival"] == est.default_survivals_[0].to_dict()
     assert us["emg_survival"] == est.default_survivals_[1].to_dict()
     assert u.predict(np.array([1.7e9])).tolist() == [0.5]
+
+
+def test_fit_summary_records_each_resolved_setting_and_its_source() -> None:
+    from psg_data.estimators._cadence import training_cadence
+    from psg_data.estimators._fremen_estimator import order_selection_summary
+
+    streams = conformance_streams(days=4)
+    cad = training_cadence(streams)
+    src = f"cadence: typical gap {cad.typical_gap_s:g} s" + ("" if cad.measured else " (fallback)")
+    est = get_estimator("perpetua_star", n_periods=20).fit(streams)
+    assert est.fit_summary_["settings"] == {
+        "forgetting": {"value": f"half-life {cad.half_life_s:g} s", "source": src},
+        "alpha0": {"value": f"{cad.alpha0_per_s * 60:.4g} per 60 s ({cad.alpha0_per_s:.4g} per s)", "source": src},
+        "n_periods": {"value": 20, "source": "set"}}
+    assert (est.gamma_, est.half_life_s_, est.alpha0_per_s_, est.n_periods_, est.profile_step_s_) == (
+        None, cad.half_life_s, cad.alpha0_per_s, 20, cad.profile_step_s)
+    assert est.fit_summary_["estimator"] == "perpetua_star" and est.fit_summary_["cadence"] == cad.to_dict()
+    assert est.timezone_ == "UTC"
+    assert {i["validation"] for i in est.fit_info_.values()} == {"none (order 0)"}  # 4 days: no held-out week
+    assert est.fit_summary_["order_selection"] == order_selection_summary("reference", True, 1e-3, est.fit_info_)
+    on_val = get_estimator("perpetua_star", n_periods=20, duration_rule=False).fit(streams, val_streams=streams)
+    assert {i["validation"] for i in on_val.fit_info_.values()} == {"val_streams"}
+    assert on_val.fit_summary_["order_selection"] == order_selection_summary("reference", False, 1e-3,
+                                                                              on_val.fit_info_)
+
+    set_all = get_estimator("perpetua_star", prior="profile", gamma=0.99, alpha0=0.01, time_unit_s=30.0,
+                            profile_step_s=7200.0).fit(streams)
+    assert set_all.fit_summary_["settings"] == {
+        "forgetting": {"value": "gamma 0.99 per observation", "source": "set"},
+        "alpha0": {"value": f"0.01 per 30 s ({0.01 / 30:.4g} per s)", "source": "set"},
+        "profile_step_s": {"value": 7200.0, "source": "set"}}
+    assert (set_all.gamma_, set_all.half_life_s_, set_all.alpha0_per_s_) == (0.99, None, 0.01 / 30)
+    half = get_estimator("perpetua_star", prior="profile", half_life_s=5000.0).fit(streams)
+    assert half.fit_summary_["settings"]["forgetting"] == {"value": "half-life 5000 s", "source": "set"}
+    assert half.fit_summary_["settings"]["profile_step_s"] == {"value": cad.profile_step_s, "source": src}
+    assert half.n_periods_ == cad.n_periods and half.half_life_s_ == 5000.0
+    with pytest.raises(EstimatorError, match=r"^perpetua_star: give gamma \(forgetting per observation\) or "
+                                             r"half_life_s \(per time\), not both \(got gamma=0\.9, half_life_s=100\)$"):
+        get_estimator("perpetua_star", gamma=0.9, half_life_s=100).fit(streams)
+
+
+def test_documented_defaults_and_parameters_round_trip() -> None:
+    est = get_estimator("perpetua_star")
+    p = est.get_params()
+    assert {k: p[k] for k in ("prior", "gamma", "half_life_s", "alpha0", "time_unit_s", "max_components", "p_m",
+                              "p_f", "min_segment", "segment_penalty", "pool_weight", "sigma_min", "n_periods",
+                              "max_order", "order_tol", "duration_rule", "profile_step_s", "schedules",
+                              "ground_truth", "prior_floor", "random_state")} == {
+        "prior": "fremen", "gamma": None, "half_life_s": None, "alpha0": None, "time_unit_s": 60.0,
+        "max_components": 5, "p_m": None, "p_f": None, "min_segment": 5, "segment_penalty": 3.0, "pool_weight": 2.0,
+        "sigma_min": 0.05, "n_periods": None, "max_order": None, "order_tol": 1e-3, "duration_rule": True,
+        "profile_step_s": None, "schedules": None, "ground_truth": None, "prior_floor": 1e-3, "random_state": 0}
+    given = {"gamma": 0.9, "alpha0": 0.02, "p_m": 0.05, "p_f": 0.07, "n_periods": 30, "max_order": 4,
+             "profile_step_s": 1800.0, "schedules": {"o/r": "[]"}, "ground_truth": {"o/r": ([0.0], [1.0])}}
+    assert {k: get_estimator("perpetua_star", **given).get_params()[k] for k in given} == given
+    assert get_estimator("perpetua_star", half_life_s=600.0).get_params()["half_life_s"] == 600.0
