@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -395,3 +396,87 @@ def test_documented_defaults_and_parameters_round_trip() -> None:
              "profile_step_s": 1800.0, "schedules": {"o/r": "[]"}, "ground_truth": {"o/r": ([0.0], [1.0])}}
     assert {k: get_estimator("perpetua_star", **given).get_params()[k] for k in given} == given
     assert get_estimator("perpetua_star", half_life_s=600.0).get_params()["half_life_s"] == 600.0
+
+
+@pytest.mark.parametrize("log_g", [
+    np.full(40, -50.0),  # the cumulative factor passes e^-300 after 6 steps: several stretches
+    np.array([0.0, -400.0, -1.0, -np.inf, -2.0, -350.0, -350.0, 0.0, -0.5]),  # single steps below e^-300, a reset
+])
+def test_discounted_cumsum_log_matches_the_loop_across_stretches(log_g: np.ndarray) -> None:
+    from psg_data.estimators._perpetua_star import discounted_cumsum_log
+
+    inc = np.random.default_rng(1).uniform(-5.0, 1.0, log_g.size)
+    want, cur = [], -3.0
+    for g, v in zip(log_g.tolist(), inc.tolist()):
+        cur = math.exp(g) * cur + v
+        want.append(cur)
+    np.testing.assert_allclose(discounted_cumsum_log(-3.0, inc, log_g), want, rtol=1e-12, atol=1e-12)
+
+
+class _OutOfRangePrior(ConstantPrior):
+    def __call__(self, t_s):  # a plugin prior may return values outside [0, 1]: they are clipped
+        return np.where(np.asarray(t_s) < 1.7e9 + 43200.0, -0.5, 1.5)
+
+
+@pytest.mark.parametrize("anneal", [False, True])
+def test_an_out_of_range_prior_is_clipped_with_and_without_observations(anneal: bool) -> None:
+    f = PerpetuaStarFilter(("o", "r"), PER, EMG, 0.1, 0.1, _OutOfRangePrior(), gamma=0.99, alpha0_per_s=1.0,
+                           prior_floor=1e-3, anneal_prediction=anneal)
+    q = 1.7e9 + np.array([0.0, 86400.0])
+    assert f.predict(q).tolist() == [0.0, 1.0]
+    f.update(1.7e9 - 3600.0, 1)
+    if anneal:  # alpha = exp(-1 * 1e5 s): the prediction is the clipped prior
+        assert f.predict(1.7e9 + np.array([100000.0])).tolist() == [1.0]
+
+
+def test_annealed_prediction_at_the_last_observation_is_eq14() -> None:
+    a = PerpetuaStarFilter(("o", "r"), PER, EMG, 0.1, 0.1, ConstantPrior(0.9), gamma=0.99, alpha0_per_s=0.5,
+                           prior_floor=1e-3, anneal_prediction=True)
+    b = PerpetuaStarFilter(("o", "r"), PER, EMG, 0.1, 0.1, ConstantPrior(0.9), gamma=0.99, alpha0_per_s=0.5,
+                           prior_floor=1e-3)
+    t = 1.7e9 + np.arange(5) * 600.0
+    for f in (a, b):
+        f.update_many(t, np.array([0, 0, 0, 0, 0], dtype=np.int8))
+    np.testing.assert_array_equal(a.predict(t[-1:]), b.predict(t[-1:]))  # alpha(t_N) = 1 exactly
+
+
+def test_scalar_update_accepts_equal_times_and_names_bad_input() -> None:
+    f = _filter()
+    f.update(1.7e9, 1)
+    f.update(1.7e9, 0)  # two scans at the same second
+    with pytest.raises(EstimatorError, match=r"^edge \('o', 'r'\): observation times must be finite$"):
+        f.update(float("nan"), 1)
+    with pytest.raises(EstimatorError, match=r"^edge \('o', 'r'\): observations must be 0 or 1$"):
+        f.update(1.7e9 + 1.0, 2)
+
+
+def test_long_runs_in_chunks_with_half_life_equal_one_at_a_time_in_every_state_field() -> None:
+    # long stretches without a change: scans continue from their last row (chunks of 128, 512, ...)
+    rng = np.random.default_rng(5)
+    n = 1500
+    t = 1.7e9 + np.cumsum(rng.uniform(30, 900, n))
+    x = (np.arange(n) // 600 % 2).astype(np.int8)
+    y = np.where(rng.random(n) < 0.02, 1 - x, x).astype(np.int8)
+    a, b = _half_life_filter(), _half_life_filter()
+    for lo, hi in ((0, 7), (7, 700), (700, n)):
+        a.update_many(t[lo:hi], y[lo:hi])
+    for ti, yi in zip(t.tolist(), y.tolist()):
+        b.update(ti, yi)
+    sa, sb = a.get_state(), b.get_state()
+    for k in ("phase", "n_restarts", "last_t_s"):
+        assert sa[k] == sb[k]
+    assert sa["per"]["n"] == sb["per"]["n"] and sa["emg"]["n"] == sb["emg"]["n"]
+    np.testing.assert_allclose(sa["L"], sb["L"], rtol=1e-9)
+    np.testing.assert_allclose(sa["E"], sb["E"], rtol=1e-9)
+
+
+def test_profile_prior_is_the_one_fitted_on_the_edges_training_observations() -> None:
+    from psg_data.estimators._priors import ProfilePrior
+
+    streams = conformance_streams(days=4)
+    est = get_estimator("perpetua_star", prior="profile", profile_step_s=7200.0, profile_days="all").fit(
+        streams, timezone="America/Toronto")
+    for s in streams[:2]:
+        want = ProfilePrior.fit(s.t_s, s.y, step_s=7200.0, days="all", timezone="America/Toronto")
+        q = s.t_s[::5]
+        np.testing.assert_array_equal(est.priors_[s.edge](q), want(q))
