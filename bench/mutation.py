@@ -111,7 +111,7 @@ def _survivors(group: str) -> list[str]:
     equivalent = _equivalent()
     return [name for meta in sorted((WORK / group).glob("mutants/psg_data/**/*.py.meta"))
             for name, code in json.loads(meta.read_text())["exit_code_by_key"].items()
-            if code == 0 and name not in equivalent]
+            if code in (0, 5, 33) and name not in equivalent]  # survived, or no test reached it
 
 
 def table(counts: dict[str, Counter[str]]) -> str:
@@ -144,7 +144,7 @@ def main() -> int:
     ap.add_argument("--only", action="append", default=[], metavar="GLOB",
                     help="test only the mutants whose names match (mutmut's names, e.g. '*PerpetuaStarFilter*')")
     ap.add_argument("--survivors", action="store_true",
-                    help="re-test only the group's survivors (after adding tests that should kill them)")
+                    help="re-test only the group's survivors and unreached mutants (after adding tests for them)")
     args = ap.parse_args()
     settings, groups = _config()
     unknown = [g for g in args.group if g not in groups]
@@ -153,6 +153,11 @@ def main() -> int:
               f"(expected one of {', '.join(groups)})", file=sys.stderr)
         return 1
     start = time.time()
+    git = ["git", "rev-parse", "--short", "HEAD"]
+    rev = subprocess.run(git, cwd=ROOT, capture_output=True, text=True).stdout.strip()  # the revision tested
+    dirty = subprocess.run(["git", "status", "--porcelain", "--", "psg_data", "tests"], cwd=ROOT,
+                           capture_output=True, text=True).stdout.strip()
+    rev += "+uncommitted" if dirty else ""
     load = Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").is_file() else "?"
     for group in [] if args.report_only else args.group or list(groups):
         names = _survivors(group) if args.survivors else args.only
@@ -167,8 +172,6 @@ def main() -> int:
     if not counts:
         print(f"error: {WORK}: no mutmut results (run without --report-only first)", file=sys.stderr)
         return 1
-    git = ["git", "rev-parse", "--short", "HEAD"]
-    rev = subprocess.run(git, cwd=ROOT, capture_output=True, text=True).stdout.strip()
     print(f"# mutation testing, {time.strftime('%Y-%m-%d %H:%M')} at {rev} on {platform.node()} "
           f"({time.time() - start:.0f} s, 1-minute load at start {load})\n")
     print(table(counts))
