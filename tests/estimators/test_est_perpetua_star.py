@@ -480,3 +480,48 @@ def test_profile_prior_is_the_one_fitted_on_the_edges_training_observations() ->
         want = ProfilePrior.fit(s.t_s, s.y, step_s=7200.0, days="all", timezone="America/Toronto")
         q = s.t_s[::5]
         np.testing.assert_array_equal(est.priors_[s.edge](q), want(q))
+
+
+def test_filter_defaults_first_observation_and_settings_checks() -> None:
+    f = _filter()
+    assert (f.get_state()["estimator"], f.anneal_prediction, f.phase) == ("perpetua_star", False, -1)
+    f.update(1.7e9, 0)  # the first observation sets the filtered state; it is no change
+    assert (f.phase, f.n_restarts) == (0, 0)
+    with pytest.raises(EstimatorError, match=r"^edge \('o', 'r'\): give exactly one of gamma \(per observation\) "
+                                             r"and half_life_s$"):
+        PerpetuaStarFilter(("o", "r"), PER, EMG, 0.1, 0.1, ConstantPrior(0.5), gamma=0.9, half_life_s=60.0,
+                           alpha0_per_s=1e-4, prior_floor=1e-3)
+
+
+def test_gamma_zero_keeps_only_the_last_increment_and_a_certain_prior_stays_finite() -> None:
+    t = 1.7e9 + np.arange(4) * 600.0
+    y = np.array([1, 1, 1, 1], dtype=np.int8)
+    f = _filter(gamma=0.0)
+    per, emg = MixtureFilter(PER, 0.1, 0.1), MixtureFilter(EMG, 0.1, 0.1, emergence=True)
+    for ti, yi in zip(t[:-1].tolist(), y[:-1].tolist()):
+        f.update(ti, yi)
+        per.update(ti, yi)
+        emg.update(ti, yi)
+    before = np.array([per.log_evidence(), emg.log_evidence()])
+    f.update(float(t[-1]), 1)
+    per.update(float(t[-1]), 1)
+    emg.update(float(t[-1]), 1)
+    np.testing.assert_allclose(f.L, np.array([per.log_evidence(), emg.log_evidence()]) - before, rtol=1e-12)
+    sure = _filter(prior=ConstantPrior(1.0))
+    sure.update_many(t, y)
+    assert np.all(np.isfinite(sure.model_posterior(t[-1] + np.array([0.0, 3600.0]))))
+
+
+def test_short_batches_after_earlier_observations_forget_from_the_last_one() -> None:
+    # scalar-path batches (<= 6) and scanned ones (> 6) right after earlier observations, with ties:
+    # the first step of each batch is discounted from the previous batch's last time
+    rng = np.random.default_rng(7)
+    t = 1.7e9 + np.cumsum(rng.choice([0.0, 300.0, 1200.0], 40))
+    y = (rng.random(40) < 0.8).astype(np.int8)
+    a, b = _half_life_filter(), _half_life_filter()
+    for lo, hi in ((0, 3), (3, 6), (6, 20), (20, 40)):
+        a.update_many(t[lo:hi], y[lo:hi])
+        for ti, yi in zip(t[lo:hi].tolist(), y[lo:hi].tolist()):
+            b.update(ti, yi)
+        assert a.n_restarts == b.n_restarts
+        np.testing.assert_allclose(a.L, b.L, rtol=1e-9, atol=1e-12)
