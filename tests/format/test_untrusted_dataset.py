@@ -36,26 +36,12 @@ from psg_data.errors import FormatError
 from psg_data.schemas._generator_model import load_process
 from psg_data.schemas.validate import validate_dataset
 from psg_data.writers import sha256_file
-from tests.conftest import write_tiny_dataset
+from tests.conftest import reseal_checksums, write_tiny_dataset
 
 BOMB_SIDE = 20000
 
 
 # -- building the corpus --------------------------------------------------------------------------
-def _reseal(root: Path) -> None:
-    """Forge every checksum to fit the dataset as it now is (what an attacker does)."""
-    fp = root / "tables/files.parquet"
-    rows = pq.read_table(fp).to_pylist()
-    for r in rows:
-        p = root / r["path"]
-        if not os.path.isabs(r["path"]) and ".." not in r["path"] and p.is_file():
-            r["size_bytes"], r["sha256"] = p.stat().st_size, sha256_file(p)
-    pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
-    m = json.loads((root / "dataset.json").read_text())
-    m["files_sha256"] = sha256_file(fp)
-    (root / "dataset.json").write_text(json.dumps(m))
-
-
 def _set_frames_cell(root: Path, column: str, row: int, value: object) -> None:
     p = root / "tables/frames.parquet"
     t = pq.read_table(p)
@@ -289,7 +275,7 @@ def crafted(tmp_path: Path) -> Callable[[str], tuple[Path, Path | None]]:
         root = write_tiny_dataset(tmp_path / "ds", scans=2, frames=3, **kwargs)
         sentinel = craft(root)
         if name != "symlinked manifest":
-            _reseal(root)
+            reseal_checksums(root)
         return root, sentinel
 
     return build
@@ -374,7 +360,7 @@ def test_generator_model_symlinked_outside(tmp_path: Path, opened: list[str]) ->
     m = json.loads((root / "dataset.json").read_text())
     m["extra"]["process_file"] = "generator/process.json"
     (root / "dataset.json").write_text(json.dumps(m))
-    _reseal(root)
+    reseal_checksums(root)
     opened.clear()
     with pytest.raises(FormatError, match=r"generator model: path 'generator/process\.json' resolves outside"):
         load_process(psg_data.open_dataset(root))
@@ -393,7 +379,7 @@ def test_files_table_listing_a_path_outside(tmp_path: Path, opened: list[str]) -
     rows.append({"path": "../outside/secret", "size_bytes": 6, "sha256": "0" * 64})
     rows.append({"path": str(sentinel), "size_bytes": 6, "sha256": "0" * 64})
     pq.write_table(pa.Table.from_pylist(rows, schema=pq.read_schema(fp)), fp)
-    _reseal(root)
+    reseal_checksums(root)
     opened.clear()
     lines = [str(p) for p in validate_dataset(root)]
     n = len(rows)
