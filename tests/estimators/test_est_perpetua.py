@@ -341,6 +341,10 @@ def _compare(f: PerpetuaFilter, r: RefPerpetua, q: np.ndarray, drawn: bool = Tru
         assert clear
     assert r.active == f.active
     np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-10)
+    # the component weights after the restarts: (1 - eps) * posterior + eps * initial prior
+    for m, rm in ((f.per, r.per), (f.emg, r.emg)):
+        np.testing.assert_allclose(np.exp(m.log_prior), rm.prior, rtol=1e-9, atol=1e-300)
+        assert m.origin == rm.origin
 
 
 def test_a_long_gap_cycles_per_emg_per_with_restart_weights() -> None:
@@ -358,6 +362,33 @@ def test_a_long_gap_cycles_per_emg_per_with_restart_weights() -> None:
         sim.check(float(g))
         states.add(sim.active)
     assert states == {"per", "emg"}
+
+
+def test_several_switches_between_two_observations_enumerated_by_hand() -> None:
+    """Exponential priors, 9 sub-steps (one per hour) in a 10 h gap after one "present" observation.
+
+    Persistence belief after the observation at 0: e^(-ln2 t/h) (times 1 / (1 + 1e-7)), emergence belief
+    of a mixture started at t_e: 1 - 10^(-(t - t_e) / 2.5 h). With delta_low 0.6 and delta_high 0.9 the
+    check times 1, 2, ..., 9 h switch at 1 h (0.5), 4 h (emergence 0.937 three hours after 1 h), 5 h
+    (fresh persistence 0.5), 8 h and 9 h; the observation at 10 h meets the emergence mixture of 9 h.
+    """
+    per = SurvivalMixture.single("exponential", math.log(2) / H)
+    emg = SurvivalMixture.single("exponential", math.log(10) / (2.5 * H))
+    f = PerpetuaFilter(("o", "r"), per, emg, 0.1, 0.1, delta_low=0.6, delta_high=0.9, eps=0.1, num_steps=9)
+    f.update(T0, 1)
+    assert (f.active, f.per.origin, f.emg.started) == ("per", T0, False)
+    f.update(T0 + 10 * H, 0)
+    assert (f.active, f.per.origin, f.emg.origin) == ("emg", T0 + 8 * H, T0 + 9 * H)
+    assert (f.per.n, f.emg.n) == (1, 1)  # both mixtures took the observation at 10 h
+    # the same with the gap's checks made by a prediction instead of an update
+    g = PerpetuaFilter(("o", "r"), per, emg, 0.1, 0.1, delta_low=0.6, delta_high=0.9, eps=0.1, num_steps=0)
+    g.update(T0, 1)
+    q = T0 + np.arange(11) * H
+    b = g.predict(q)
+    sw = [1, 4, 5, 8, 9]  # the prediction at a switch time is the fresh mixture's: 0 (emergence) or 1
+    np.testing.assert_allclose(b[sw], [0.0, 1.0, 0.0, 1.0, 0.0], atol=1e-15)
+    e1, e2 = 1 - 10 ** -0.4, 1 - 10 ** -0.8  # emergence beliefs 1 h and 2 h after its start
+    np.testing.assert_allclose(b[[2, 3, 6, 7, 10]], [e1, e2, e1, e2, e1], rtol=1e-12)
 
 
 _FAMILY = st.sampled_from(["lognormal", "exponential"])
@@ -447,6 +478,19 @@ def test_state_keeps_edge_name_clock_and_floors() -> None:
     assert g.emg.emergence and not g.per.emergence
     with pytest.raises(EstimatorError, match="earlier than the last"):
         g.update(T0 + H, 1)
+
+
+def test_a_renamed_variant_keeps_its_name_through_make_filter_and_state() -> None:
+    """A subclass registered under another name: its filters and their restored states carry that name."""
+
+    class Variant(PerpetuaEstimator):
+        name = "perpetua_variant"
+
+    est = Variant(p_m=0.1, p_f=0.1).fit(_streams())
+    f = est.make_filter(("o", "r"))
+    assert f.get_state()["estimator"] == "perpetua_variant"
+    g = est.filter_from_state(f.get_state())
+    assert g.get_state()["estimator"] == "perpetua_variant" == PerpetuaFilter.from_state(f.get_state())._name
 
 
 # ---------------------------------------------------------------------------------------------- the estimator
