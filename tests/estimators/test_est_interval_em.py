@@ -586,3 +586,16 @@ def test_narrow_lognormal_series_to_its_h2_terms(mu: float, sd: float, z: float,
     assert float(logp[0, 0]) == pytest.approx(float(mpmath.log(p)), abs=2e-13)
     assert float(ex[0, 0]) == pytest.approx(float(mu + sd * m1), abs=2e-13)
     assert float(ex2[0, 0]) == pytest.approx(float(sd * sd * m2), abs=2e-13)
+
+
+def test_a_component_beyond_double_range_contributes_nothing() -> None:
+    """A log-normal component at mu = 1e200 (z^2 overflows, log Phi = -inf) adds 0 to every row, not NaN."""
+    mix = SurvivalMixture("lognormal", np.array([0.5, 0.5]), np.array([math.log(H), 1e200]), np.array([1.0, 1.0]))
+    lo, hi = np.array([0.5 * H, 2 * H, 0.0]), np.array([H, np.inf, 0.1 * H])
+    # the far component: P(T > 2 h) = 1, P(T <= 1 h) = 0
+    far = [-np.inf, 0.0, -np.inf]
+    want = sum(float(np.logaddexp(math.log(0.5) + _scipy_log_p("lognormal", math.log(H), 1.0, a, b), math.log(0.5) + f))
+               for a, b, f in zip(lo, hi, far))
+    with np.errstate(over="ignore"):  # z^2 of the far component overflows (a numpy warning, not an error)
+        got = interval_log_likelihood(mix, lo, hi)
+    assert got == pytest.approx(want, rel=1e-12)
