@@ -620,3 +620,22 @@ def test_restarts_never_do_worse_and_can_do_better() -> None:
         assert many.aic_by_k[1] == one.aic_by_k[1]  # K = 1 has no restarts
         assert all(many.aic_by_k[k] <= one.aic_by_k[k] + 1e-9 for k in (2, 3))
         assert many.aic_by_k[3] < one.aic_by_k[3] - gain
+
+
+def test_missing_bounds_and_weights_given_as_none_are_ignored_rows() -> None:
+    """None in a Python list (a missing value) is a row with a bad bound, ignored like NaN."""
+    mix = SurvivalMixture("lognormal", np.array([1.0]), np.array([math.log(2 * H)]), np.array([0.8]))
+    want = interval_log_likelihood(mix, [H, 3 * H], [2 * H, np.inf], [1.0, 2.0])
+    got = [interval_log_likelihood(mix, [H, None, 3 * H], [2 * H, 4 * H, np.inf], [1.0, 1.0, 2.0]),
+           interval_log_likelihood(mix, [H, 2 * H, 3 * H], [2 * H, None, np.inf], [1.0, 1.0, 2.0]),
+           interval_log_likelihood(mix, [H, 2 * H, 3 * H], [2 * H, 4 * H, np.inf], [1.0, None, 2.0])]
+    assert got == pytest.approx([want] * 3, rel=1e-12)
+
+
+def test_moments_of_a_row_with_zero_probability_are_finite() -> None:
+    """Where P underflows to 0 (a component at mu = 1e200) the E-step still returns finite moments."""
+    with np.errstate(over="ignore"):
+        logp, ex, ex2 = _estep_lognormal(np.array([H, 0.0]), np.array([2 * H, H]), np.array([0.0, 1e200]),
+                                         np.array([1.0, 1.0]))
+    assert np.all(logp[:, 1] == -np.inf) and np.all(np.isfinite(logp[:, 0]))
+    assert np.all(np.isfinite(ex)) and np.all(np.isfinite(ex2))
