@@ -238,7 +238,7 @@ def test_million_rows_stay_finite_and_errors_are_clear() -> None:
 
 # ------------------------------------------------------------------ pinned against scipy / mpmath
 def _scipy_log_p(family: str, p1: float, p2: float, lo: float, hi: float) -> float:
-    """log P(lo < T <= hi) (log density of T for lo == hi) from scipy.stats, tails via logsf."""
+    """log P(lo < T <= hi) (log density of T for lo == hi) from scipy.stats, tails via logcdf / logsf."""
     from scipy import stats
 
     d = {"lognormal": lambda: stats.lognorm(p2, scale=math.exp(p1)), "exponential": lambda: stats.expon(scale=1 / p1),
