@@ -2,11 +2,14 @@
 
 Scan trajectories: the robot starts every scan in the dock room (room B) and visits the rooms it
 can reach through open doors and open passages (a closed door is never crossed; in the ``chain``
-layout a closed door hides the room behind it for that scan, in ``two_routes`` the passages reach
-every room). Keyframe viewpoints are chosen greedily from a grid of
+layout a closed door hides the room behind it for that scan, in ``two_routes`` and ``corridor`` the
+passages reach every room). Keyframe viewpoints are chosen greedily from a grid of
 candidate poses (positions in the free centre of each room, yaw every 15 deg, camera 1.25 m above
 the floor pitched 28 deg down) so that the top surfaces of as many receptacles as possible are seen;
-the frame budget is shared between the reachable rooms in proportion to their receptacles.
+the frame budget is shared between the reachable rooms in proportion to their receptacles. In the
+``corridor`` layout the views also cover the doors (each doorway weighs :data:`DOOR_VIEW_WEIGHT`
+receptacles), so every scan sees the doors' states; the corridor itself holds no receptacles and
+gets no views.
 
 Odometry drift: the stored ``T_world_camera`` is exactly the pose the renderer used (images and
 poses are consistent). What a real robot's drift would do is represented by the trajectory itself
@@ -29,7 +32,7 @@ from psg_data.errors import PsgDataError
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
-from psg_data.synth._layout import LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
+from psg_data.synth._layout import DOOR_ID0, LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
 
@@ -50,6 +53,9 @@ and ``continuous-v1`` (the first generator, kept so that old datasets rebuild id
 
 CAMERA_HEIGHT_M = 1.25
 CAMERA_PITCH_DEG = 28.0
+DOOR_VIEW_WEIGHT = 2.0
+"""Weight of a doorway against a receptacle (1) in the scan views' coverage (layouts whose scans look
+at the doors): the route covers the doors first, then as many receptacles as it can."""
 
 
 @dataclass(frozen=True)
@@ -77,9 +83,10 @@ class LabConfig:
         day_persistence: ``steps-v2``: probability that the next day of the same kind keeps the
             day's pattern (diagonal of the day-level matrix).
         max_dwell_steps: ``steps-v2``: longest stay drawn for an entity's best receptacle, steps.
-        layout: the lab geometry, ``two_routes`` (default: a door and an open passage in each inner
-            wall) or ``chain`` (doors only; what datasets without ``layout`` in their manifest used),
-            see :mod:`psg_data.synth._layout`.
+        layout: the lab geometry, ``corridor`` (default: doors, and a hallway along the rooms with an
+            opening into each), ``two_routes`` (a door and an open passage in each inner wall; the
+            default before) or ``chain`` (doors only; what datasets without ``layout`` in their
+            manifest used), see :mod:`psg_data.synth._layout`.
     """
 
     seed: int = 0
@@ -99,7 +106,7 @@ class LabConfig:
     day_patterns: int = 5
     day_persistence: float = 0.6
     max_dwell_steps: int = 8
-    layout: str = "two_routes"
+    layout: str = "corridor"
 
     def __post_init__(self) -> None:
         check_settings(LAB_SETTINGS, asdict(self), "synth", PsgDataError)
@@ -360,23 +367,39 @@ class LabModel:
                         frontier.append(b)
         return seen
 
+    def _view_targets(self) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Points the scan views try to see, (K, 5, 3) world metres, and each target's instance id: 5
+        points on every receptacle top, and (layouts whose scans look at the doors) 5 points on every
+        closed door leaf's doorway plane."""
+        L = self.layout
+        tops = []
+        for r in L.receptacles:
+            c, e, R = np.asarray(r.box.center_m), np.asarray(r.box.extent_m), np.asarray(r.box.rotation)
+            loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[:2]
+            tops.append(np.column_stack([loc, np.full(5, e[2] / 2 + 0.01)]) @ R.T + c)
+        ids = [RECEPTACLE_ID0 + i for i in range(len(L.receptacles))]
+        if L.scans_look_at_doors:
+            for i, d in enumerate(L.doors):
+                c, e = np.asarray(d.box.center_m), np.asarray(d.box.extent_m)
+                loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[1:]
+                tops.append(np.column_stack([np.zeros(5), loc]) @ np.asarray(d.box.rotation).T + c)
+                ids.append(DOOR_ID0 + i)
+        return np.asarray(tops), np.asarray(ids, np.int64)
+
     def _view_candidates(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per room: candidate (x, y, yaw) rows and their (C, R) receptacle-top visibility scores."""
+        """Per room with receptacles: candidate (x, y, yaw) rows and their (C, K) visibility scores of
+        the view targets (:meth:`_view_targets`)."""
         if self._candidates is not None:
             return self._candidates
         L = self.layout
         closed = SceneState({}, {d: False for d in L.door_ids})
         rend = LabRenderer(L, closed)
         cam = d435_intrinsics(160, 120)
-        tops = []  # 5 points on every receptacle top
-        for r in L.receptacles:
-            c, e, R = np.asarray(r.box.center_m), np.asarray(r.box.extent_m), np.asarray(r.box.rotation)
-            loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[:2]
-            pts = np.column_stack([loc, np.full(5, e[2] / 2 + 0.01)]) @ R.T + c
-            tops.append(pts)
-        tops_a = np.asarray(tops)  # (R, 5, 3)
+        tops_a, target_ids = self._view_targets()
         out: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         for room in L.room_ids:
+            if not any(r.room_id == room for r in L.receptacles):
+                continue
             x0, x1, y0, y1 = L.room_bounds(room, inset_m=0.9)
             xs, ys = np.arange(x0, x1 + 1e-9, 0.5), np.arange(y0, y1 + 1e-9, 0.5)
             cands = []
@@ -388,7 +411,7 @@ class LabModel:
                     for yaw in np.deg2rad(np.arange(0, 360, 15)):
                         cands.append((x, y, yaw))
             C = np.asarray(cands, float)
-            scores = np.zeros((len(C), len(L.receptacles)))
+            scores = np.zeros((len(C), len(target_ids)))
             for ci, (x, y, yaw) in enumerate(C):
                 T = camera_pose(x, y, yaw)
                 Tinv = np.linalg.inv(T)
@@ -400,8 +423,7 @@ class LabModel:
                 inimg = (z > 0.4) & (z < 6.0) & (u > 2) & (u < cam.width - 3) & (v > 2) & (v < cam.height - 3)
                 d = tops_a.reshape(-1, 3) - T[:3, 3]
                 t, iid, _ = rend.cast(np.broadcast_to(T[:3, 3], d.shape), d)
-                rid = RECEPTACLE_ID0 + np.repeat(np.arange(len(L.receptacles)), 5)
-                vis = inimg & (iid == rid) & (t > 0.97)
+                vis = inimg & (iid == np.repeat(target_ids, 5)) & (t > 0.97)
                 scores[ci] = vis.reshape(-1, 5).mean(axis=1)
             out[room] = (C, scores)
         self._candidates = out
@@ -413,6 +435,7 @@ class LabModel:
         L = self.layout
         rec_room = np.array([r.room_id for r in L.receptacles])
         door_pos = {d.door_id: np.asarray(d.box.center_m)[:2] for d in L.doors}
+        w = np.where(self._view_targets()[1] >= RECEPTACLE_ID0, 1.0, DOOR_VIEW_WEIGHT)  # coverage weights
         plans: list[ScanPlan] = []
         idx = 0
         for day in range(cfg.days):
@@ -436,7 +459,7 @@ class LabModel:
                     covered = np.zeros(S.shape[1])
                     order: list[int] = []
                     for _ in range(int(b)):
-                        gain = np.minimum(S + covered, 1.0).sum(axis=1) - np.minimum(covered, 1.0).sum()
+                        gain = (np.minimum(S + covered, 1.0) * w).sum(axis=1) - (np.minimum(covered, 1.0) * w).sum()
                         gain = gain + 0.05 * S.sum(axis=1) + rng.uniform(0, 0.3, len(C))
                         gain[order] = -np.inf
                         k = int(np.argmax(gain))
