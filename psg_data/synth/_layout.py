@@ -15,18 +15,21 @@ Three layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layou
   (its Fig. "Predictive Navigation" and the extended real-world figure), which needs a second route.
 - ``chain``: the first layout, the doors are the only way between rooms (a closed door cuts the lab);
   kept so that datasets built with it (no ``layout`` in their manifest) rebuild identically.
-- ``corridor`` (default since ``DEMO_VERSION`` ``...-corridor-...``): the inner walls have only their doors (as in ``chain``); a corridor
-  (:data:`CORRIDOR_WIDTH_M` wide, the building's hallway outside the lab, a fourth entry of the
-  ``rooms`` table without receptacles, id ``corridor``) runs along the north side of the three rooms,
-  and each room opens onto it through a doorless opening in its north wall, at the end of the wall
-  farthest from the room's door (the middle room: at its centre). A closed door therefore sends the
-  robot out into the corridor and back in: a longer detour than ``two_routes``' passages, and every
-  room stays reachable with both doors closed. The lab keeps 3 rooms, 2 doors, 28 receptacles.
-  Its scans also look at the doors (:meth:`LabLayout.scans_look_at_doors`).
+- ``corridor`` (default since ``DEMO_VERSION`` ``...-corridor-...``): the inner walls have only
+  their doors (as in ``chain``); a corridor (:data:`CORRIDOR_WIDTH_M` wide: the building's hallway
+  outside the lab, a fourth ``rooms`` entry without receptacles, id ``corridor``) runs along the
+  north side of the three rooms, and each room opens onto it through a doorless opening in its
+  north wall, at the end of the wall farthest from the room's door (the middle room: at its
+  centre). A closed door sends the robot out through the corridor and back in, a longer detour than
+  ``two_routes``' passages, and every room stays reachable with both doors closed; the lab keeps 3
+  rooms, 2 doors, 28 receptacles (10/10/8). It follows the same paper text as ``two_routes`` (the
+  paper gives the lab's counts, not its floor plan: where the second route runs is our choice), and
+  its scans also look at the doors (:attr:`LabLayout.scans_look_at_doors`), so that door streams
+  from the images have observations.
 
-Both layouts of a seed share the door positions and each room's furniture categories; the
-furniture is placed from the same random stream around different keep-out zones, so positions
-differ and two receptacles of the same footprint may swap categories (and ids) between layouts.
+All layouts of a seed share the door positions and the receptacle counts per room; the furniture is
+placed from the same random stream around different keep-out zones, so positions differ and
+receptacles may swap categories (and ids) between layouts.
 
 Receptacles stand against the walls (back to the wall), leaving the centre of every room, the door
 swing areas and the passages free for the robot.
@@ -144,7 +147,8 @@ class LabLayout:
     @property
     def scans_look_at_doors(self) -> bool:
         """Whether the scan route also covers the doorways (``corridor``; the older layouts keep the
-        receptacle-only route their datasets were built with)."""
+        receptacle-only route their datasets were built with).
+        """
         return self.name == "corridor"
 
     # -- lookups --------------------------------------------------------------------------------
@@ -279,7 +283,8 @@ def _wall_segments(door_ys: list[float], open_ys: list[float | None]) -> list[Wa
 
 def _corridor_opening_xs(door_ys: list[float]) -> list[float]:
     """Centres (x) of the ``corridor`` layout's openings in the rooms' north wall, one per room: at the
-    end of the wall farthest from the room's door (end rooms), at the centre (the middle room)."""
+    end of the wall farthest from the room's door (end rooms), at the centre (the middle room).
+    """
     margin = WALL_THICKNESS_M / 2 + 0.30 + OPENING_WIDTH_M / 2
     xs = []
     for k, (_, _, _, (xa, xb), _) in enumerate(_ROOMS):

@@ -370,7 +370,8 @@ class LabModel:
     def _view_targets(self) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Points the scan views try to see, (K, 5, 3) world metres, and each target's instance id: 5
         points on every receptacle top, and (layouts whose scans look at the doors) 5 points on every
-        closed door leaf's doorway plane."""
+        closed door leaf's doorway plane.
+        """
         L = self.layout
         tops = []
         for r in L.receptacles:
@@ -388,7 +389,8 @@ class LabModel:
 
     def _view_candidates(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Per room with receptacles: candidate (x, y, yaw) rows and their (C, K) visibility scores of
-        the view targets (:meth:`_view_targets`)."""
+        the view targets (:meth:`_view_targets`).
+        """
         if self._candidates is not None:
             return self._candidates
         L = self.layout

@@ -170,6 +170,10 @@ def test_layouts_share_doors_and_each_rooms_furniture(seed: int) -> None:
         cats_a = sorted(r.category or "" for r in a.receptacles if r.room_id == room)
         cats_b = sorted(r.category or "" for r in b.receptacles if r.room_id == room)
         assert cats_a == cats_b
+    c = make_layout(seed, "corridor")
+    assert all(np.allclose(x.box.center_m, y.box.center_m) for x, y in zip(a.doors, c.doors))
+    assert ([sum(r.room_id == x for r in c.receptacles) for x in a.room_ids]
+            == [sum(r.room_id == x for r in a.receptacles) for x in a.room_ids])
     # the passages stand in the inner walls, clear of the doors
     for o, d in zip(b.openings, b.doors):
         assert o.box.center_m[0] == d.box.center_m[0] and abs(o.box.center_m[1] - d.box.center_m[1]) > 1.2
