@@ -98,8 +98,6 @@ def summarise_doors(records: Any, names: list[str], *, seed: int = 0) -> dict[st
 def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None,
                  info: Mapping[str, Any] | None = None) -> EvalResults:
     """The door run in the results schema: the door table, and the objects-behind-doors table when it ran."""
-    from psg_data.evaluation._navigation_report import navigation_results
-
     roles = dict(roles or {})
     summ = res.summary.set_index("estimator")
     names = list(summ.index)
@@ -142,7 +140,8 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
 def _objects_table(objects: Any) -> ResultTable:
     """The objects-behind-doors table: the navigation table (unreachable present targets left out),
     and a ``Both ways`` column: overall SR over every query, an unreachable present target scored
-    like an absent one (a correct abort is a success, a walk towards it a failure)."""
+    like an absent one (a correct abort is a success, a walk towards it a failure).
+    """
     from psg_data.evaluation._navigation_report import _summary_of, navigation_results
     from psg_data.evaluation._navigation_scores import summarise_navigation
 
