@@ -16,6 +16,10 @@ door queries):
 
 Reference rows: ``oracle`` (the true door states: the ceiling), ``all_open`` (every door assumed
 open), ``last_seen`` (each door's last observation), ``time_of_week_frequency``.
+
+Objects-behind-doors table: the navigation table (reachable present targets and absent ones), and
+a ``Both ways`` column: overall SR over every query, an unreachable present target scored like an
+absent one (a correct abort is a success, a walk towards it a failure).
 """
 
 from __future__ import annotations
