@@ -497,7 +497,8 @@ class LabModel:
     def _room_views(C: NDArray[np.float64], S: NDArray[np.float64], n: int, rng: np.random.Generator
                     ) -> list[tuple[float, float, float]]:
         """``n`` receptacle views of one room: greedy coverage of the (C, R) receptacle scores ``S``,
-        visited by bearing around their centre."""
+        visited by bearing around their centre.
+        """
         if n == 0:
             return []
         covered = np.zeros(S.shape[1])
@@ -518,7 +519,8 @@ class LabModel:
     def _door_view(C: NDArray[np.float64], s: NDArray[np.float64], rng: np.random.Generator
                    ) -> tuple[float, float, float]:
         """The door keyframe of one room: the candidate that sees most of the doorway (``s``, per
-        candidate), a small random tie-break."""
+        candidate), a small random tie-break.
+        """
         return tuple(C[int(np.argmax(s + rng.uniform(0, 0.02, len(C))))])
 
     # -- rendering --------------------------------------------------------------------------------
