@@ -7,9 +7,10 @@ passages reach every room). Keyframe viewpoints are chosen greedily from a grid 
 candidate poses (positions in the free centre of each room, yaw every 15 deg, camera 1.25 m above
 the floor pitched 28 deg down) so that the top surfaces of as many receptacles as possible are seen;
 the frame budget is shared between the reachable rooms in proportion to their receptacles. In the
-``corridor`` layout the views also cover the doors (each doorway weighs :data:`DOOR_VIEW_WEIGHT`
-receptacles), so every scan sees the doors' states; the corridor itself holds no receptacles and
-gets no views.
+``corridor`` layout every scan also takes one door keyframe per door, beyond the budget (in the first
+room of the route that the door joins, after its receptacle views: the candidate that sees most of
+the doorway), so that every scan sees the doors' states (``frames_per_scan`` + 2 frames per scan);
+the corridor itself holds no receptacles and gets no views.
 
 Odometry drift: the stored ``T_world_camera`` is exactly the pose the renderer used (images and
 poses are consistent). What a real robot's drift would do is represented by the trajectory itself
@@ -53,9 +54,6 @@ and ``continuous-v1`` (the first generator, kept so that old datasets rebuild id
 
 CAMERA_HEIGHT_M = 1.25
 CAMERA_PITCH_DEG = 28.0
-DOOR_VIEW_WEIGHT = 2.0
-"""Weight of a doorway against a receptacle (1) in the scan views' coverage (layouts whose scans look
-at the doors): the route covers the doors first, then as many receptacles as it can."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +64,8 @@ class LabConfig:
         seed: seed of everything (layout, schedules, trajectories, noise).
         days: number of days (4 scans a day).
         train_days: first days with split 'train', the rest 'test' (default: 2/3 of the days, 14 of 21).
-        frames_per_scan: keyframes per scan.
+        frames_per_scan: receptacle keyframes per scan (the ``corridor`` layout adds one door
+            keyframe per door).
         width, height: image size, pixels.
         shift: distribution shift of the test days: None or 'long-weekend'.
         shift_weekdays: weekdays ('Mon'..'Sun') of the test days that follow the weekend pattern.
@@ -437,7 +436,11 @@ class LabModel:
         L = self.layout
         rec_room = np.array([r.room_id for r in L.receptacles])
         door_pos = {d.door_id: np.asarray(d.box.center_m)[:2] for d in L.doors}
-        w = np.where(self._view_targets()[1] >= RECEPTACLE_ID0, 1.0, DOOR_VIEW_WEIGHT)  # coverage weights
+        target_ids = self._view_targets()[1]
+        n_rec_targets = int(np.sum(target_ids >= RECEPTACLE_ID0))
+        door_col = {d.door_id: int(np.flatnonzero(target_ids == DOOR_ID0 + i)[0])
+                    for i, d in enumerate(L.doors) if np.any(target_ids == DOOR_ID0 + i)}
+        door_rooms = [(d.door_id, d.room_a, d.room_b) for d in L.doors if d.door_id in door_col]
         plans: list[ScanPlan] = []
         idx = 0
         for day in range(cfg.days):
@@ -454,24 +457,14 @@ class LabModel:
                         break
                     budget[i] += 1
                 views: list[tuple[float, float, float]] = []
+                door_room = {d: next((r for r in rooms if r in (ra, rb) and r in cands), None)
+                             for d, ra, rb in door_rooms}
                 for room, b in zip(rooms, budget):
-                    if b == 0:
+                    if room not in cands:
                         continue
                     C, S = cands[room]
-                    covered = np.zeros(S.shape[1])
-                    order: list[int] = []
-                    for _ in range(int(b)):
-                        gain = (np.minimum(S + covered, 1.0) * w).sum(axis=1) - (np.minimum(covered, 1.0) * w).sum()
-                        gain = gain + 0.05 * S.sum(axis=1) + rng.uniform(0, 0.3, len(C))
-                        gain[order] = -np.inf
-                        k = int(np.argmax(gain))
-                        order.append(k)
-                        covered = covered + S[k]
-                    # visit order inside the room: by bearing around the room centre
-                    pts = C[order]
-                    cxy = pts[:, :2].mean(axis=0)
-                    ang = np.arctan2(pts[:, 1] - cxy[1], pts[:, 0] - cxy[0])
-                    views += [tuple(pts[i]) for i in np.argsort(ang)]
+                    views += self._room_views(C, S[:, :n_rec_targets], int(b), rng)
+                    views += [self._door_view(C, S[:, col], rng) for d, col in door_col.items() if door_room[d] == room]
                 poses = []
                 walk = np.zeros(3)
                 stamps = []
@@ -499,6 +492,36 @@ class LabModel:
                                       np.asarray(stamps, np.int64), np.asarray(poses), state, rooms))
                 idx += 1
         return plans
+
+    @staticmethod
+    def _room_views(C: NDArray[np.float64], S: NDArray[np.float64], n: int, rng: np.random.Generator
+                    ) -> list[tuple[float, float, float]]:
+        """``n`` receptacle views of one room: greedy coverage of the (C, R) receptacle scores ``S``,
+        visited by bearing around their centre.
+        """
+        if n == 0:
+            return []
+        covered = np.zeros(S.shape[1])
+        order: list[int] = []
+        for _ in range(n):
+            gain = np.minimum(S + covered, 1.0).sum(axis=1) - np.minimum(covered, 1.0).sum()
+            gain = gain + 0.05 * S.sum(axis=1) + rng.uniform(0, 0.3, len(C))
+            gain[order] = -np.inf
+            k = int(np.argmax(gain))
+            order.append(k)
+            covered = covered + S[k]
+        pts = C[order]
+        cxy = pts[:, :2].mean(axis=0)
+        ang = np.arctan2(pts[:, 1] - cxy[1], pts[:, 0] - cxy[0])
+        return [tuple(pts[i]) for i in np.argsort(ang)]
+
+    @staticmethod
+    def _door_view(C: NDArray[np.float64], s: NDArray[np.float64], rng: np.random.Generator
+                   ) -> tuple[float, float, float]:
+        """The door keyframe of one room: the candidate that sees most of the doorway (``s``, per
+        candidate), a small random tie-break.
+        """
+        return tuple(C[int(np.argmax(s + rng.uniform(0, 0.02, len(C))))])
 
     # -- rendering --------------------------------------------------------------------------------
     def renderer(self, state: SceneState) -> LabRenderer:
