@@ -24,7 +24,7 @@ __all__ = ["demo", "cache_dir", "DEMO_VERSION", "BuiltinDataset", "BUILTIN", "re
 
 log = logging.getLogger(__name__)
 
-DEMO_VERSION = "synth2-steps-tworoutes-seed0-d21-f8-160x120-fmt2"
+DEMO_VERSION = "synth2-steps-corridor-seed0-d21-f8d2-160x120-fmt2"
 """Cache key of the demo dataset; bumped whenever the generator's output (or its format) changes."""
 
 NAVIGATION_BENCHMARK_VERSION = "house1-shift0.5-fmt2"

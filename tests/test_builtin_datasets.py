@@ -96,4 +96,5 @@ def test_info_on_the_real_demo_lab() -> None:
     r = CliRunner().invoke(psg_data, ["info", "demo", "--json"])
     assert r.exit_code == 0, r.output
     s = json.loads(r.stdout)
-    assert (s["scans"], s["rooms"], s["doors"], s["objects"], s["receptacles"]) == (84, 3, 2, 21, 28)
+    # the three lab rooms and the corridor (a room without receptacles, the default layout)
+    assert (s["scans"], s["rooms"], s["doors"], s["objects"], s["receptacles"]) == (84, 4, 2, 21, 28)

@@ -39,9 +39,11 @@ def _resolution(_ctx: click.Context, _param: click.Parameter, value: str) -> tup
                    "continuous-time one.")
 @click.option("--routine-strength", type=click.FloatRange(0.0, 1.0), default=0.8, show_default=True,
               help="steps-v2: probability that the routine sets the state at a step (0 random walk, 1 clockwork).")
-@click.option("--layout", type=click.Choice(["two_routes", "chain"]), default="two_routes", show_default=True,
+@click.option("--layout", type=click.Choice(["two_routes", "chain", "corridor"]), default="corridor", show_default=True,
               help="two_routes: a door and an open passage in each inner wall (a closed door forces a detour); "
-                   "chain: doors only (the former lab, where a closed door cuts a room off).")
+                   "chain: doors only (the former lab, where a closed door cuts a room off); corridor: doors, "
+                   "and a hallway along the rooms with an opening into each (a closed door sends the robot "
+                   "out through the hallway; its scans also look at the doors).")
 @click.option("--overwrite", is_flag=True,
               help="Replace OUT if it is a psg-dataset psg-data wrote (by synth or convert; recordings psg-data synth "
                    "wrote with --format ros1|...) or an empty folder; anything else is refused.")

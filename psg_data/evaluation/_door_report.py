@@ -16,6 +16,10 @@ door queries):
 
 Reference rows: ``oracle`` (the true door states: the ceiling), ``all_open`` (every door assumed
 open), ``last_seen`` (each door's last observation), ``time_of_week_frequency``.
+
+Objects-behind-doors table: the navigation table (reachable present targets and absent ones), and
+a ``Both ways`` column: overall SR over every query, an unreachable present target scored like an
+absent one (a correct abort is a success, a walk towards it a failure).
 """
 
 from __future__ import annotations
@@ -98,8 +102,6 @@ def summarise_doors(records: Any, names: list[str], *, seed: int = 0) -> dict[st
 def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None,
                  info: Mapping[str, Any] | None = None) -> EvalResults:
     """The door run in the results schema: the door table, and the objects-behind-doors table when it ran."""
-    from psg_data.evaluation._navigation_report import navigation_results
-
     roles = dict(roles or {})
     summ = res.summary.set_index("estimator")
     names = list(summ.index)
@@ -133,14 +135,34 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
     tables.append(ResultTable("doors", title, list(DOOR_METRICS.values()), rows, notes,
                               count_columns=["queries", "declined"]))
     if res.objects is not None:
-        obj = navigation_results(res.objects, roles={"oracle": ("ceiling", "the true receptacle and doors")})
-        t = obj.tables[0]
-        t.name, t.title = "objects", ("Objects behind predicted-closed doors: each estimator with all doors open, its "
-                                      "predicted doors, the true doors")
-        tables.append(t)
+        tables.append(_objects_table(res.objects))
     return EvalResults("doors", tables, config={**o.to_dict(), "setting_text": f"doors, {o.setting}"},
                        info=dict(info or {}), interval={"method": s.method if s else "none", "unit": "door queries",
                                                         "n": s.n if s else 0, "confidence": 0.95})
+
+
+def _objects_table(objects: Any) -> ResultTable:
+    """The objects-behind-doors table: the navigation table (unreachable present targets left out),
+    and a ``Both ways`` column: overall SR over every query, an unreachable present target scored
+    like an absent one (a correct abort is a success, a walk towards it a failure).
+    """
+    from psg_data.evaluation._navigation_report import _summary_of, navigation_results
+    from psg_data.evaluation._navigation_scores import summarise_navigation
+
+    t = navigation_results(objects, roles={"oracle": ("ceiling", "the true receptacle and doors")}).tables[0]
+    t.name, t.title = "objects", ("Objects behind predicted-closed doors: each estimator with all doors open, its "
+                                  "predicted doors, the true doors")
+    cfg, rec = objects.config, objects.records
+    _, both = summarise_navigation(rec[rec["delta"] == float(cfg["delta"])], [r.method for r in t.rows],
+                                   absent_in_overall=cfg["absent_in_overall"], unreachable="like_absent")
+    by = {str(r["method"]): r for _, r in both.iterrows()}
+    for row in t.rows:
+        row.values["overall_sr_both"] = _summary_of(by[row.method], "overall_sr")
+    t.metrics.append(MetricInfo("overall_sr_both", "SR all %", "higher", "every query: a reachable present target "
+                                "found, an absent or unreachable one aborted (a walk towards it fails)", 100.0, 1))
+    n = int(both["n_queries"].iloc[0]) if len(both) else 0
+    t.groups.append((f"Both ways ({n})", ["overall_sr_both"]))
+    return t
 
 
 def _headroom_table(rows: list[ResultRow], res: Any, where: str) -> ResultTable | None:

@@ -4,9 +4,10 @@ World frame: x east, y north, z up, metres; the floor is ``z = 0``. The rooms st
 ``room_a | door_ab | room_b | door_bc | room_c``; walls are 0.1 m thick boxes centred on the room
 boundaries with doorways cut out.
 
-Two layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layout`):
+Three layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layout`):
 
-- ``two_routes`` (default since ``DEMO_VERSION`` ``...-tworoutes-...``): each inner wall also has a
+- ``two_routes`` (the default from ``DEMO_VERSION`` ``...-tworoutes-...`` until ``...-corridor-...``):
+  each inner wall also has a
   doorless passage (an open archway, :class:`~psg_data.schemas.Opening`, 1.0 m wide) at the far end
   of the wall from its door, so a closed door lengthens the way by a few metres and never isolates a
   room: every room is reachable with both doors closed. This follows the paper's real-world lab, where
@@ -14,10 +15,21 @@ Two layouts (:data:`LAYOUTS`, chosen by :attr:`~psg_data.synth.LabConfig.layout`
   (its Fig. "Predictive Navigation" and the extended real-world figure), which needs a second route.
 - ``chain``: the first layout, the doors are the only way between rooms (a closed door cuts the lab);
   kept so that datasets built with it (no ``layout`` in their manifest) rebuild identically.
+- ``corridor`` (default since ``DEMO_VERSION`` ``...-corridor-...``): the inner walls have only
+  their doors (as in ``chain``); a corridor (:data:`CORRIDOR_WIDTH_M` wide: the building's hallway
+  outside the lab, a fourth ``rooms`` entry without receptacles, id ``corridor``) runs along the
+  north side of the three rooms, and each room opens onto it through a doorless opening in its
+  north wall, at the end of the wall farthest from the room's door (the middle room: at its
+  centre). A closed door sends the robot out through the corridor and back in, a longer detour than
+  ``two_routes``' passages, and every room stays reachable with both doors closed; the lab keeps 3
+  rooms, 2 doors, 28 receptacles (10/10/8). It follows the same paper text as ``two_routes`` (the
+  paper gives the lab's counts, not its floor plan: where the second route runs is our choice), and
+  its scans also look at the doors (:attr:`LabLayout.scans_look_at_doors`), so that door streams
+  from the images have observations.
 
-Both layouts of a seed share the door positions and each room's furniture categories; the
-furniture is placed from the same random stream around different keep-out zones, so positions
-differ and two receptacles of the same footprint may swap categories (and ids) between layouts.
+All layouts of a seed share the door positions and the receptacle counts per room; the furniture is
+placed from the same random stream around different keep-out zones, so positions differ and
+receptacles may swap categories (and ids) between layouts.
 
 Receptacles stand against the walls (back to the wall), leaving the centre of every room, the door
 swing areas and the passages free for the robot.
@@ -35,7 +47,7 @@ from psg_data._geometry import yaw_rotation
 from psg_data.schemas._records import Box, Door, Opening, Receptacle, Room
 from psg_data.synth._catalog import FURNITURE, OBJECTS, ROOM_FURNITURE, ObjectSpec
 
-__all__ = ["LabLayout", "WallBox", "Instance", "make_layout", "LAYOUTS", "OPENING_WIDTH_M",
+__all__ = ["LabLayout", "WallBox", "Instance", "make_layout", "LAYOUTS", "OPENING_WIDTH_M", "CORRIDOR_WIDTH_M",
            "WALL_HEIGHT_M", "DOOR_WIDTH_M", "DOOR_HEIGHT_M", "WALL_THICKNESS_M",
            "ID_NONE", "ID_FLOOR", "ID_CEILING", "WALL_ID0", "DOOR_ID0", "RECEPTACLE_ID0", "OBJECT_ID0"]
 
@@ -48,9 +60,12 @@ DOOR_HEIGHT_M = 2.05
 LEAF_THICKNESS_M = 0.04
 OPENING_WIDTH_M = 1.00
 OPENING_HEIGHT_M = 2.20
-LAYOUTS = ("two_routes", "chain")
-"""Lab layouts (module docstring): ``two_routes`` (a door and an open passage in each inner wall) and
-``chain`` (doors only)."""
+CORRIDOR_WIDTH_M = 1.50
+"""Width of the ``corridor`` layout's hallway (inside its walls' centre lines), metres."""
+CORRIDOR_ID = "corridor"
+LAYOUTS = ("two_routes", "chain", "corridor")
+"""Lab layouts (module docstring): ``two_routes`` (a door and an open passage in each inner wall),
+``chain`` (doors only) and ``corridor`` (doors, and a hallway along the rooms with an opening into each)."""
 
 # Instance ids of the renderer's per-pixel id image (int32).
 ID_NONE = 0
@@ -105,14 +120,17 @@ class LabLayout:
     """Static geometry of the lab (deterministic from the seed).
 
     Attributes:
-        rooms: the three rooms with floor polygons (wall centre lines, counter-clockwise).
+        rooms: the three rooms with floor polygons (wall centre lines, counter-clockwise), and in the
+            ``corridor`` layout the corridor after them (no receptacles).
         doors: the two doors; their box is the doorway opening (x along the wall normal).
         receptacles: 28 receptacles, boxes with x along the wall they stand against.
         objects: the 21 object specs (ids are their names).
         walls: wall segments (solid boxes).
         door_hinges: per door, hinge position (x, y) and the swing direction (+1/-1 along x).
         dock_room: room where the robot starts every scan.
-        openings: doorless passages (``two_routes``: one per inner wall; ``chain``: none).
+        openings: doorless passages (``two_routes``: one per inner wall; ``chain``: none;
+            ``corridor``: one from each room into the corridor).
+        name: the layout's name (one of :data:`LAYOUTS`).
     """
 
     rooms: list[Room]
@@ -124,6 +142,14 @@ class LabLayout:
     dock_room: str = "room_b"
     receptacle_colors: list[tuple[float, float, float]] = field(default_factory=list)
     openings: list[Opening] = field(default_factory=list)
+    name: str = "corridor"
+
+    @property
+    def scans_look_at_doors(self) -> bool:
+        """Whether the scan route also covers the doorways (``corridor``; the older layouts keep the
+        receptacle-only route their datasets were built with).
+        """
+        return self.name == "corridor"
 
     # -- lookups --------------------------------------------------------------------------------
     @property
@@ -255,11 +281,46 @@ def _wall_segments(door_ys: list[float], open_ys: list[float | None]) -> list[Wa
     return walls
 
 
+def _corridor_opening_xs(door_ys: list[float]) -> list[float]:
+    """Centres (x) of the ``corridor`` layout's openings in the rooms' north wall, one per room: at the
+    end of the wall farthest from the room's door (end rooms), at the centre (the middle room).
+    """
+    margin = WALL_THICKNESS_M / 2 + 0.30 + OPENING_WIDTH_M / 2
+    xs = []
+    for k, (_, _, _, (xa, xb), _) in enumerate(_ROOMS):
+        if k == 0:
+            xs.append(xa + margin)
+        elif k == len(_ROOMS) - 1:
+            xs.append(xb - margin)
+        else:
+            xs.append((xa + xb) / 2)
+    return xs
+
+
+def _corridor_walls(walls: list[WallBox], open_xs: list[float]) -> list[WallBox]:
+    """``chain`` walls with the north wall cut by the openings and the corridor's own walls around it."""
+    t, h = WALL_THICKNESS_M / 2, WALL_HEIGHT_M
+    y0, y1 = _Y_RANGE
+    y2 = y1 + CORRIDOR_WIDTH_M
+    x_all = (_ROOMS[0][3][0], _ROOMS[-1][3][1])
+    out = [walls[0],  # south, then the corridor's north, west and east walls
+           WallBox((x_all[0] - t, y2 - t, 0.0), (x_all[1] + t, y2 + t, h)),
+           WallBox((x_all[0] - t, y0 + t, 0.0), (x_all[0] + t, y2 - t, h)),
+           WallBox((x_all[1] - t, y0 + t, 0.0), (x_all[1] + t, y2 - t, h))]
+    lo = x_all[0] + t
+    for xo in sorted(open_xs):  # the rooms' north wall between the openings, and the lintels
+        a, b = xo - OPENING_WIDTH_M / 2, xo + OPENING_WIDTH_M / 2
+        out += [WallBox((lo, y1 - t, 0.0), (a, y1 + t, h)), WallBox((a, y1 - t, OPENING_HEIGHT_M), (b, y1 + t, h))]
+        lo = b
+    out.append(WallBox((lo, y1 - t, 0.0), (x_all[1] - t, y1 + t, h)))
+    return out + walls[4:]
+
+
 def _overlap(a: tuple[float, float, float, float], b: tuple[float, float, float, float], gap: float) -> bool:
     return not (a[1] + gap <= b[0] or b[1] + gap <= a[0] or a[3] + gap <= b[2] or b[3] + gap <= a[2])
 
 
-def make_layout(seed: int, layout: str = "two_routes") -> LabLayout:
+def make_layout(seed: int, layout: str = "corridor") -> LabLayout:
     """Build the lab geometry from ``seed`` (door positions, furniture choice and placement).
 
     Args:
@@ -272,10 +333,16 @@ def make_layout(seed: int, layout: str = "two_routes") -> LabLayout:
     door_ys = [float(rng.uniform(1.3, 4.2)) for _ in range(len(_ROOMS) - 1)]
     open_ys: list[float | None] = [_opening_y(y) if layout == "two_routes" else None for y in door_ys]
     walls = _wall_segments(door_ys, open_ys)
+    open_xs = _corridor_opening_xs(door_ys) if layout == "corridor" else []
+    if open_xs:
+        walls = _corridor_walls(walls, open_xs)
     rooms: list[Room] = []
+    y0, y1 = _Y_RANGE
     for rid, name, _, (xa, xb), _ in _ROOMS:
-        y0, y1 = _Y_RANGE
         rooms.append(Room(rid, name, np.array([[xa, y0], [xb, y0], [xb, y1], [xa, y1]], float)))
+    if open_xs:
+        xa, xb, y2 = _ROOMS[0][3][0], _ROOMS[-1][3][1], y1 + CORRIDOR_WIDTH_M
+        rooms.append(Room(CORRIDOR_ID, "corridor", np.array([[xa, y1], [xb, y1], [xb, y2], [xa, y2]], float)))
     doors: list[Door] = []
     hinges: list[tuple[float, float, float]] = []
     for k, yd in enumerate(door_ys):
@@ -296,16 +363,24 @@ def make_layout(seed: int, layout: str = "two_routes") -> LabLayout:
                                     np.array([WALL_THICKNESS_M + 0.04, OPENING_WIDTH_M, OPENING_HEIGHT_M]),
                                     np.eye(3))))
 
+    for (rid, _, _, _, _), xo in zip(_ROOMS, open_xs):
+        openings.append(Opening(f"opening_{rid[-1]}", f"opening {rid[-1].upper()}-corridor", rid, CORRIDOR_ID,
+                                Box(np.array([xo, y1, OPENING_HEIGHT_M / 2]),
+                                    np.array([WALL_THICKNESS_M + 0.04, OPENING_WIDTH_M, OPENING_HEIGHT_M]),
+                                    yaw_rotation(np.pi / 2))))
+
     receptacles: list[Receptacle] = []
     colors: list[tuple[float, float, float]] = []
     forbidden = []
     for k, yd in enumerate(door_ys):  # door passage and swing zones on both sides of each doorway
         x = _ROOMS[k][3][1]
-        dx = 1.1 if layout == "chain" else 0.9  # two_routes: room for the passages' zones too
+        dx = 0.9 if layout == "two_routes" else 1.1  # two_routes: room for the passages' zones too
         forbidden.append((x - dx, x + dx, yd - 0.75, yd + 0.75))
     for k, yo in enumerate(open_ys):  # and in front of the open passages
         if yo is not None:
             forbidden.append((_ROOMS[k][3][1] - 0.9, _ROOMS[k][3][1] + 0.9, yo - 0.65, yo + 0.65))
+    for xo in open_xs:  # and in front of the corridor openings
+        forbidden.append((xo - 0.65, xo + 0.65, y1 - 0.9, y1 + 0.9))
     for rid, name, theme, (xa, xb), n in _ROOMS:
         cats = list(ROOM_FURNITURE[theme])
         rng.shuffle(cats)
@@ -318,7 +393,7 @@ def make_layout(seed: int, layout: str = "two_routes") -> LabLayout:
                 break
         else:  # pragma: no cover - the room sizes leave ample space
             raise RuntimeError(f"could not place the furniture of {rid}")
-    return LabLayout(rooms, doors, receptacles, list(OBJECTS), walls, hinges, "room_b", colors, openings)
+    return LabLayout(rooms, doors, receptacles, list(OBJECTS), walls, hinges, "room_b", colors, openings, layout)
 
 
 def _place_room(rng: np.random.Generator, rid: str, name: str, x_range: tuple[float, float], cats: list[str],

@@ -2,11 +2,15 @@
 
 Scan trajectories: the robot starts every scan in the dock room (room B) and visits the rooms it
 can reach through open doors and open passages (a closed door is never crossed; in the ``chain``
-layout a closed door hides the room behind it for that scan, in ``two_routes`` the passages reach
-every room). Keyframe viewpoints are chosen greedily from a grid of
+layout a closed door hides the room behind it for that scan, in ``two_routes`` and ``corridor`` the
+passages reach every room). Keyframe viewpoints are chosen greedily from a grid of
 candidate poses (positions in the free centre of each room, yaw every 15 deg, camera 1.25 m above
 the floor pitched 28 deg down) so that the top surfaces of as many receptacles as possible are seen;
-the frame budget is shared between the reachable rooms in proportion to their receptacles.
+the frame budget is shared between the reachable rooms in proportion to their receptacles. In the
+``corridor`` layout every scan also takes one door keyframe per door, beyond the budget (in the first
+room of the route that the door joins, after its receptacle views: the candidate that sees most of
+the doorway), so that every scan sees the doors' states (``frames_per_scan`` + 2 frames per scan);
+the corridor itself holds no receptacles and gets no views.
 
 Odometry drift: the stored ``T_world_camera`` is exactly the pose the renderer used (images and
 poses are consistent). What a real robot's drift would do is represented by the trajectory itself
@@ -29,7 +33,7 @@ from psg_data.errors import PsgDataError
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
-from psg_data.synth._layout import LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
+from psg_data.synth._layout import DOOR_ID0, LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
 from psg_data.synth._render import DepthNoise, LabRenderer, RenderedFrame, SceneState, d435_intrinsics
 from psg_data.synth._schedule import SHIFTS, WEEKDAYS, local_time_ns
 
@@ -60,7 +64,8 @@ class LabConfig:
         seed: seed of everything (layout, schedules, trajectories, noise).
         days: number of days (4 scans a day).
         train_days: first days with split 'train', the rest 'test' (default: 2/3 of the days, 14 of 21).
-        frames_per_scan: keyframes per scan.
+        frames_per_scan: receptacle keyframes per scan (the ``corridor`` layout adds one door
+            keyframe per door).
         width, height: image size, pixels.
         shift: distribution shift of the test days: None or 'long-weekend'.
         shift_weekdays: weekdays ('Mon'..'Sun') of the test days that follow the weekend pattern.
@@ -77,9 +82,10 @@ class LabConfig:
         day_persistence: ``steps-v2``: probability that the next day of the same kind keeps the
             day's pattern (diagonal of the day-level matrix).
         max_dwell_steps: ``steps-v2``: longest stay drawn for an entity's best receptacle, steps.
-        layout: the lab geometry, ``two_routes`` (default: a door and an open passage in each inner
-            wall) or ``chain`` (doors only; what datasets without ``layout`` in their manifest used),
-            see :mod:`psg_data.synth._layout`.
+        layout: the lab geometry, ``corridor`` (default: doors, and a hallway along the rooms with an
+            opening into each), ``two_routes`` (a door and an open passage in each inner wall; the
+            default before) or ``chain`` (doors only; what datasets without ``layout`` in their
+            manifest used), see :mod:`psg_data.synth._layout`.
     """
 
     seed: int = 0
@@ -99,7 +105,7 @@ class LabConfig:
     day_patterns: int = 5
     day_persistence: float = 0.6
     max_dwell_steps: int = 8
-    layout: str = "two_routes"
+    layout: str = "corridor"
 
     def __post_init__(self) -> None:
         check_settings(LAB_SETTINGS, asdict(self), "synth", PsgDataError)
@@ -360,23 +366,41 @@ class LabModel:
                         frontier.append(b)
         return seen
 
+    def _view_targets(self) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Points the scan views try to see, (K, 5, 3) world metres, and each target's instance id: 5
+        points on every receptacle top, and (layouts whose scans look at the doors) 5 points on every
+        closed door leaf's doorway plane.
+        """
+        L = self.layout
+        tops = []
+        for r in L.receptacles:
+            c, e, R = np.asarray(r.box.center_m), np.asarray(r.box.extent_m), np.asarray(r.box.rotation)
+            loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[:2]
+            tops.append(np.column_stack([loc, np.full(5, e[2] / 2 + 0.01)]) @ R.T + c)
+        ids = [RECEPTACLE_ID0 + i for i in range(len(L.receptacles))]
+        if L.scans_look_at_doors:
+            for i, d in enumerate(L.doors):
+                c, e = np.asarray(d.box.center_m), np.asarray(d.box.extent_m)
+                loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[1:]
+                tops.append(np.column_stack([np.zeros(5), loc]) @ np.asarray(d.box.rotation).T + c)
+                ids.append(DOOR_ID0 + i)
+        return np.asarray(tops), np.asarray(ids, np.int64)
+
     def _view_candidates(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per room: candidate (x, y, yaw) rows and their (C, R) receptacle-top visibility scores."""
+        """Per room with receptacles: candidate (x, y, yaw) rows and their (C, K) visibility scores of
+        the view targets (:meth:`_view_targets`).
+        """
         if self._candidates is not None:
             return self._candidates
         L = self.layout
         closed = SceneState({}, {d: False for d in L.door_ids})
         rend = LabRenderer(L, closed)
         cam = d435_intrinsics(160, 120)
-        tops = []  # 5 points on every receptacle top
-        for r in L.receptacles:
-            c, e, R = np.asarray(r.box.center_m), np.asarray(r.box.extent_m), np.asarray(r.box.rotation)
-            loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[:2]
-            pts = np.column_stack([loc, np.full(5, e[2] / 2 + 0.01)]) @ R.T + c
-            tops.append(pts)
-        tops_a = np.asarray(tops)  # (R, 5, 3)
+        tops_a, target_ids = self._view_targets()
         out: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         for room in L.room_ids:
+            if not any(r.room_id == room for r in L.receptacles):
+                continue
             x0, x1, y0, y1 = L.room_bounds(room, inset_m=0.9)
             xs, ys = np.arange(x0, x1 + 1e-9, 0.5), np.arange(y0, y1 + 1e-9, 0.5)
             cands = []
@@ -388,7 +412,7 @@ class LabModel:
                     for yaw in np.deg2rad(np.arange(0, 360, 15)):
                         cands.append((x, y, yaw))
             C = np.asarray(cands, float)
-            scores = np.zeros((len(C), len(L.receptacles)))
+            scores = np.zeros((len(C), len(target_ids)))
             for ci, (x, y, yaw) in enumerate(C):
                 T = camera_pose(x, y, yaw)
                 Tinv = np.linalg.inv(T)
@@ -400,8 +424,7 @@ class LabModel:
                 inimg = (z > 0.4) & (z < 6.0) & (u > 2) & (u < cam.width - 3) & (v > 2) & (v < cam.height - 3)
                 d = tops_a.reshape(-1, 3) - T[:3, 3]
                 t, iid, _ = rend.cast(np.broadcast_to(T[:3, 3], d.shape), d)
-                rid = RECEPTACLE_ID0 + np.repeat(np.arange(len(L.receptacles)), 5)
-                vis = inimg & (iid == rid) & (t > 0.97)
+                vis = inimg & (iid == np.repeat(target_ids, 5)) & (t > 0.97)
                 scores[ci] = vis.reshape(-1, 5).mean(axis=1)
             out[room] = (C, scores)
         self._candidates = out
@@ -413,6 +436,11 @@ class LabModel:
         L = self.layout
         rec_room = np.array([r.room_id for r in L.receptacles])
         door_pos = {d.door_id: np.asarray(d.box.center_m)[:2] for d in L.doors}
+        target_ids = self._view_targets()[1]
+        n_rec_targets = int(np.sum(target_ids >= RECEPTACLE_ID0))
+        door_col = {d.door_id: int(np.flatnonzero(target_ids == DOOR_ID0 + i)[0])
+                    for i, d in enumerate(L.doors) if np.any(target_ids == DOOR_ID0 + i)}
+        door_rooms = [(d.door_id, d.room_a, d.room_b) for d in L.doors if d.door_id in door_col]
         plans: list[ScanPlan] = []
         idx = 0
         for day in range(cfg.days):
@@ -429,24 +457,14 @@ class LabModel:
                         break
                     budget[i] += 1
                 views: list[tuple[float, float, float]] = []
+                door_room = {d: next((r for r in rooms if r in (ra, rb) and r in cands), None)
+                             for d, ra, rb in door_rooms}
                 for room, b in zip(rooms, budget):
-                    if b == 0:
+                    if room not in cands:
                         continue
                     C, S = cands[room]
-                    covered = np.zeros(S.shape[1])
-                    order: list[int] = []
-                    for _ in range(int(b)):
-                        gain = np.minimum(S + covered, 1.0).sum(axis=1) - np.minimum(covered, 1.0).sum()
-                        gain = gain + 0.05 * S.sum(axis=1) + rng.uniform(0, 0.3, len(C))
-                        gain[order] = -np.inf
-                        k = int(np.argmax(gain))
-                        order.append(k)
-                        covered = covered + S[k]
-                    # visit order inside the room: by bearing around the room centre
-                    pts = C[order]
-                    cxy = pts[:, :2].mean(axis=0)
-                    ang = np.arctan2(pts[:, 1] - cxy[1], pts[:, 0] - cxy[0])
-                    views += [tuple(pts[i]) for i in np.argsort(ang)]
+                    views += self._room_views(C, S[:, :n_rec_targets], int(b), rng)
+                    views += [self._door_view(C, S[:, col], rng) for d, col in door_col.items() if door_room[d] == room]
                 poses = []
                 walk = np.zeros(3)
                 stamps = []
@@ -474,6 +492,36 @@ class LabModel:
                                       np.asarray(stamps, np.int64), np.asarray(poses), state, rooms))
                 idx += 1
         return plans
+
+    @staticmethod
+    def _room_views(C: NDArray[np.float64], S: NDArray[np.float64], n: int, rng: np.random.Generator
+                    ) -> list[tuple[float, float, float]]:
+        """``n`` receptacle views of one room: greedy coverage of the (C, R) receptacle scores ``S``,
+        visited by bearing around their centre.
+        """
+        if n == 0:
+            return []
+        covered = np.zeros(S.shape[1])
+        order: list[int] = []
+        for _ in range(n):
+            gain = np.minimum(S + covered, 1.0).sum(axis=1) - np.minimum(covered, 1.0).sum()
+            gain = gain + 0.05 * S.sum(axis=1) + rng.uniform(0, 0.3, len(C))
+            gain[order] = -np.inf
+            k = int(np.argmax(gain))
+            order.append(k)
+            covered = covered + S[k]
+        pts = C[order]
+        cxy = pts[:, :2].mean(axis=0)
+        ang = np.arctan2(pts[:, 1] - cxy[1], pts[:, 0] - cxy[0])
+        return [tuple(pts[i]) for i in np.argsort(ang)]
+
+    @staticmethod
+    def _door_view(C: NDArray[np.float64], s: NDArray[np.float64], rng: np.random.Generator
+                   ) -> tuple[float, float, float]:
+        """The door keyframe of one room: the candidate that sees most of the doorway (``s``, per
+        candidate), a small random tie-break.
+        """
+        return tuple(C[int(np.argmax(s + rng.uniform(0, 0.02, len(C))))])
 
     # -- rendering --------------------------------------------------------------------------------
     def renderer(self, state: SceneState) -> LabRenderer:

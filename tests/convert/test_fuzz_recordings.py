@@ -117,3 +117,24 @@ def converts_or_fails_cleanly(rec: Path, summary: str) -> None:
     else:
         assert_one_error(r)
         assert not full.exists() and not full.with_name(full.name + ".partial").exists()
+
+
+def test_ros2_sqlite3_message_with_null_data_is_one_error(tmp_path: Path, pristine: dict) -> None:
+    """A damaged ROS 2 sqlite3 bag can hold a message row whose data is NULL (found by the fuzzer:
+    rosbags then yields None and convert raised a TypeError); it is a recording error."""
+    import sqlite3
+
+    src, _ = pristine["ros2-sqlite3"]
+    rec = tmp_path / src.name
+    shutil.copytree(src, rec)
+    db = next(p for p in rec.iterdir() if p.suffix == ".db3")
+    with sqlite3.connect(db) as con:  # as truncation leaves it: the schema's NOT NULL no longer holds
+        con.execute("PRAGMA writable_schema = ON")
+        con.execute("UPDATE sqlite_master SET sql = replace(sql, 'data BLOB NOT NULL', 'data BLOB') "
+                    "WHERE name = 'messages'")
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE messages SET data = NULL WHERE id = (SELECT MAX(id) FROM messages)")
+    r = CliRunner().invoke(main, ["convert", str(rec), str(tmp_path / "out")])
+    line = assert_one_error(r, "has no data")
+    assert str(db.name) in line or str(rec) in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == [rec.name]

@@ -49,8 +49,9 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from psg_data.synth._build import build_lab
     from psg_data.synth._model import LabConfig
 
+    # two_routes: 3 frames per scan (the corridor layout adds two door keyframes), as the counts below expect
     return build_lab(tmp_path_factory.mktemp("lab") / "lab", LabConfig(days=1, frames_per_scan=3, width=64,
-                                                                         height=48))
+                                                                         height=48, layout="two_routes"))
 
 
 def lab_database(lab: Path, path: Path, version: str, *, optimized: bool = True, loops: bool = True,

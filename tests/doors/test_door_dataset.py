@@ -128,6 +128,17 @@ def test_door_task_and_objects_behind_doors(labelled_lab) -> None:  # type: igno
     assert [t.name for t in tables[:2]] == ["door_headroom", "doors"]
     assert [r.method for r in tables[0].rows] == ["oracle", "all_open"] and "headroom" in tables[0].notes[0]
     assert np.isclose(s.loc["tow", "blocked_rate"], res.per_seed[res.per_seed.estimator == "tow"].blocked_rate.mean())
+    # the objects table scores reachability both ways too: every query, an unreachable present target
+    # counts like an absent one (aborting is right, walking is a failure); recomputed from the records
+    objt = tables[-1]
+    assert objt.name == "objects" and objt.groups[-1] == (f"Both ways ({len(res.objects.records) // 4})",
+                                                          ["overall_sr_both"])
+    recs = res.objects.records
+    assert (~recs.reachable & (recs.category != "absent")).any()  # the chain lab cuts some targets off
+    for row in objt.rows:
+        d = recs[recs.method == row.method]
+        ok = np.where((d.category == "absent") | ~d.reachable, d.aborted, d.success)
+        assert row.values["overall_sr_both"].mean == pytest.approx(ok.mean())
     objs = res.objects.summary.set_index("method")
     assert list(objs.index) == ["oracle", "tow [doors all open]", "tow [doors predicted]", "tow [doors known]"]
     rec = res.objects.records

@@ -16,8 +16,11 @@ from psg_data.synth import RECEPTACLE_ID0, ID_FLOOR, LabConfig, LabModel, build_
 
 def test_tables(small_dataset, small_lab: LabModel) -> None:  # type: ignore[no-untyped-def]
     ds = small_dataset
-    assert len(ds.scan_ids) == 8 and ds.table("frames").num_rows == 24
-    assert len(ds.rooms) == 3 and len(ds.doors) == 2 and len(ds.objects) == 21
+    # 3 receptacle keyframes and one door keyframe per door in every scan (the corridor layout)
+    assert len(ds.scan_ids) == 8 and ds.table("frames").num_rows == 8 * (3 + 2)
+    # three lab rooms and the corridor (default layout), which holds no receptacles
+    assert sorted(ds.rooms) == ["corridor", "room_a", "room_b", "room_c"]
+    assert len(ds.doors) == 2 and len(ds.objects) == 21 and len(ds.openings) == 3
     assert sorted(Counter(r.room_id for r in ds.receptacles.values()).values()) == [8, 10, 10]
     assert all(r.floor_polygon_m is not None and len(r.floor_polygon_m) == 4 for r in ds.rooms.values())
     splits = [ds.scan(s).split for s in ds.scan_ids]

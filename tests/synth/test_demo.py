@@ -17,7 +17,8 @@ def test_demo_builds_once_and_rebuilds_when_corrupted(tmp_path: Path, monkeypatc
     root = demo()
     assert root.parent == tmp_path / "cache" and DEMO_VERSION in root.name
     ds = open_dataset(root)
-    assert len(ds.scan_ids) == 84 and len(ds.rooms) == 3 and len(ds.doors) == 2 and len(ds.objects) == 21
+    assert len(ds.scan_ids) == 84 and len(ds.doors) == 2 and len(ds.objects) == 21
+    assert sorted(ds.rooms) == ["corridor", "room_a", "room_b", "room_c"]  # the lab's 3 rooms and its corridor
     assert sorted(Counter(r.room_id for r in ds.receptacles.values()).values()) == [8, 10, 10]
     splits = Counter(ds.scan(s).split for s in ds.scan_ids)
     assert splits == {"train": 56, "test": 28}

@@ -24,7 +24,7 @@ def test_public_names_exported() -> None:
 @pytest.mark.parametrize("seed", [0, 1, 7])
 def test_counts_and_names(seed: int) -> None:
     L = make_layout(seed)
-    assert len(L.rooms) == 3 and len(L.doors) == 2
+    assert [r.room_id for r in L.rooms] == ["room_a", "room_b", "room_c", "corridor"] and len(L.doors) == 2
     assert sorted(Counter(r.room_id for r in L.receptacles).values()) == [8, 10, 10]
     assert [o.name for o in L.objects] == PAPER_OBJECTS
     assert len({r.receptacle_id for r in L.receptacles}) == 28
@@ -62,7 +62,7 @@ def test_free_floor_connects_rooms_through_doorways() -> None:
     L = make_layout(0)
     res = 0.05
     xs = np.arange(-0.5, 17.5, res)
-    ys = np.arange(-0.5, 6.0, res)
+    ys = np.arange(-0.5, 7.5, res)  # the rooms (y 0-5.5) and the corridor north of them
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, 0.3)])
     occ = np.zeros(X.size, bool)

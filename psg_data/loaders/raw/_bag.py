@@ -429,7 +429,11 @@ class RosRecording:
         if topics and not conns:
             return
         try:
-            yield from reader.messages(connections=conns)
+            for conn, t_ns, raw in reader.messages(connections=conns):
+                if raw is None:  # a damaged ROS 2 sqlite3 bag: a message row whose data is NULL
+                    raise ConversionError(f"{self.path}: message on {conn.topic} at log time {t_ns} ns has no data "
+                                          "(damaged recording); expected its serialized bytes")
+                yield conn, t_ns, raw
         except Exception as exc:  # corrupt data found while reading (every reader library's own types)
             if not _is_read_error(exc):
                 raise

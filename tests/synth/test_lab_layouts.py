@@ -1,4 +1,5 @@
-"""The two-route lab: a closed door lengthens the way, never isolates a room; the chain stays as it was."""
+"""The lab layouts: in ``corridor`` and ``two_routes`` a closed door lengthens the way and never isolates a
+room; the chain stays as it was; the corridor lab's scans see the doors."""
 
 from __future__ import annotations
 
@@ -28,9 +29,14 @@ def _room_cells(grid, layout):  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4, 5, 6, 7])
-def test_every_room_reachable_with_both_doors_closed(seed: int) -> None:
-    L = make_layout(seed)
-    assert len(L.rooms) == 3 and len(L.doors) == 2 and len(L.openings) == 2
+@pytest.mark.parametrize("layout", ["corridor", "two_routes"])
+def test_every_room_reachable_with_both_doors_closed(seed: int, layout: str) -> None:
+    L = make_layout(seed, layout)
+    lab_rooms = sorted({r.room_id for r in L.receptacles})
+    assert lab_rooms == ["room_a", "room_b", "room_c"] and len(L.doors) == 2
+    assert [sum(r.room_id == x for r in L.receptacles) for x in lab_rooms] == [10, 10, 8]
+    assert len(L.rooms) == (4 if layout == "corridor" else 3)
+    assert len(L.openings) == (3 if layout == "corridor" else 2)
     grid = grid_from_geometry(L.rooms, L.receptacles, L.doors, openings=L.openings)
     planner = PlanningCache(grid)
     cells = _room_cells(grid, L)
@@ -50,7 +56,28 @@ def test_every_room_reachable_with_both_doors_closed(seed: int) -> None:
         cfg = tuple(j != k for j in range(2))
         detour = lengths[(cfg, *sorted((door.room_a, door.room_b)))] - lengths[((True, True),
                                                                                  *sorted((door.room_a, door.room_b)))]
-        assert 0.0 <= detour < 12.0
+        assert (0.5 if layout == "corridor" else 0.0) <= detour < 16.0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 4])
+def test_corridor_openings_lead_out_of_every_room_clear_of_furniture(seed: int) -> None:
+    L = make_layout(seed, "corridor")
+    corridor = next(r for r in L.rooms if r.room_id == "corridor")
+    assert not any(r.room_id == "corridor" for r in L.receptacles)
+    assert sorted(o.room_a for o in L.openings) == ["room_a", "room_b", "room_c"]
+    assert all(o.room_b == "corridor" for o in L.openings)
+    y_wall = np.asarray(corridor.floor_polygon_m)[:, 1].min()
+    for o in L.openings:
+        c = np.asarray(o.box.center_m)
+        assert c[1] == pytest.approx(y_wall)
+        assert L.room_of_point(c[:2] - [0.0, 0.3]) == o.room_a  # the room's side of its north wall
+        # nothing stands in front of the opening (1.3 m wide, 0.9 m deep)
+        front = np.array([[c[0] + dx, c[1] - dy, 0.3] for dx in np.linspace(-0.6, 0.6, 7) for dy in (0.1, 0.5, 0.85)])
+        assert not any(r.box.contains(front, margin_m=0.0).any() for r in L.receptacles)
+    # the end rooms open at the end of the wall away from their door
+    doors = {d.room_a: d for d in L.doors}
+    xa = next(o for o in L.openings if o.room_a == "room_a").box.center_m[0]
+    assert abs(xa - doors["room_a"].box.center_m[0]) > 4.0
 
 
 @pytest.mark.parametrize("seed", [0, 3])
@@ -77,7 +104,7 @@ def test_openings_round_trip_through_the_dataset(tmp_path) -> None:  # type: ign
     root = build_lab(tmp_path / "lab", cfg, lab=lab)
     ds = open_dataset(root)
     assert sorted(ds.openings) == sorted(o.opening_id for o in lab.layout.openings)
-    assert LabModel.from_dataset(ds).config.layout == "two_routes"
+    assert LabModel.from_dataset(ds).config.layout == "corridor"
     grid = grid_from_dataset(ds)
     closed = {d: False for d in grid.door_ids}
     cells = _room_cells(grid, lab.layout)
@@ -88,9 +115,36 @@ def test_openings_round_trip_through_the_dataset(tmp_path) -> None:  # type: ign
 
 def test_old_manifest_without_layout_rebuilds_the_chain() -> None:
     extra = LabConfig().to_extra()
-    assert extra["layout"] == "two_routes"
+    assert extra["layout"] == "corridor"
+    assert LabConfig.from_extra({**extra, "layout": "two_routes"}).layout == "two_routes"
     extra.pop("layout")
     assert LabConfig.from_extra(extra).layout == "chain"
+
+
+def test_only_the_corridor_lab_aims_its_views_at_the_doors() -> None:
+    from psg_data.synth._layout import DOOR_ID0, RECEPTACLE_ID0
+
+    for layout, looks in (("corridor", True), ("two_routes", False), ("chain", False)):
+        lab = LabModel(LabConfig(layout=layout, days=1))
+        assert lab.layout.scans_look_at_doors is looks
+        _, ids = lab._view_targets()
+        assert list(ids[:28]) == [RECEPTACLE_ID0 + i for i in range(28)]
+        assert list(ids[28:]) == ([DOOR_ID0, DOOR_ID0 + 1] if looks else [])
+
+
+def test_corridor_scans_see_both_doors_and_read_their_state(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from psg_data.labeling import observe_doors
+
+    cfg = LabConfig(seed=0, days=2, width=80, height=60)
+    root = build_lab(tmp_path / "lab", cfg)
+    ds = open_dataset(root)
+    ob = observe_doors(ds)
+    vis = np.asarray(ob.visible)
+    assert vis.shape == (8, 2) and vis.mean() >= 0.75
+    truth = ds.table("door_states").to_pandas().pivot(index="scan_id", columns="door_id", values="state")
+    truth = truth.loc[list(ob.scan_ids), list(ob.door_ids)].to_numpy()
+    seen = np.where(np.asarray(ob.open_fraction) >= ob.params.open_threshold, "open", "closed")
+    assert (seen[vis] == truth[vis]).all()
 
 
 def test_synth_command_builds_the_chain_by_name(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -116,6 +170,10 @@ def test_layouts_share_doors_and_each_rooms_furniture(seed: int) -> None:
         cats_a = sorted(r.category or "" for r in a.receptacles if r.room_id == room)
         cats_b = sorted(r.category or "" for r in b.receptacles if r.room_id == room)
         assert cats_a == cats_b
+    c = make_layout(seed, "corridor")
+    assert all(np.allclose(x.box.center_m, y.box.center_m) for x, y in zip(a.doors, c.doors))
+    assert ([sum(r.room_id == x for r in c.receptacles) for x in a.room_ids]
+            == [sum(r.room_id == x for r in a.receptacles) for x in a.room_ids])
     # the passages stand in the inner walls, clear of the doors
     for o, d in zip(b.openings, b.doors):
         assert o.box.center_m[0] == d.box.center_m[0] and abs(o.box.center_m[1] - d.box.center_m[1]) > 1.2
