@@ -130,8 +130,11 @@ def test_fourier_sums_edge_sizes_shapes_and_dispatch() -> None:
     np.testing.assert_array_equal(fourier_sums(tau, w, 1001), fourier_sums(tau, w, 1001, method="fft"))
     np.testing.assert_allclose(direct, _plain_sums(tau, w, 1000), rtol=0, atol=1e-10)
     np.testing.assert_allclose(fft, direct, rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(direct, _fremen._direct_sums(tau, w, 1000, WEEK_S))
+    np.testing.assert_array_equal(fft, _fremen._fft_sums(tau, w, 1000, WEEK_S))
     # columns are flattened; float32 times are read as float64 (no float32 angles)
     np.testing.assert_array_equal(fourier_sums(tau[:, None], w[:, None], 1000), direct)
+    np.testing.assert_array_equal(fourier_sums(tau[:, None], w, 1000, method="fft"), fft)
     t32 = tau.astype(np.float32)
     for method in ("direct", "fft"):
         np.testing.assert_allclose(fourier_sums(t32, w, 200, method=method),
@@ -170,7 +173,10 @@ def test_model_add_edges_defaults_and_serialised_statistics() -> None:
     flat = FremenModel(40).add(tau, y)
     np.testing.assert_array_equal(FremenModel(40).add(tau[:, None], y).coefficients(), flat.coefficients())
     np.testing.assert_array_equal(FremenModel(40).add(tau, y[:, None]).coefficients(), flat.coefficients())
-    # the default method is the direct sum for small N*K: S_k, Z_k are exactly the direct sums
+    # add() passes its method on; the default is the direct sum for small N*K
+    by_fft = FremenModel(40).add(tau, y, method="fft")
+    np.testing.assert_array_equal(by_fft.s, fourier_sums(tau, y, 40, method="fft"))
+    np.testing.assert_array_equal(by_fft.z, fourier_sums(tau, np.ones(80), 40, method="fft"))
     np.testing.assert_array_equal(flat.s, fourier_sums(tau, y, 40, method="direct"))
     np.testing.assert_array_equal(flat.z, fourier_sums(tau, np.ones(80), 40, method="direct"))
     # float32 observations are summed in float64 (a float32 sum of 0.3s is off by ~1e-7 relative here)
@@ -194,6 +200,13 @@ def test_duration_rule_boundary_base_period_and_admissible_mask() -> None:
     assert adm.dtype == np.bool_ and adm.tolist() == [k >= 7 for k in range(1, 11)]
     assert FremenModel(3).admissible().dtype == np.bool_
     assert not m.coefficients()[:6].any() and m.coefficients()[6:].all()
+    # ranking: decreasing amplitude, ties (here the dropped periods) in harmonic order
+    rng = np.random.default_rng(9)
+    t3 = np.sort(rng.uniform(0, 3 * 86400.0, 200))
+    m3 = FremenModel(300, duration_rule=True).add(t3, (rng.random(200) < 0.5).astype(float))
+    amp = np.abs(m3.coefficients())
+    assert (amp == 0).sum() == 3  # 1.5 T > 3 days for T = 7, 3.5 and 2.33 days
+    assert m3.ranking().tolist() == sorted(range(1, 301), key=lambda k: -amp[k - 1])
     # a daily base period is kept in the components and used by their prediction
     tau = np.arange(0, 5 * 86400.0, 600.0)
     y = 0.5 + 0.4 * np.cos(2 * np.pi * tau / 43200.0)
@@ -222,8 +235,12 @@ def test_components_prediction_clips_and_round_trips_through_json() -> None:
     assert back.coef.dtype == np.complex128 and back.base_period_s == WEEK_S
     np.testing.assert_array_equal(back.coef, comps.coef)
     np.testing.assert_array_equal(back.predict(tau), comps.predict(tau))
-    d = FremenComponents(0.25, np.array([2]), np.array([0.1 - 0.2j]), 86400.0).to_dict()
+    daily = FremenComponents(0.25, np.array([2]), np.array([0.1 - 0.2j]), 86400.0)
+    d = daily.to_dict()
     assert d == {"mean": 0.25, "k": [2], "re": [0.1], "im": [-0.2], "base_period_s": 86400.0}
+    back = FremenComponents.from_dict(json.loads(json.dumps(d)))
+    assert back.base_period_s == 86400.0
+    np.testing.assert_array_equal(back.raw(tau), daily.raw(tau))
 
 
 def _zone_offset(t: float, zone: str) -> float:
@@ -281,20 +298,21 @@ def test_offset_table_is_reused_and_grown_not_rebuilt(monkeypatch: pytest.Monkey
     np.testing.assert_array_equal(wall_seconds(inside, zone), [x + _zone_offset(x, zone) for x in inside])
     assert len(calls) == 1  # no rebuild for times the table covers
     far = np.array([lo + 1500 * 86400.0, lo - 1500 * 86400.0])
-    np.testing.assert_array_equal(wall_seconds(far, zone), [x + _zone_offset(x, zone) for x in far])
-    assert len(calls) == 2  # one rebuild grows the table to cover both
+    for i, x in enumerate(far):  # each far time grows the table once, keeping what it covered
+        assert wall_seconds(np.array([x]), zone)[0] == x + _zone_offset(x, zone)
+        assert len(calls) == 2 + i
+        both = np.array([a, b, *far[: i + 1]])
+        np.testing.assert_array_equal(wall_seconds(both, zone), [x + _zone_offset(x, zone) for x in both])
+        assert len(calls) == 2 + i
     a2, b2 = _fremen._OFFSET_TABLES[zone][:2]
     assert a2 <= min(a, far.min()) and b2 >= max(b, far.max())
-    both = np.array([a, b, far[0], far[1]])
-    np.testing.assert_array_equal(wall_seconds(both, zone), [x + _zone_offset(x, zone) for x in both])
-    assert len(calls) == 2  # the grown table still covers the first range
     # a fresh table that ends exactly at a transition: its last time has the new offset
     monkeypatch.setattr(_fremen, "_OFFSET_TABLES", {})
     fall = 1_730_613_600.0  # 2024-11-03 06:00 UTC: Toronto goes from -4 h to -5 h
     assert _zone_offset(fall - 1, zone) == -14400 and _zone_offset(fall, zone) == -18000
     wall_seconds(np.array([fall - 400 * 86400.0]), zone)  # the table ends at the transition (400-day margin)
     end = _fremen._OFFSET_TABLES[zone][1]
-    assert wall_seconds(np.array([end]), zone)[0] == end + _zone_offset(end, zone) and len(calls) == 3
+    assert wall_seconds(np.array([end]), zone)[0] == end + _zone_offset(end, zone) and len(calls) == 4
 
 
 def test_utc_names_and_empty_input_never_need_the_zone_tables(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -239,6 +239,7 @@ def test_order_scores_equal_the_reference_evaluation_over_several_chunks() -> No
     want_ref = np.mean(np.abs(yv - (est > 0.5)), axis=1)
     want_mae = np.mean(np.abs(yv - np.clip(est, 0.0, 1.0)), axis=1)
     np.testing.assert_allclose(m.order_scores(tv, yv), want_ref, rtol=0, atol=1e-12)  # the default rule
+    np.testing.assert_array_equal(m.order_scores(tv.reshape(-1, 2), yv), m.order_scores(tv, yv))  # any shape
     np.testing.assert_allclose(m.order_scores(tv, yv, rule="mae"), want_mae, rtol=0, atol=1e-9)
     # columns are flattened; float32 times are read as float64
     np.testing.assert_array_equal(m.order_scores(tv[:50, None], yv[:50, None], 5), m.order_scores(tv[:50], yv[:50], 5))
