@@ -231,3 +231,53 @@ def test_save_process_writes_the_json_document_and_replaces_a_file(tmp_path) -> 
     assert StepProcess.from_dict(json.loads(text)).to_json() == text
     save_process(proc, str(out))  # a str path as well
     assert out.read_text(encoding="utf-8") == text
+
+
+def _slot_minutes(d: int, s: int, hours: tuple[float, ...]) -> int:
+    return d * 1440 + int(round(hours[s] * 60))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 4), st.data())
+def test_intervals_cover_exactly_the_on_slots_in_maximal_runs(K: int, data: st.DataObject) -> None:
+    """Decode the 'Day: HH:MM - Day: HH:MM' strings back to slots: every on slot once, no off slot,
+    one interval per maximal run of on slots around the week (Sunday's last slot runs into Monday)."""
+    from psg_data.synth._process import WEEKDAYS, _intervals
+
+    hours = tuple(sorted(data.draw(st.sets(st.integers(0, 23), min_size=K, max_size=K))))
+    n = 7 * K
+    on = np.array(data.draw(st.lists(st.booleans(), min_size=n, max_size=n)))
+    got = _intervals(on, K, hours)
+    starts = {_slot_minutes(d, s, hours): d * K + s for d in range(7) for s in range(K)}
+    if on.all():
+        assert got == [f"{WEEKDAYS[d]}: 00:00 - {WEEKDAYS[(d + 1) % 7]}: 00:00" for d in range(7)]
+        return
+    covered: list[int] = []
+    for text in got:
+        a, b = text.split(" - ")
+        t0 = WEEKDAYS.index(a[:3]) * 1440 + int(a[5:7]) * 60 + int(a[8:10])
+        t1 = WEEKDAYS.index(b[:3]) * 1440 + int(b[5:7]) * 60 + int(b[8:10])
+        i = starts[t0]
+        while True:  # walk the slots from the interval's start until the one that ends at t1
+            covered.append(i)
+            nxt = (i + 1) % n
+            if _slot_minutes(nxt // K, nxt % K, hours) == t1:
+                break
+            i = nxt
+            assert len(covered) <= n
+    assert sorted(covered) == list(np.flatnonzero(on))
+    runs = sum(1 for i in range(n) if on[i] and not on[i - 1])  # circular run starts
+    assert len(got) == runs
+    keys = [(WEEKDAYS.index(s[:3]), s[5:10]) for s in got]
+    assert keys == sorted(keys)
+
+
+def test_llm_schedules_skip_an_absent_state_anywhere_in_the_list() -> None:
+    import dataclasses
+
+    proc = tiny_process(4, K=2, rho=1.0)
+    ent = proc.entities["obj"]
+    moved = dataclasses.replace(ent, states=("r0", None, "r2"))
+    proc.entities["obj"] = moved
+    sched = llm_schedules(proc)
+    assert set(sched) == {("obj", "r0"), ("obj", "r2")}
