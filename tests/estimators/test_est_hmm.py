@@ -114,3 +114,118 @@ def test_time_vectorised_forward_backward_equals_the_loop() -> None:
     args = (le, _transitions(0.6, d), _transitions(0.3, d), d, b.long & b.valid_t)
     for a, c in zip(_forward_backward(*args), _forward_backward_scan(*args)):
         np.testing.assert_allclose(c, a, rtol=1e-9, atol=1e-9)
+
+
+def _enumerate(ys: dict[str, np.ndarray], long: np.ndarray, pm: float, pf: float, stay: tuple[float, float],
+               d: np.ndarray) -> dict[str, object]:
+    """Brute force over every path and every step's jump indicator of one object: the E-step's
+    expected counts (state marginals, transitions per kind, jumps landing per kind) and log p(y)."""
+    labels = sorted(ys)
+    n_t, n_s = len(long), len(labels) + 1
+    tot = 0.0
+    gamma = np.zeros((n_t, n_s))
+    trans = {False: 0.0, True: 0.0}
+    land = {False: np.zeros(n_s), True: np.zeros(n_s)}
+    for path in itertools.product(range(n_s), repeat=n_t):
+        p = d[path[0]]
+        for i in range(1, n_t):
+            s = stay[1] if long[i] else stay[0]
+            p *= s * (path[i] == path[i - 1]) + (1 - s) * d[path[i]]
+        for i, z in enumerate(path):
+            for k, r in enumerate(labels):
+                y = ys[r][i]
+                p *= ((1 - pm) if y else pm) if z == k + 1 else (pf if y else 1 - pf)
+        tot += p
+        for i, z in enumerate(path):
+            gamma[i, z] += p
+        for i in range(1, n_t):
+            s = stay[1] if long[i] else stay[0]
+            jump = (1 - s) * d[path[i]]  # the jump part of this step's transition probability
+            trans[bool(long[i])] += p
+            land[bool(long[i])][path[i]] += p * jump / (s * (path[i] == path[i - 1]) + jump)
+    return {"loglik": math.log(tot), "gamma": gamma / tot, "trans": {k: v / tot for k, v in trans.items()},
+            "land": {k: v / tot for k, v in land.items()}}
+
+
+def test_one_baum_welch_step_equals_the_closed_form_m_step_on_enumerated_counts() -> None:
+    t = T0 + np.array([0, 2, 4, 20, 22]) * 3600.0  # median gap 2 h: the 16 h gap is the long one
+    ys = {"r1": np.array([1, 0, 0, 1, 1]), "r2": np.array([0, 1, 0, 1, 1])}
+    streams = [EdgeStream(("o", r), t, y.astype(np.int8)) for r, y in ys.items()]
+    long = np.array([False, False, False, True, False])
+    d0 = np.full(3, 1 / 3)
+    for p_m in (None, 0.2):
+        fit = fit_error_hmm(streams, p_m=p_m, max_iter=1)
+        pm0 = 0.05 if p_m is None else p_m
+        en = _enumerate(ys, long, pm0, 0.05, (0.7, 0.5), d0)
+        g = en["gamma"]
+        # the first trace value: log p(y) plus the Dirichlet penalty 2/3 * sum(log d) at d uniform
+        assert fit.log_likelihood[0] == pytest.approx(en["loglik"] + 2.0 * math.log(1 / 3), rel=1e-12)
+        y = np.stack([ys["r1"], ys["r2"]], axis=1)
+        g_on = g[:, 1:]
+        want_pm = np.sum(g_on * (y == 0)) / np.sum(g_on) if p_m is None else p_m
+        want_pf = np.sum((1 - g_on) * (y == 1)) / np.sum(1 - g_on)
+        assert fit.p_m == pytest.approx(want_pm, rel=1e-10) and fit.p_f == pytest.approx(want_pf, rel=1e-10)
+        for kind, lg in (("same_day", False), ("long_gap", True)):
+            want = 1 - en["land"][lg].sum() / en["trans"][lg]
+            assert fit.stay[kind] == pytest.approx(want, rel=1e-10)
+        np.testing.assert_allclose(fit.posterior[("o", "r1")][1], g[:, 1], rtol=1e-10)
+        np.testing.assert_allclose(fit.posterior[("o", "r2")][1], g[:, 2], rtol=1e-10)
+        assert fit.n_objects == 1 and fit.n_steps == 5 and fit.long_gap_s == 3 * 7200.0
+        # the destinations: first states and jumps landing, plus the pseudo-counts; the second trace
+        # value is the penalised likelihood under the updated parameters
+        d1 = g[0] + en["land"][False] + en["land"][True] + 2.0 / 3
+        d1 /= d1.sum()
+        nxt = fit_error_hmm(streams, p_m=p_m, max_iter=2, tol=0.0)
+        en1 = _enumerate(ys, long, fit.p_m, fit.p_f, (fit.stay["same_day"], fit.stay["long_gap"]), d1)
+        pen1 = float(np.sum(2.0 / 3 * np.log(d1)))
+        assert nxt.log_likelihood[1] == pytest.approx(en1["loglik"] + pen1, rel=1e-12)
+
+
+def test_forward_backward_transition_counts_against_enumeration() -> None:
+    t = T0 + np.array([0, 2, 4, 20, 22]) * 3600.0
+    ys = {"r1": np.array([1, 0, 0, 1, 1]), "r2": np.array([0, 1, 0, 1, 0])}
+    streams = [EdgeStream(("o", r), t, y.astype(np.int8)) for r, y in ys.items()]
+    b = _batch(streams, long_gap_s=6 * 3600)
+    d = np.array([[0.2, 0.5, 0.3]])
+    a_s, a_l = _transitions(0.7, d), _transitions(0.3, d)
+    _, xs, xl, _ = _forward_backward(_log_emissions(b, 0.1, 0.2), a_s, a_l, d, b.long)
+    want = {False: np.zeros((3, 3)), True: np.zeros((3, 3))}
+    tot = 0.0
+    for path in itertools.product(range(3), repeat=5):
+        p = d[0, path[0]]
+        for i in range(1, 5):
+            p *= (a_l[0] if b.long[0, i] else a_s[0])[path[i - 1], path[i]]
+        for i, z in enumerate(path):
+            for k, r in enumerate(("r1", "r2")):
+                y = ys[r][i]
+                p *= (0.9 if y else 0.1) if z == k + 1 else (0.2 if y else 0.8)
+        tot += p
+        for i in range(1, 5):
+            want[bool(b.long[0, i])][path[i - 1], path[i]] += p
+    np.testing.assert_allclose(xs[0], want[False] / tot, rtol=1e-10, atol=1e-15)
+    np.testing.assert_allclose(xl[0], want[True] / tot, rtol=1e-10, atol=1e-15)
+
+
+def test_split_streams_of_one_edge_merge_and_typical_gap_and_summary() -> None:
+    from psg_data.estimators._hmm import typical_gap_s
+
+    streams, _ = simulate(3, 4, 0.1, 0.1, seed=9)
+    one = fit_error_hmm(streams, max_iter=5)
+    split = []
+    for s in streams:  # every edge as two interleaved streams (odd and even observations)
+        split += [EdgeStream(s.edge, s.t_s[::2], s.y[::2]), EdgeStream(s.edge, s.t_s[1::2], s.y[1::2])]
+    two = fit_error_hmm(split, max_iter=5)
+    assert two.p_m == pytest.approx(one.p_m, rel=1e-12) and two.p_f == pytest.approx(one.p_f, rel=1e-12)
+    assert two.log_likelihood == pytest.approx(one.log_likelihood, rel=1e-12)
+    for e, (ts, p) in one.posterior.items():
+        np.testing.assert_array_equal(two.posterior[e][0], ts)
+        np.testing.assert_allclose(two.posterior[e][1], p, rtol=1e-12, atol=1e-15)
+    s = one.summary()
+    assert s == {"p_m": one.p_m, "p_f": one.p_f, "stay": one.stay, "long_gap_s": one.long_gap_s,
+                 "iterations": len(one.log_likelihood), "objects": 3, "object_steps": one.n_steps}
+    # the median of the distinct gaps, pooled; repeated times and one-observation streams add nothing
+    g = [EdgeStream(("a", "x"), np.array([0.0, 10.0, 10.0, 40.0]), np.ones(4, np.int8)),
+         EdgeStream(("a", "y"), np.array([5.0, 7.0]), np.ones(2, np.int8)),
+         EdgeStream(("b", "x"), np.array([100.0]), np.ones(1, np.int8))]
+    assert typical_gap_s(g) == float(np.median([10.0, 30.0, 2.0]))
+    assert typical_gap_s(g[2:]) == 0.0 and typical_gap_s([]) == 0.0
