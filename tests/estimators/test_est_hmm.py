@@ -134,7 +134,8 @@ def _enumerate(ys: dict[str, np.ndarray], long: np.ndarray, pm: float, pf: float
         for i, z in enumerate(path):
             for k, r in enumerate(labels):
                 y = ys[r][i]
-                p *= ((1 - pm) if y else pm) if z == k + 1 else (pf if y else 1 - pf)
+                if y >= 0:  # -1: not observed
+                    p *= ((1 - pm) if y else pm) if z == k + 1 else (pf if y else 1 - pf)
         tot += p
         for i, z in enumerate(path):
             gamma[i, z] += p
@@ -229,3 +230,74 @@ def test_split_streams_of_one_edge_merge_and_typical_gap_and_summary() -> None:
          EdgeStream(("b", "x"), np.array([100.0]), np.ones(1, np.int8))]
     assert typical_gap_s(g) == float(np.median([10.0, 30.0, 2.0]))
     assert typical_gap_s(g[2:]) == 0.0 and typical_gap_s([]) == 0.0
+
+
+def _loop_and_scan(le: np.ndarray, d: np.ndarray, long: np.ndarray) -> None:
+    from psg_data.estimators._hmm import _forward_backward_scan
+
+    args = (le, _transitions(0.6, d), _transitions(0.3, d), d, long)
+    for a, c in zip(_forward_backward(*args), _forward_backward_scan(*args)):
+        np.testing.assert_allclose(c, a, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_s", [2, 3, 4])
+def test_time_vectorised_forward_backward_small_state_spaces_short_and_extreme(n_s: int) -> None:
+    # 2 and 3 states use the hand-unrolled matrix product; T = 1 and 2 are the edge cases of the
+    # backward pass; log emissions of -1000 and below underflow exp() unless each step is shifted by
+    # its own maximum, and 3000 steps underflow an unscaled product
+    rng = np.random.default_rng(n_s)
+    d = rng.dirichlet(np.ones(n_s), size=2)
+    for t_max in (1, 2, 3, 40):
+        le = np.log(rng.uniform(0.05, 1.0, size=(2, t_max, n_s)))
+        _loop_and_scan(le, d, rng.random((2, t_max)) < 0.3)
+    _loop_and_scan(rng.uniform(-2000.0, -1000.0, size=(2, 30, n_s)), d, rng.random((2, 30)) < 0.3)
+    _loop_and_scan(np.log(rng.uniform(0.05, 1.0, size=(2, 3000, n_s))), d, rng.random((2, 3000)) < 0.3)
+
+
+def test_pooled_m_step_over_objects_of_different_sizes_and_lengths() -> None:
+    # object "o" on two receptacles at five times, object "q" on one receptacle at three: padded
+    # states add nothing; q's chain runs on through the two padded times unobserved (same-day
+    # steps: they change no likelihood, and their expected transitions enter the stay update, a
+    # data augmentation of the EM that keeps its monotonicity and its fixed points); the rates and
+    # stays are pooled over both objects
+    t = T0 + np.array([0, 2, 4, 20, 22]) * 3600.0
+    ys = {"r1": np.array([1, 0, 0, 1, 1]), "r2": np.array([0, 1, 0, 1, 1])}
+    tq, yq = T0 + np.array([1, 3, 19]) * 3600.0, {"r1": np.array([1, 1, 0])}
+    streams = [EdgeStream(("o", r), t, y.astype(np.int8)) for r, y in ys.items()]
+    streams.append(EdgeStream(("q", "r1"), tq, yq["r1"].astype(np.int8)))
+    fit = fit_error_hmm(streams, max_iter=1)
+    assert fit.long_gap_s == 3 * 7200.0  # the median of 2, 2, 16, 2, 2, 16 h
+    eo = _enumerate(ys, np.array([False, False, False, True, False]), 0.05, 0.05, (0.7, 0.5), np.full(3, 1 / 3))
+    yq_padded = {"r1": np.array([1, 1, 0, -1, -1])}
+    eq = _enumerate(yq_padded, np.array([False, False, True, False, False]), 0.05, 0.05, (0.7, 0.5),
+                    np.full(2, 1 / 2))
+    pen = 2.0 * math.log(1 / 3) + 2.0 * math.log(1 / 2)
+    assert fit.log_likelihood[0] == pytest.approx(eo["loglik"] + eq["loglik"] + pen, rel=1e-12)
+    go, gq = eo["gamma"][:, 1:], eq["gamma"][:3, 1:]
+    yo, yqq = np.stack([ys["r1"], ys["r2"]], axis=1), yq["r1"][:, None]
+    pm = (np.sum(go * (yo == 0)) + np.sum(gq * (yqq == 0))) / (go.sum() + gq.sum())
+    pf = (np.sum((1 - go) * (yo == 1)) + np.sum((1 - gq) * (yqq == 1))) / ((1 - go).sum() + (1 - gq).sum())
+    assert fit.p_m == pytest.approx(pm, rel=1e-10) and fit.p_f == pytest.approx(pf, rel=1e-10)
+    for kind, lg in (("same_day", False), ("long_gap", True)):
+        jumps = eo["land"][lg].sum() + eq["land"][lg].sum()
+        assert fit.stay[kind] == pytest.approx(1 - jumps / (eo["trans"][lg] + eq["trans"][lg]), rel=1e-10)
+    np.testing.assert_allclose(fit.posterior[("q", "r1")][1], eq["gamma"][:3, 1], rtol=1e-10)
+    assert fit.n_objects == 2 and fit.n_steps == 8
+
+
+def test_fixed_rates_are_kept_inside_the_open_interval_and_iteration_limits() -> None:
+    t = T0 + np.array([0, 2, 4, 20, 22]) * 3600.0
+    ys = {"r1": np.array([1, 0, 0, 1, 1]), "r2": np.array([0, 1, 0, 1, 1])}
+    streams = [EdgeStream(("o", r), t, y.astype(np.int8)) for r, y in ys.items()]
+    fit = fit_error_hmm(streams, p_m=0.0, p_f=0.7, max_iter=3)
+    assert 0.0 < fit.p_m <= 1e-6 and 0.45 < fit.p_f < 0.5  # a zero or > 1/2 rate would be degenerate
+    assert np.all(np.isfinite(fit.log_likelihood))
+    en = _enumerate(ys, np.array([False, False, False, True, False]), fit.p_m, fit.p_f, (0.7, 0.5), np.full(3, 1 / 3))
+    assert fit.log_likelihood[0] == pytest.approx(en["loglik"] + 2.0 * math.log(1 / 3), rel=1e-9)
+    # without a tolerance the default runs its 200 iterations
+    assert len(fit_error_hmm(streams, tol=-1.0).log_likelihood) == 200
+    # one scan time: no gap, so no step is long; sub-second gaps are gaps as well
+    one = [EdgeStream(("o", "r1"), np.array([T0]), np.array([1], np.int8))]
+    assert fit_error_hmm(one, max_iter=2).long_gap_s == math.inf
+    fast = [EdgeStream(("o", "r1"), T0 + np.array([0.0, 0.5, 1.0, 5.0]), np.array([1, 1, 0, 0], np.int8))]
+    assert fit_error_hmm(fast, max_iter=2).long_gap_s == 1.5
