@@ -69,9 +69,10 @@ def test_forward_backward_against_enumeration() -> None:
     d = np.array([[0.2, 0.5, 0.3]])
     a_s, a_l = _transitions(0.7, d), _transitions(0.3, d)
     le = _log_emissions(b, pm, pf)
-    gamma, _, _, ll = _forward_backward(le, a_s, a_l, d, b.long)
-    # brute force over all 3^5 paths
+    gamma, xs, xl, ll = _forward_backward(le, a_s, a_l, d, b.long)
+    # brute force over all 3^5 paths: state marginals and the expected transitions per step kind
     tot, marg = 0.0, np.zeros((5, 3))
+    xi = {False: np.zeros((3, 3)), True: np.zeros((3, 3))}
     for path in itertools.product(range(3), repeat=5):
         p = d[0, path[0]]
         for i in range(1, 5):
@@ -85,8 +86,12 @@ def test_forward_backward_against_enumeration() -> None:
         tot += p
         for i, z in enumerate(path):
             marg[i, z] += p
+        for i in range(1, 5):
+            xi[bool(b.long[0, i])][path[i - 1], path[i]] += p
     assert float(ll[0]) == pytest.approx(math.log(tot), rel=1e-12)
     np.testing.assert_allclose(gamma[0], marg / tot, rtol=1e-10)
+    np.testing.assert_allclose(xs[0], xi[False] / tot, rtol=1e-10, atol=1e-15)
+    np.testing.assert_allclose(xl[0], xi[True] / tot, rtol=1e-10, atol=1e-15)
     del rng
 
 
@@ -180,31 +185,6 @@ def test_one_baum_welch_step_equals_the_closed_form_m_step_on_enumerated_counts(
         en1 = _enumerate(ys, long, fit.p_m, fit.p_f, (fit.stay["same_day"], fit.stay["long_gap"]), d1)
         pen1 = float(np.sum(2.0 / 3 * np.log(d1)))
         assert nxt.log_likelihood[1] == pytest.approx(en1["loglik"] + pen1, rel=1e-12)
-
-
-def test_forward_backward_transition_counts_against_enumeration() -> None:
-    t = T0 + np.array([0, 2, 4, 20, 22]) * 3600.0
-    ys = {"r1": np.array([1, 0, 0, 1, 1]), "r2": np.array([0, 1, 0, 1, 0])}
-    streams = [EdgeStream(("o", r), t, y.astype(np.int8)) for r, y in ys.items()]
-    b = _batch(streams, long_gap_s=6 * 3600)
-    d = np.array([[0.2, 0.5, 0.3]])
-    a_s, a_l = _transitions(0.7, d), _transitions(0.3, d)
-    _, xs, xl, _ = _forward_backward(_log_emissions(b, 0.1, 0.2), a_s, a_l, d, b.long)
-    want = {False: np.zeros((3, 3)), True: np.zeros((3, 3))}
-    tot = 0.0
-    for path in itertools.product(range(3), repeat=5):
-        p = d[0, path[0]]
-        for i in range(1, 5):
-            p *= (a_l[0] if b.long[0, i] else a_s[0])[path[i - 1], path[i]]
-        for i, z in enumerate(path):
-            for k, r in enumerate(("r1", "r2")):
-                y = ys[r][i]
-                p *= (0.9 if y else 0.1) if z == k + 1 else (0.2 if y else 0.8)
-        tot += p
-        for i in range(1, 5):
-            want[bool(b.long[0, i])][path[i - 1], path[i]] += p
-    np.testing.assert_allclose(xs[0], want[False] / tot, rtol=1e-10, atol=1e-15)
-    np.testing.assert_allclose(xl[0], want[True] / tot, rtol=1e-10, atol=1e-15)
 
 
 def test_split_streams_of_one_edge_merge_and_typical_gap_and_summary() -> None:
