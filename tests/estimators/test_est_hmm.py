@@ -281,3 +281,54 @@ def test_fixed_rates_are_kept_inside_the_open_interval_and_iteration_limits() ->
     assert fit_error_hmm(one, max_iter=2).long_gap_s == math.inf
     fast = [EdgeStream(("o", "r1"), T0 + np.array([0.0, 0.5, 1.0, 5.0]), np.array([1, 1, 0, 0], np.int8))]
     assert fit_error_hmm(fast, max_iter=2).long_gap_s == 1.5
+
+
+def test_stopping_rule_single_observations_and_degenerate_stays() -> None:
+    from psg_data.estimators._hmm import _RATE_MAX, _RATE_MIN
+
+    t = T0 + np.array([0, 2, 4, 20, 22]) * 3600.0
+    ys = {"r1": np.array([1, 0, 0, 1, 1]), "r2": np.array([0, 1, 0, 1, 1])}
+    streams = [EdgeStream(("o", r), t, y.astype(np.int8)) for r, y in ys.items()]
+    # Baum-Welch stops at the first iteration whose change is below tol * max(1, |total|)
+    for tol in (1e-2, 1e-4, 1e-7):
+        tr = fit_error_hmm(streams, tol=tol).log_likelihood
+        stop = next(i for i in range(1, len(tr)) if abs(tr[i] - tr[i - 1]) < tol * max(1.0, abs(tr[i])))
+        assert len(tr) == stop + 1
+    assert len(fit_error_hmm(streams, tol=0.0).log_likelihood) == 200  # never below 0: all iterations
+    # one observation, present: the M-step's raw rates are 0 (P_M) and 1 (P_F), kept inside the bounds
+    one = [EdgeStream(("o", "r1"), np.array([T0]), np.array([1], np.int8))]
+    en = _enumerate({"r1": np.array([1])}, np.array([False]), 0.05, 0.05, (0.7, 0.5), np.full(2, 1 / 2))
+    fit = fit_error_hmm(one, max_iter=1)
+    g_on = en["gamma"][0, 1]
+    assert fit.p_m == float(np.clip(0.0 / g_on, _RATE_MIN, _RATE_MAX))
+    assert fit.p_f == float(np.clip((1 - g_on) / (1 - g_on), _RATE_MIN, _RATE_MAX))
+    assert fit.stay == {"same_day": 0.7, "long_gap": 0.5}  # no step of either kind: nothing to update
+    assert fit_error_hmm(one, max_iter=3).stay == {"same_day": 0.7, "long_gap": 0.5}
+    # two scans, one step: its stay is updated from that single transition
+    two = [EdgeStream(("o", "r1"), np.array([T0, T0 + 3600.0]), np.array([1, 0], np.int8))]
+    en2 = _enumerate({"r1": np.array([1, 0])}, np.array([False, False]), 0.05, 0.05, (0.7, 0.5), np.full(2, 1 / 2))
+    assert fit_error_hmm(two, max_iter=1).stay["same_day"] == pytest.approx(
+        1 - en2["land"][False].sum() / en2["trans"][False], rel=1e-10)
+    # an object that never moves drives the stay toward 1, one that moves at every scan toward 0:
+    # both stay strictly inside (0, 1)
+    tt = T0 + np.arange(40) * 3600.0
+    still = [EdgeStream(("o", "r1"), tt, np.ones(40, np.int8)), EdgeStream(("o", "r2"), tt, np.zeros(40, np.int8))]
+    s_still = fit_error_hmm(still, p_m=1e-9, p_f=1e-9, max_iter=80, tol=0.0).stay["same_day"]
+    assert 0.999 < s_still < 1.0
+    alt = (np.arange(40) % 2).astype(np.int8)
+    moving = [EdgeStream(("o", "r1"), tt, alt), EdgeStream(("o", "r2"), tt, (1 - alt).astype(np.int8))]
+    s_moving = fit_error_hmm(moving, p_m=1e-9, p_f=1e-9, max_iter=80, tol=0.0).stay["same_day"]
+    assert 1e-9 < s_moving < 0.01
+
+
+def test_no_observations_and_the_strict_long_gap() -> None:
+    from psg_data.errors import EstimatorError
+
+    with pytest.raises(EstimatorError, match="^error-rate HMM: no observations$"):
+        fit_error_hmm([EdgeStream(("o", "r1"), np.zeros(0), np.zeros(0, np.int8))])
+    # gaps 1, 1, 1, 3 h: the typical gap is 1 h, so 3 h is not longer than 3 typical gaps
+    t = T0 + np.array([0, 1, 2, 3, 6]) * 3600.0
+    b = _batch([EdgeStream(("o", "r1"), t, np.ones(5, np.int8))], long_gap_s=3 * 3600.0)
+    assert not b.long.any()
+    b = _batch([EdgeStream(("o", "r1"), t, np.ones(5, np.int8))], long_gap_s=3 * 3600.0 - 1)
+    assert b.long.tolist() == [[False, False, False, False, True]]
