@@ -274,6 +274,8 @@ def test_fixed_rates_are_kept_inside_the_open_interval_and_iteration_limits() ->
     assert np.all(np.isfinite(fit.log_likelihood))
     en = _enumerate(ys, np.array([False, False, False, True, False]), fit.p_m, fit.p_f, (0.7, 0.5), np.full(3, 1 / 3))
     assert fit.log_likelihood[0] == pytest.approx(en["loglik"] + 2.0 * math.log(1 / 3), rel=1e-9)
+    swapped = fit_error_hmm(streams, p_m=0.7, p_f=0.0, max_iter=1)
+    assert 0.45 < swapped.p_m < 0.5 and 0.0 < swapped.p_f <= 1e-6
     # without a tolerance the default runs its 200 iterations
     assert len(fit_error_hmm(streams, tol=-1.0).log_likelihood) == 200
     # one scan time: no gap, so no step is long; sub-second gaps are gaps as well
