@@ -229,3 +229,28 @@ def test_a_deep_copy_is_independent_and_predicts_the_same(proc: StepProcess) -> 
         fresh.update_many(train[0].t_s[:6], train[0].y[:6])
         fresh.update_many(train[0].t_s[6:9], 1 - train[0].y[6:9])
         np.testing.assert_allclose(g.predict(q), fresh.predict(q), rtol=0, atol=1e-15)
+
+
+def test_deep_copies_keep_the_shared_tracker_and_a_fresh_filter_copies(proc: StepProcess) -> None:
+    import copy
+
+    streams = _streams(proc, 10, 7)
+    cut = streams[0].t_s[6 * proc.n_slots]
+    train = [s.between(-np.inf, cut) for s in streams]
+    test = [s.between(cut, np.inf) for s in streams]
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P, share_updates=True).fit(train)
+    fresh = est.make_filter(train[0].edge)
+    q = np.linspace(test[0].t_s[5], test[0].t_s[5] + 86400, 5)
+    np.testing.assert_array_equal(copy.deepcopy(fresh).predict(q), fresh.predict(q))  # no belief yet
+    f, g = est.make_filter(train[0].edge), est.make_filter(train[1].edge)
+    f.update_many(np.concatenate([train[0].t_s, test[0].t_s[:6]]), np.concatenate([train[0].y, test[0].y[:6]]))
+    g.update_many(np.concatenate([train[1].t_s, test[1].t_s[:2]]), np.concatenate([train[1].y, test[1].y[:2]]))
+    # the sibling's observations after the training data reach f through the tracker, and its copy
+    np.testing.assert_array_equal(copy.deepcopy(f).predict(q), f.predict(q))
+    fc, gc = copy.deepcopy([f, g])  # copied together: the copies share one (copied) tracker
+    t3, y3 = float(test[1].t_s[2]), int(1 - test[1].y[2])
+    before = fc.predict(q)
+    g.update(t3, y3)
+    gc.update(t3, y3)
+    np.testing.assert_array_equal(fc.predict(q), f.predict(q))
+    assert not np.array_equal(fc.predict(q), before)

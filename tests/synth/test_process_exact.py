@@ -281,3 +281,11 @@ def test_llm_schedules_skip_an_absent_state_anywhere_in_the_list() -> None:
     proc.entities["obj"] = moved
     sched = llm_schedules(proc)
     assert set(sched) == {("obj", "r0"), ("obj", "r2")}
+
+
+def test_intervals_with_a_single_off_slot_wrap_around_the_week() -> None:
+    from psg_data.synth._process import _intervals
+
+    on = np.ones(14, bool)
+    on[5] = False  # K = 2: only Wednesday's second slot (15:00 until Thursday 09:00) is off
+    assert _intervals(on, 2, (9.0, 15.0)) == ["Thu: 09:00 - Wed: 15:00"]  # one run, around the week
