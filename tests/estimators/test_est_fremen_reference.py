@@ -224,3 +224,53 @@ def test_order_scores_name_the_rule_and_the_settings_parse_from_the_command_line
         get_estimator("fremen", order_rule="auc").fit([EdgeStream(("a", "b"), np.arange(3.0), np.ones(3, np.int8))])
     star = get_estimator("perpetua_star")
     assert star.get_params()["order_rule"] == "reference" and star.get_params()["duration_rule"] is True
+
+
+def test_order_scores_equal_the_reference_evaluation_over_several_chunks() -> None:
+    # 1000 orders x 4100 held-out times: the scores are summed over two chunks (4000 rows, then 100)
+    rng = np.random.default_rng(11)
+    t = np.sort(rng.uniform(0, 2 * WEEK, 300))
+    y = (np.mod(t, DAY) < 0.4 * DAY).astype(float)
+    tv = rng.uniform(-WEEK, 3 * WEEK, 4100)
+    yv = (np.mod(tv, DAY) < 0.4 * DAY).astype(float)
+    m = FremenModel(1000).add(t, y)
+    model = ref_fit(t, y, 1000, duration_rule=False)
+    est = ref_estimates(model, tv, 1000)
+    want_ref = np.mean(np.abs(yv - (est > 0.5)), axis=1)
+    want_mae = np.mean(np.abs(yv - np.clip(est, 0.0, 1.0)), axis=1)
+    np.testing.assert_allclose(m.order_scores(tv, yv), want_ref, rtol=0, atol=1e-12)  # the default rule
+    np.testing.assert_array_equal(m.order_scores(tv.reshape(-1, 2), yv), m.order_scores(tv, yv))  # any shape
+    np.testing.assert_allclose(m.order_scores(tv, yv, rule="mae"), want_mae, rtol=0, atol=1e-9)
+    # columns are flattened; float32 times are read as float64
+    np.testing.assert_array_equal(m.order_scores(tv[:50, None], yv[:50, None], 5), m.order_scores(tv[:50], yv[:50], 5))
+    t32 = tv[:200].astype(np.float32)
+    np.testing.assert_allclose(m.order_scores(t32, yv[:200], 40, rule="mae"),
+                               m.order_scores(t32.astype(np.float64), yv[:200], 40, rule="mae"), rtol=0, atol=1e-12)
+
+
+def test_order_scores_threshold_is_strict_and_sizes_zero_and_one() -> None:
+    m = FremenModel(3).add([0.0, 3600.0], [1.0, 0.0])  # mean exactly 0.5: the order-0 estimate is 0.5
+    yv = np.array([1.0, 1.0, 1.0, 0.0])
+    s = m.order_scores(np.arange(4.0) * 7200, yv, max_order=0)
+    assert s.tolist() == [0.75]  # (0.5 > 0.5) is 0: wrong on the three ones
+    empty = m.order_scores([], [], max_order=2)
+    assert empty.tolist() == [0.0, 0.0, 0.0]
+    one = m.order_scores([1800.0], [1.0], max_order=0)
+    assert one.tolist() == [1.0]
+    with pytest.raises(EstimatorError, match="must be one of reference, mae, got 'auc'"):
+        m.order_scores([1.0], [1.0], rule="auc")
+
+
+def test_choose_order_default_rule_shapes_and_no_finite_score() -> None:
+    s = [0.30, 0.2995, 0.25, 0.2492, 0.10, 0.0995, 0.1]
+    assert choose_order(s, 1e-3) == choose_order(s, 1e-3, "reference") == 4
+    assert choose_order(np.array(s)[:, None], 1e-3) == 4
+    assert choose_order(np.array(s)[:, None], 1e-3, "mae") == 4
+    assert choose_order([math.inf, math.inf], 0.0) == 0  # nothing beats "no score yet": order 0
+    assert choose_order([], 0.0) == 0
+    # float32 scores are compared in float64: 1 - 2^-24 beats 1.0 by 2^-24 > tol = 3 * 2^-26, although
+    # 1.0 - tol would round to 1 - 2^-24 in float32
+    s32 = np.array([1.0, 1.0 - 2.0**-24], dtype=np.float32)
+    assert choose_order(s32, 3 * 2.0**-26) == 1
+    with pytest.raises(EstimatorError, match="must be one of reference, mae, got 'aic'"):
+        choose_order(s, 1e-3, "aic")

@@ -192,3 +192,65 @@ def test_navigation_with_the_oracle(lab: Path) -> None:
                          estimator_settings={"process_oracle": {"dataset": str(lab)}}, keep_trails=False)
     table = res.summary
     assert {"process_oracle", "last_seen"} <= set(table["method"] if "method" in table else table.iloc[:, 0])
+
+
+def test_a_state_without_own_observations_restores_a_fresh_filter(proc: StepProcess) -> None:
+    train = _streams(proc, 6, 5)
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P).fit(train)
+    edge = train[0].edge
+    q = np.linspace(train[0].t_s[-1], train[0].t_s[-1] + 2 * 86400, 7)
+    bare = est.filter_from_state({"estimator": "process_oracle", "edge": list(edge)})
+    assert bare.last_t_s is None
+    np.testing.assert_allclose(bare.predict(q), est.make_filter(edge).predict(q), rtol=0, atol=0)
+    f = est.make_filter(edge)
+    f.update_many(train[0].t_s[:5], train[0].y[:5])
+    back = est.filter_from_state(json.loads(json.dumps(f.get_state())))
+    assert back.last_t_s == f.last_t_s
+    np.testing.assert_allclose(back.predict(q), f.predict(q), rtol=0, atol=1e-15)
+
+
+def test_a_deep_copy_is_independent_and_predicts_the_same(proc: StepProcess) -> None:
+    import copy
+
+    train = _streams(proc, 6, 6)
+    for share in (False, True):
+        est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P, share_updates=share).fit(train)
+        f = est.make_filter(train[0].edge)
+        f.update_many(train[0].t_s[:6], train[0].y[:6])
+        q = np.linspace(train[0].t_s[6], train[0].t_s[6] + 86400, 5)
+        before = f.predict(q)
+        g = copy.deepcopy(f)
+        np.testing.assert_array_equal(g.predict(q), before)
+        g.update_many(train[0].t_s[6:9], 1 - train[0].y[6:9])  # the copy learns, the original does not
+        assert g.last_t_s == train[0].t_s[8] and f.last_t_s == train[0].t_s[5]
+        np.testing.assert_array_equal(f.predict(q), before)
+        assert f.get_state()["own_t"] == train[0].t_s[:6].tolist()
+        fresh = est.make_filter(train[0].edge)
+        fresh.update_many(train[0].t_s[:6], train[0].y[:6])
+        fresh.update_many(train[0].t_s[6:9], 1 - train[0].y[6:9])
+        np.testing.assert_allclose(g.predict(q), fresh.predict(q), rtol=0, atol=1e-15)
+
+
+def test_deep_copies_keep_the_shared_tracker_and_a_fresh_filter_copies(proc: StepProcess) -> None:
+    import copy
+
+    streams = _streams(proc, 10, 7)
+    cut = streams[0].t_s[6 * proc.n_slots]
+    train = [s.between(-np.inf, cut) for s in streams]
+    test = [s.between(cut, np.inf) for s in streams]
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P, share_updates=True).fit(train)
+    fresh = est.make_filter(train[0].edge)
+    q = np.linspace(test[0].t_s[5], test[0].t_s[5] + 86400, 5)
+    np.testing.assert_array_equal(copy.deepcopy(fresh).predict(q), fresh.predict(q))  # no belief yet
+    f, g = est.make_filter(train[0].edge), est.make_filter(train[1].edge)
+    f.update_many(np.concatenate([train[0].t_s, test[0].t_s[:6]]), np.concatenate([train[0].y, test[0].y[:6]]))
+    g.update_many(np.concatenate([train[1].t_s, test[1].t_s[:2]]), np.concatenate([train[1].y, test[1].y[:2]]))
+    # the sibling's observations after the training data reach f through the tracker, and its copy
+    np.testing.assert_array_equal(copy.deepcopy(f).predict(q), f.predict(q))
+    fc, gc = copy.deepcopy([f, g])  # copied together: the copies share one (copied) tracker
+    t3, y3 = float(test[1].t_s[2]), int(1 - test[1].y[2])
+    before = fc.predict(q)
+    g.update(t3, y3)
+    gc.update(t3, y3)
+    np.testing.assert_array_equal(fc.predict(q), f.predict(q))
+    assert not np.array_equal(fc.predict(q), before)

@@ -162,3 +162,130 @@ def test_llm_schedules_follow_the_modal_routine() -> None:
     from psg_data.estimators import parse_llm_schedule
 
     assert len(parse_llm_schedule(repr(sched[("obj", "r1")]))) == 7
+
+
+def test_forecast_is_each_steps_marginal_in_any_order_without_moving_the_belief() -> None:
+    proc = tiny_process(5)
+    ent = proc.entities["obj"]
+    b = ForwardBelief(proc, ent).start()
+    b.advance_to(2)
+    b.observe(observation_likelihood(ent, "r0", 1, 0.1, 0.05))
+    alpha, n = b.alpha.copy(), b.n
+    assert b.forecast([]).shape == (0, ent.n_states)
+
+    def marginal(step: int) -> np.ndarray:
+        c = b.copy()
+        c.advance_to(max(step, n))
+        return c.state_marginal()
+
+    np.testing.assert_allclose(b.forecast([5])[0], marginal(5), rtol=0, atol=1e-15)
+    steps = [6, 2, 4, 6, 0, 3]  # unsorted, repeated, and before the current step (0: the current one)
+    got = b.forecast(np.array(steps))
+    assert got.shape == (len(steps), ent.n_states)
+    for row, s in zip(got, steps):
+        np.testing.assert_allclose(row, marginal(s), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(b.alpha, alpha)
+    assert b.n == n
+
+
+def test_weekday_pattern_marginals_long_run_closed_forms() -> None:
+    import dataclasses
+
+    from psg_data.synth._process import weekday_pattern_marginals
+
+    proc = tiny_process(6)
+    ent = proc.entities["obj"]
+    got = weekday_pattern_marginals(proc, ent)
+    assert got.shape == (7, ent.n_patterns)
+    # the periodic stationary law of the day chain: the eigenvector of one week's product of day matrices
+    first = 7  # a day index whose weekday is the start's
+    week = np.linalg.multi_dot([proc.day_matrix(ent, first + d) for d in range(1, 8)])
+    w, v = np.linalg.eig(week.T)
+    pi = np.real(v[:, np.argmin(np.abs(w - 1))])
+    pi = pi / pi.sum()
+    want = np.zeros((7, ent.n_patterns))
+    p = pi
+    for d in range(1, 8):
+        p = p @ proc.day_matrix(ent, first + d)
+        want[proc.clock.weekday(first + d)] = p
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    # a chain that alternates its two patterns every day never settles: each weekday sees each
+    # pattern in every other week, so the long-run frequency is 1/2 (an average over whole weeks pairs)
+    alt = dataclasses.replace(ent, pattern_allowed=np.ones((7, 2), bool),
+                              pattern_transition=np.array([[0.0, 1.0], [1.0, 0.0]]))
+    np.testing.assert_allclose(weekday_pattern_marginals(proc, alt), np.full((7, 2), 0.5), rtol=0, atol=1e-15)
+
+
+def test_save_process_writes_the_json_document_and_replaces_a_file(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import json
+
+    from psg_data.synth._process import save_process
+
+    proc = tiny_process(9)
+    out = tmp_path / "process.json"
+    out.write_text("old", encoding="utf-8")
+    save_process(proc, out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["process.json"]
+    text = out.read_text(encoding="utf-8")
+    assert text == proc.to_json()
+    assert StepProcess.from_dict(json.loads(text)).to_json() == text
+    save_process(proc, str(out))  # a str path as well
+    assert out.read_text(encoding="utf-8") == text
+
+
+def _slot_minutes(d: int, s: int, hours: tuple[float, ...]) -> int:
+    return d * 1440 + int(round(hours[s] * 60))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 4), st.data())
+def test_intervals_cover_exactly_the_on_slots_in_maximal_runs(K: int, data: st.DataObject) -> None:
+    """Decode the 'Day: HH:MM - Day: HH:MM' strings back to slots: every on slot once, no off slot,
+    one interval per maximal run of on slots around the week (Sunday's last slot runs into Monday)."""
+    from psg_data.synth._process import WEEKDAYS, _intervals
+
+    hours = tuple(sorted(data.draw(st.sets(st.integers(0, 23), min_size=K, max_size=K))))
+    n = 7 * K
+    on = np.array(data.draw(st.lists(st.booleans(), min_size=n, max_size=n)))
+    got = _intervals(on, K, hours)
+    starts = {_slot_minutes(d, s, hours): d * K + s for d in range(7) for s in range(K)}
+    if on.all():
+        assert got == [f"{WEEKDAYS[d]}: 00:00 - {WEEKDAYS[(d + 1) % 7]}: 00:00" for d in range(7)]
+        return
+    covered: list[int] = []
+    for text in got:
+        a, b = text.split(" - ")
+        t0 = WEEKDAYS.index(a[:3]) * 1440 + int(a[5:7]) * 60 + int(a[8:10])
+        t1 = WEEKDAYS.index(b[:3]) * 1440 + int(b[5:7]) * 60 + int(b[8:10])
+        i = starts[t0]
+        while True:  # walk the slots from the interval's start until the one that ends at t1
+            covered.append(i)
+            nxt = (i + 1) % n
+            if _slot_minutes(nxt // K, nxt % K, hours) == t1:
+                break
+            i = nxt
+            assert len(covered) <= n
+    assert sorted(covered) == list(np.flatnonzero(on))
+    runs = sum(1 for i in range(n) if on[i] and not on[i - 1])  # circular run starts
+    assert len(got) == runs
+    keys = [(WEEKDAYS.index(s[:3]), s[5:10]) for s in got]
+    assert keys == sorted(keys)
+
+
+def test_llm_schedules_skip_an_absent_state_anywhere_in_the_list() -> None:
+    import dataclasses
+
+    proc = tiny_process(4, K=2, rho=1.0)
+    ent = proc.entities["obj"]
+    moved = dataclasses.replace(ent, states=("r0", None, "r2"))
+    proc.entities["obj"] = moved
+    sched = llm_schedules(proc)
+    assert set(sched) == {("obj", "r0"), ("obj", "r2")}
+
+
+def test_intervals_with_a_single_off_slot_wrap_around_the_week() -> None:
+    from psg_data.synth._process import _intervals
+
+    on = np.ones(14, bool)
+    on[5] = False  # K = 2: only Wednesday's second slot (15:00 until Thursday 09:00) is off
+    assert _intervals(on, 2, (9.0, 15.0)) == ["Thu: 09:00 - Wed: 15:00"]  # one run, around the week
