@@ -257,33 +257,56 @@ def _opening_y(door_y: float) -> float:
     return y1 - margin if door_y < mid else y0 + margin
 
 
-def _wall_segments(door_ys: list[float], open_ys: list[float | None]) -> list[WallBox]:
+def _cut_wall(axis: int, at: float, lo: float, hi: float, gaps: list[tuple[float, float, float]]) -> list[WallBox]:
+    """A wall centred on ``at`` across ``axis`` (0: the wall runs along x, 1: along y) from ``lo`` to
+    ``hi``, with doorways or openings ``gaps`` ``(a, b, top)`` along it: the pieces between the gaps,
+    then the lintels over them (from ``top`` to the wall height).
+    """
+    t, h = WALL_THICKNESS_M / 2, WALL_HEIGHT_M
+
+    def box(a: float, b: float, z0: float) -> WallBox:
+        lo3, hi3 = [at - t, at - t, z0], [at + t, at + t, h]
+        lo3[axis], hi3[axis] = a, b
+        return WallBox((lo3[0], lo3[1], lo3[2]), (hi3[0], hi3[1], hi3[2]))
+
+    pieces, lintels = [], []
+    for a, b, top in sorted(gaps):
+        pieces.append(box(lo, a, 0.0))
+        lintels.append(box(a, b, top))
+        lo = b
+    return [*pieces, box(lo, hi, 0.0), *lintels]
+
+
+def _wall_segments(door_ys: list[float], open_ys: list[float | None], open_xs: list[float]) -> list[WallBox]:
+    """The lab's walls: the outer walls (around the corridor too when there are corridor openings
+    ``open_xs``), the rooms' north wall cut by those openings, and the inner walls with their doors
+    and passages (``open_ys``).
+    """
     t, h = WALL_THICKNESS_M / 2, WALL_HEIGHT_M
     y0, y1 = _Y_RANGE
+    top = y1 + CORRIDOR_WIDTH_M if open_xs else y1
     x_all = (_ROOMS[0][3][0], _ROOMS[-1][3][1])
     walls = [
         WallBox((x_all[0] - t, y0 - t, 0.0), (x_all[1] + t, y0 + t, h)),  # south
-        WallBox((x_all[0] - t, y1 - t, 0.0), (x_all[1] + t, y1 + t, h)),  # north
-        WallBox((x_all[0] - t, y0 + t, 0.0), (x_all[0] + t, y1 - t, h)),  # west
-        WallBox((x_all[1] - t, y0 + t, 0.0), (x_all[1] + t, y1 - t, h)),  # east
+        WallBox((x_all[0] - t, top - t, 0.0), (x_all[1] + t, top + t, h)),  # north
+        WallBox((x_all[0] - t, y0 + t, 0.0), (x_all[0] + t, top - t, h)),  # west
+        WallBox((x_all[1] - t, y0 + t, 0.0), (x_all[1] + t, top - t, h)),  # east
     ]
+    if open_xs:  # the rooms' north wall, between them and the corridor
+        walls += _cut_wall(0, y1, x_all[0] + t, x_all[1] - t,
+                           [(x - OPENING_WIDTH_M / 2, x + OPENING_WIDTH_M / 2, OPENING_HEIGHT_M) for x in open_xs])
     for k, (yd, yo) in enumerate(zip(door_ys, open_ys)):
-        x = _ROOMS[k][3][1]
         gaps = [(yd - DOOR_WIDTH_M / 2, yd + DOOR_WIDTH_M / 2, DOOR_HEIGHT_M)]
         if yo is not None:
             gaps.append((yo - OPENING_WIDTH_M / 2, yo + OPENING_WIDTH_M / 2, OPENING_HEIGHT_M))
-        lo, lintels = y0 + t, []
-        for a, b, top in sorted(gaps):  # wall pieces between the gaps, then the lintels over them
-            walls.append(WallBox((x - t, lo, 0.0), (x + t, a, h)))
-            lintels.append(WallBox((x - t, a, top), (x + t, b, h)))
-            lo = b
-        walls += [WallBox((x - t, lo, 0.0), (x + t, y1 - t, h)), *lintels]
+        walls += _cut_wall(1, _ROOMS[k][3][1], y0 + t, y1 - t, gaps)
     return walls
 
 
-def _corridor_opening_xs(door_ys: list[float]) -> list[float]:
+def _corridor_opening_xs() -> list[float]:
     """Centres (x) of the ``corridor`` layout's openings in the rooms' north wall, one per room: at the
-    end of the wall farthest from the room's door (end rooms), at the centre (the middle room).
+    end of the wall farthest from the room's door (the end rooms' doors are in their inner wall), at
+    the centre (the middle room).
     """
     margin = WALL_THICKNESS_M / 2 + 0.30 + OPENING_WIDTH_M / 2
     xs = []
@@ -295,25 +318,6 @@ def _corridor_opening_xs(door_ys: list[float]) -> list[float]:
         else:
             xs.append((xa + xb) / 2)
     return xs
-
-
-def _corridor_walls(walls: list[WallBox], open_xs: list[float]) -> list[WallBox]:
-    """``chain`` walls with the north wall cut by the openings and the corridor's own walls around it."""
-    t, h = WALL_THICKNESS_M / 2, WALL_HEIGHT_M
-    y0, y1 = _Y_RANGE
-    y2 = y1 + CORRIDOR_WIDTH_M
-    x_all = (_ROOMS[0][3][0], _ROOMS[-1][3][1])
-    out = [walls[0],  # south, then the corridor's north, west and east walls
-           WallBox((x_all[0] - t, y2 - t, 0.0), (x_all[1] + t, y2 + t, h)),
-           WallBox((x_all[0] - t, y0 + t, 0.0), (x_all[0] + t, y2 - t, h)),
-           WallBox((x_all[1] - t, y0 + t, 0.0), (x_all[1] + t, y2 - t, h))]
-    lo = x_all[0] + t
-    for xo in sorted(open_xs):  # the rooms' north wall between the openings, and the lintels
-        a, b = xo - OPENING_WIDTH_M / 2, xo + OPENING_WIDTH_M / 2
-        out += [WallBox((lo, y1 - t, 0.0), (a, y1 + t, h)), WallBox((a, y1 - t, OPENING_HEIGHT_M), (b, y1 + t, h))]
-        lo = b
-    out.append(WallBox((lo, y1 - t, 0.0), (x_all[1] - t, y1 + t, h)))
-    return out + walls[4:]
 
 
 def _overlap(a: tuple[float, float, float, float], b: tuple[float, float, float, float], gap: float) -> bool:
@@ -332,10 +336,8 @@ def make_layout(seed: int, layout: str = "corridor") -> LabLayout:
     rng = np.random.default_rng([int(seed), 101])
     door_ys = [float(rng.uniform(1.3, 4.2)) for _ in range(len(_ROOMS) - 1)]
     open_ys: list[float | None] = [_opening_y(y) if layout == "two_routes" else None for y in door_ys]
-    walls = _wall_segments(door_ys, open_ys)
-    open_xs = _corridor_opening_xs(door_ys) if layout == "corridor" else []
-    if open_xs:
-        walls = _corridor_walls(walls, open_xs)
+    open_xs = _corridor_opening_xs() if layout == "corridor" else []
+    walls = _wall_segments(door_ys, open_ys, open_xs)
     rooms: list[Room] = []
     y0, y1 = _Y_RANGE
     for rid, name, _, (xa, xb), _ in _ROOMS:

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from psg_data._settings import INT64_MAX, Integral, Options, Real, TimeZone, check_settings
 from psg_data.errors import PsgDataError
-from psg_data.schemas._records import CameraIntrinsics
+from psg_data.schemas._records import CameraIntrinsics, Door
 from psg_data.synth._lab_process import ProcessParams, StepSchedule
 from psg_data.synth._lab_schedule import LabSchedule
 from psg_data.synth._layout import DOOR_ID0, LAYOUTS, RECEPTACLE_ID0, LabLayout, make_layout
@@ -372,19 +372,23 @@ class LabModel:
         closed door leaf's doorway plane.
         """
         L = self.layout
+        five = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]])  # centre and 4 inner points
         tops = []
-        for r in L.receptacles:
+        for r in L.receptacles:  # on the top face (box z is up)
             c, e, R = np.asarray(r.box.center_m), np.asarray(r.box.extent_m), np.asarray(r.box.rotation)
-            loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[:2]
-            tops.append(np.column_stack([loc, np.full(5, e[2] / 2 + 0.01)]) @ R.T + c)
+            tops.append(np.column_stack([five * e[:2], np.full(5, e[2] / 2 + 0.01)]) @ R.T + c)
         ids = [RECEPTACLE_ID0 + i for i in range(len(L.receptacles))]
-        if L.scans_look_at_doors:
-            for i, d in enumerate(L.doors):
-                c, e = np.asarray(d.box.center_m), np.asarray(d.box.extent_m)
-                loc = np.array([[0, 0], [-.3, -.3], [.3, -.3], [-.3, .3], [.3, .3]]) * e[1:]
-                tops.append(np.column_stack([np.zeros(5), loc]) @ np.asarray(d.box.rotation).T + c)
-                ids.append(DOOR_ID0 + i)
+        for i, d in enumerate(self._viewed_doors()):  # on the doorway plane (box x is the wall normal)
+            c, e = np.asarray(d.box.center_m), np.asarray(d.box.extent_m)
+            tops.append(np.column_stack([np.zeros(5), five * e[1:]]) @ np.asarray(d.box.rotation).T + c)
+            ids.append(DOOR_ID0 + i)
         return np.asarray(tops), np.asarray(ids, np.int64)
+
+    def _viewed_doors(self) -> list[Door]:
+        """The doors each scan takes a door keyframe of (layouts whose scans look at the doors), in
+        layout order; their view targets follow the receptacles' (:meth:`_view_targets`).
+        """
+        return list(self.layout.doors) if self.layout.scans_look_at_doors else []
 
     def _view_candidates(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Per room with receptacles: candidate (x, y, yaw) rows and their (C, K) visibility scores of
@@ -436,11 +440,8 @@ class LabModel:
         L = self.layout
         rec_room = np.array([r.room_id for r in L.receptacles])
         door_pos = {d.door_id: np.asarray(d.box.center_m)[:2] for d in L.doors}
-        target_ids = self._view_targets()[1]
-        n_rec_targets = int(np.sum(target_ids >= RECEPTACLE_ID0))
-        door_col = {d.door_id: int(np.flatnonzero(target_ids == DOOR_ID0 + i)[0])
-                    for i, d in enumerate(L.doors) if np.any(target_ids == DOOR_ID0 + i)}
-        door_rooms = [(d.door_id, d.room_a, d.room_b) for d in L.doors if d.door_id in door_col]
+        n_rec_cols = len(L.receptacles)  # the view targets' columns: receptacles, then the viewed doors
+        viewed = self._viewed_doors()
         plans: list[ScanPlan] = []
         idx = 0
         for day in range(cfg.days):
@@ -457,14 +458,15 @@ class LabModel:
                         break
                     budget[i] += 1
                 views: list[tuple[float, float, float]] = []
-                door_room = {d: next((r for r in rooms if r in (ra, rb) and r in cands), None)
-                             for d, ra, rb in door_rooms}
+                # each viewed door from the first room of the route that it joins
+                door_room = [next((r for r in rooms if r in (d.room_a, d.room_b) and r in cands), None) for d in viewed]
                 for room, b in zip(rooms, budget):
                     if room not in cands:
                         continue
                     C, S = cands[room]
-                    views += self._room_views(C, S[:, :n_rec_targets], int(b), rng)
-                    views += [self._door_view(C, S[:, col], rng) for d, col in door_col.items() if door_room[d] == room]
+                    views += self._room_views(C, S[:, :n_rec_cols], int(b), rng)
+                    views += [self._door_view(C, S[:, n_rec_cols + i], rng)
+                              for i, r in enumerate(door_room) if r == room]
                 poses = []
                 walk = np.zeros(3)
                 stamps = []
