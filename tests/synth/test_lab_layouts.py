@@ -56,7 +56,8 @@ def test_every_room_reachable_with_both_doors_closed(seed: int, layout: str) -> 
         cfg = tuple(j != k for j in range(2))
         detour = lengths[(cfg, *sorted((door.room_a, door.room_b)))] - lengths[((True, True),
                                                                                  *sorted((door.room_a, door.room_b)))]
-        assert (0.5 if layout == "corridor" else 0.0) <= detour < 16.0
+        # the corridor detour is longer by design (out of the room, along the hallway, back in)
+        assert (0.5 <= detour < 16.0) if layout == "corridor" else (0.0 <= detour < 12.0)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 4])
