@@ -119,6 +119,11 @@ class Ref:
         tau = max(tq - self.origin, self.taus[n - 1])
         return float(min(lik * self.sf(c, tau) / e, 1))
 
+    def p_own_of(self, c: int, tq: float) -> float:
+        """Eq. 8's posterior of component c after all observations."""
+        _, lik, _ = self.parts(c, len(self.t))
+        return float(lik * self.sf(c, max(tq - self.origin, self.taus[-1])) / self.comp_evidence()[c])
+
     def predict(self, tq: float) -> float:
         p = self.p_own(tq)
         return 1.0 - p if self.emergence else p
@@ -232,12 +237,14 @@ def test_escape_floors_and_origins(floors: tuple[float, float], origin: float | 
 def test_scan_result_rows_and_scan_from_the_fresh_state() -> None:
     """ScanResult's per-observation arrays; ``scan_from`` with ly0 = lsf0 = None is the fresh state."""
     surv = FAMS["weibull"]
+    origin = T[0] - 300.0  # S(tau_1) < 1: the first change probability is not the floor
     f = MixtureFilter(surv, 0.15, 0.05)
+    f.reset(origin)
     res = f.scan(T, Y)
-    again = f.scan_from(float(T[0]), 0.0, 0.0, None, None, T.copy(), Y.astype(np.intp))
-    r = Ref(surv, 0.15, 0.05, T, Y)
+    again = f.scan_from(origin, 0.0, 0.0, None, None, T.copy(), Y.astype(np.intp))
+    r = Ref(surv, 0.15, 0.05, T, Y, origin=origin)
     for got in (res, again):
-        assert isinstance(got, ScanResult) and got.origin == T[0]
+        assert isinstance(got, ScanResult) and got.origin == origin
         np.testing.assert_array_equal(got.t, T)
         np.testing.assert_array_equal(got.tau, r.taus)
         for n in range(1, len(T) + 1):
@@ -246,7 +253,7 @@ def test_scan_result_rows_and_scan_from_the_fresh_state() -> None:
             np.testing.assert_allclose(got.lsf[:, n - 1], r.log_sf(n), rtol=1e-11, atol=1e-13)
             assert got.log_evidence[n - 1] == pytest.approx(r.log_evidence(n), rel=1e-11)
             assert got.p_own[n - 1] == pytest.approx(r.p_own(r.t[n - 1], n), rel=1e-10)
-    assert (f.n, f.last_t, f.origin) == (0, None, None)  # scan changes no state
+    assert (f.n, f.last_t, f.origin) == (0, None, origin)  # scan changes no state
 
 
 @pytest.mark.parametrize("path", ["scan", "step"])
@@ -413,3 +420,46 @@ def test_posterior_weights_of_a_long_stream() -> None:
     assert f.log_evidence() == pytest.approx(r.log_evidence(), rel=1e-11)
     np.testing.assert_allclose(f.posterior_weights(), r.weights(), rtol=1e-9)
     assert f.dominant() == r.dominant()
+
+
+def test_step_breaks_an_exact_tie_of_the_weights_like_argmax() -> None:
+    """At exactly equal posterior weights the first component is the dominant one in step, as in
+    ``dominant()`` (numpy's argmax) and the batch scan."""
+    surv = SurvivalMixture("weibull", np.array([0.5, 0.5]), np.array([0.9, 2.2]), np.array([2000.0, 2600.0]))
+    probe = MixtureFilter(surv, 0.1, 0.2)
+    probe.update_many(T, Y)
+    e = probe.component_log_evidence()
+    assert 0.5 < e[0] / e[1] < 2.0  # so e0 - e1 is exact (Sterbenz) and e1 + (e0 - e1) == e0
+    lp = [0.0, float(e[0] - e[1])]
+    f = MixtureFilter(surv, 0.1, 0.2, log_prior=lp)
+    out = [f.step(float(ti), int(yi)) for ti, yi in zip(T, Y)]
+    w = f.log_prior + f.component_log_evidence()
+    assert w[0] == w[1]  # the tie (the precondition of this test)
+    r = Ref(surv, 0.1, 0.2, T, Y, log_prior=np.array(lp))
+    p0, p1 = r.p_own_of(0, T[-1]), r.p_own_of(1, T[-1])
+    assert abs(p0 - p1) > 0.5 * max(p0, p1)  # the two components disagree: the tie break matters
+    assert out[-1][1] == pytest.approx(p0, rel=1e-10)
+    assert f.dominant() == 0
+    assert float(f.predict(T[-1:])[0]) == pytest.approx(p0, rel=1e-10)
+    g = MixtureFilter(surv, 0.1, 0.2, log_prior=lp)
+    assert float(g.scan(T, Y).p_own[-1]) == pytest.approx(p0, rel=1e-10)
+
+
+@pytest.mark.parametrize("surv", [SurvivalMixture.single("weibull", 1.5, 300.0),
+                                  SurvivalMixture.lognormal_median(300.0, 0.5)], ids=["weibull", "lognormal"])
+def test_prediction_never_exceeds_one(surv: SurvivalMixture) -> None:
+    """Certain presence (P_F = 0, no change probability between repeated detections): the posterior is
+    1 to double precision, and the scalar and numpy survival functions may differ in the last bit;
+    the prediction is clipped to 1 and still matches the reference."""
+    rng = np.random.default_rng(1)
+    for _ in range(60):
+        t = T0 + np.sort(rng.uniform(100.0, 3000.0, 3))
+        t = np.append(t, [t[-1]] * 3)  # three more detections at the last time
+        f = MixtureFilter(surv, 0.1, 0.0, escape=0.0, escape_first=0.0)
+        f.reset(T0)
+        for ti in t:
+            f.update(float(ti), 1)
+        p = f.predict(np.array([t[-1], t[-1] + 1e-3]))
+        assert np.all(p <= 1.0)
+        r = Ref(surv, 0.1, 0.0, t, np.ones(t.size, dtype=np.int8), origin=T0, escape=0.0, escape_first=0.0)
+        np.testing.assert_allclose(p, [r.predict(float(t[-1])), r.predict(float(t[-1]) + 1e-3)], rtol=1e-12)
