@@ -215,9 +215,10 @@ class MixtureFilter:
             np.log(d, out=d)
             d += prev
         np.fmax(d, _NEG_INF, out=d)  # nan (both survivals 0) -> log 0
+        first = d[:, 0].copy()
         np.maximum(d, self._log_esc, out=d)  # escape floor
         if ly0 is None or np.all(np.isneginf(np.asarray(ly0, dtype=np.float64))):  # fresh: nothing filtered yet
-            np.maximum(d[:, 0], self._log_esc1, out=d[:, 0])
+            np.maximum(first, self._log_esc1, out=d[:, 0])  # escape_first instead of escape, as in step
         ca = self._la[yi]
         np.cumsum(ca, out=ca)
         l = ca
