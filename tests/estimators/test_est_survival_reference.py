@@ -206,13 +206,21 @@ def test_loglogistic_scalar_tails_on_both_sides() -> None:
 
 def test_log_ndtr_scalar_matches_mpmath_in_all_three_ranges() -> None:
     x = np.concatenate([np.linspace(-60.0, 8.0, 341), [-1.0, np.nextafter(-1.0, 0.0), np.nextafter(-1.0, -2.0),
-                                                        -37.0, np.nextafter(-37.0, 0.0), -37.2, -37.5, -37.9, -38.5,
+                                                        -37.0, np.nextafter(-37.0, 0.0), -37.2, -37.5, -37.9, -37.99, -38.5,
                                                         -39.0, -45.0, -300.0, -1e4, 0.0, 30.0]])
     for v in x:
         want = ref_log_ndtr(mpmath.mpf(float(v)))
         got = log_ndtr_scalar(float(v))
         assert math.isclose(got, want, rel_tol=1e-13, abs_tol=1e-300), (v, got, want)
     np.testing.assert_allclose([log_ndtr_scalar(float(v)) for v in x], log_ndtr(x), rtol=1e-13, atol=1e-300)
+
+
+def test_log_ndtr_scalar_series_is_accurate_to_a_few_ulps() -> None:
+    """Below x = -37 (where erfc would leave the normal range) the erfcx series to 1/u^10 keeps
+    log Phi within ~3 ulps: its first omitted term is ~1e-15 relative to s at x = -37."""
+    for v in np.concatenate([np.linspace(-45.0, -37.0, 400, endpoint=False), [-50.0, -1e3, -1e6]]):
+        want = ref_log_ndtr(mpmath.mpf(float(v)))
+        assert math.isclose(log_ndtr_scalar(float(v)), want, rel_tol=2e-15), v
 
 
 def test_lognormal_scalar_uses_the_math_module_log_ndtr() -> None:
@@ -255,6 +263,14 @@ def test_weights_are_normalised_and_arrays_stored_as_float64() -> None:
     np.testing.assert_array_equal(m.p2, [10.0, 20.0])
     assert m.n_components == 2
     np.testing.assert_allclose(m.log_weights, np.log([0.25, 0.75]), rtol=1e-15)
+    # float32 weights (a float32 Parquet column) are normalised in double precision
+    w32 = np.array([0.1, 0.3, 0.7], dtype=np.float32)
+    m32 = SurvivalMixture("weibull", w32, np.ones(3, dtype=np.float32), np.ones(3, dtype=np.float32))
+    for arr in (m32.weights, m32.p1, m32.p2):
+        assert arr.dtype == np.float64
+    w64 = [float(v) for v in w32]  # the float32 values, exactly
+    np.testing.assert_allclose(m32.weights, [v / math.fsum(w64) for v in w64], rtol=1e-15)
+    assert abs(math.fsum(m32.weights.tolist()) - 1.0) <= 2e-16
 
 
 def test_scalars_become_one_component() -> None:
@@ -340,6 +356,14 @@ def test_round_trip_and_constructors(family: str) -> None:
     one = SurvivalMixture.single(family, 1.5, 2.5)
     assert one.family == family and one.p1.tolist() == [1.5] and one.p2.tolist() == [2.5]
     assert SurvivalMixture.single("exponential", 0.25).p2.tolist() == [1.0]
+
+
+@pytest.mark.parametrize("which", ["p1", "p2"])
+def test_single_refuses_a_complex_parameter_rather_than_dropping_its_imaginary_part(which: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a ComplexWarning would mean the imaginary part was dropped
+        with pytest.raises(TypeError):
+            SurvivalMixture.single("weibull", **{"p1": 1.5, "p2": 10.0, which: 2.0 + 1.0j})  # type: ignore[arg-type]
 
 
 def test_lognormal_median_is_the_median() -> None:
