@@ -251,6 +251,23 @@ def test_scalar_path_after_a_change_of_family_cache_free_objects() -> None:
             assert_close(np.array(m.log_sf_scalar(tau)), ref_matrix(m, np.array(tau)))
 
 
+def test_scalar_path_reads_its_parameters_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The documented fast path (math module, no numpy): ln(scale) is taken with numpy once, on the first
+    call, and every later call runs without touching numpy."""
+    import psg_data.estimators._survival as survival
+
+    m = SurvivalMixture("weibull", np.ones(2), np.array([1.5, 0.7]), np.array([100.0, 5000.0]))
+    first = m.log_sf_scalar(250.0)
+
+    class NoNumpy:
+        def __getattr__(self, name: str) -> None:
+            raise AssertionError(f"the scalar path called numpy.{name} after its first call")
+
+    monkeypatch.setattr(survival, "np", NoNumpy())
+    assert m.log_sf_scalar(250.0) == first
+    assert_close(np.array(m.log_sf_scalar(9000.0)), ref_matrix(m, np.array(9000.0)))
+
+
 # --- the constructor's validation and normalisation ---------------------------------------------------------
 
 
