@@ -168,6 +168,34 @@ def test_intervals_find_the_window_of_the_first_and_last_local_day() -> None:
     assert w.intervals(t1 - 1800.0, t1).tolist() == [[t1 - 1800.0, t1]]
 
 
+def test_intervals_do_not_depend_on_the_machines_zone(monkeypatch: pytest.MonkeyPatch) -> None:
+    # local days of the windows' zone read in the machine's zone would be up to two days off here
+    # (UTC-12 vs UTC+14: 26 h); the result must not change with the TZ of the process
+    import time
+
+    west = DailyWindows(((22.0, 24.0),), "Etc/GMT+12")  # UTC-12
+    t0 = _utc("Etc/GMT+12", 2024, 6, 3, 23, 0)  # 2024-06-05 01:00 at UTC+14
+    east = DailyWindows(((0.0, 2.0),), "Pacific/Kiritimati")  # UTC+14
+    t1 = _utc("Pacific/Kiritimati", 2024, 6, 5, 1, 0)  # 2024-06-03 23:00 at UTC-12
+    try:
+        for machine in ("XXX-14", "YYY+12", "UTC0"):  # POSIX TZ strings: UTC+14, UTC-12, UTC
+            monkeypatch.setenv("TZ", machine)
+            time.tzset()
+            assert west.intervals(t0, t0 + 1800.0).tolist() == [[t0, t0 + 1800.0]]
+            assert east.intervals(t1 - 1800.0, t1).tolist() == [[t1 - 1800.0, t1]]
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+
+
+def test_intervals_of_integer_instants_are_float_seconds() -> None:
+    zone = "Europe/Berlin"
+    w = DailyWindows(((9.0, 17.0),), zone)
+    t0 = int(_utc(zone, 2024, 7, 1, 10, 0))
+    got = w.intervals(t0, t0 + 3600)
+    assert got.dtype == np.float64 and got.tolist() == [[float(t0), float(t0 + 3600)]]
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.integers(0, 96), min_size=2, max_size=6, unique=True),
        st.sampled_from(["America/Toronto", "Europe/London", "Asia/Kathmandu", "Pacific/Chatham", "UTC"]),
@@ -337,6 +365,7 @@ def test_dataset_windows_of_a_written_dataset(make_dataset: Any) -> None:
     ([7.5, 9.0, 9.5, 14.0], (7.5, 15.5), 1.5 * 3600.0),  # gaps 1.5, 0.5, 4.5: median 1.5 (mean 2.17)
     ([10], (10.0, 12.0), 86400.0),                     # one scan a day: a 2 h step, a day's cadence
     (["6", "22"], (6.0, 24.0), 16 * 3600.0),
+    ([9, 12], (9.0, 15.0), 3 * 3600.0),
 ])
 def test_the_labs_windows_and_cadence_are_its_scan_steps(scan_hours: list[Any] | None,
                                                          window: tuple[float, float], cadence: float) -> None:
@@ -371,6 +400,8 @@ def _cadence_reference(stamps: list[float], zone: str) -> float | None:
     ("Asia/Kolkata", [(2024, 1, 6, 13, 1), (2024, 1, 6, 9, 0), (2024, 1, 6, 11, 0), (2024, 1, 7, 9, 0)]),
     # one scan a day: no same-day gap, the median of all gaps (days)
     ("Europe/Berlin", [(2024, 1, 5, 9, 0), (2024, 1, 6, 9, 0), (2024, 1, 8, 9, 0)]),
+    # one same-day gap (30 min) beside a gap of a day
+    ("Europe/Berlin", [(2024, 1, 5, 9, 0), (2024, 1, 5, 9, 30), (2024, 1, 6, 9, 0)]),
     # two scans
     ("UTC", [(2024, 1, 5, 9, 0), (2024, 1, 5, 9, 45)]),
 ])
