@@ -223,6 +223,10 @@ def test_contains_of_scalars_nested_and_empty_inputs() -> None:
     one = DailyWindows(((8.0 + 59.0 / 60.0 + 59.5 / 3600.0, 16.0 + 59.0 / 60.0 + 30.0 / 3600.0),), zone)
     assert one.contains([nine - 1.0, nine - 31.0, nine + 8 * 3600.0 - 31.0, nine + 8 * 3600.0 - 30.0]).tolist() == [
         False, False, True, False]
+    # array-likes are read as float seconds, as the metrics read them: numeric text, integers
+    sec = [nine - 1.0, nine, nine + 8 * 3600.0]
+    assert w.contains([repr(x) for x in sec]).tolist() == [False, True, False]
+    assert w.contains(np.asarray(sec, dtype=np.int64)).tolist() == [False, True, False]
     empty = w.contains([])
     assert empty.shape == (0,) and empty.dtype == np.bool_
     assert w.contains(np.zeros((0, 3))).shape == (0,)
@@ -275,7 +279,7 @@ def test_parse_windows(text: str, hours: tuple[tuple[float, float], ...]) -> Non
 @pytest.mark.parametrize(("text", "part"), [
     ("9", "9"), ("9-", "9-"), ("-17", "-17"), ("9-17,", ""), ("9:60-17", "9:60-17"), ("25-26", "25-26"),
     ("9-24:30", "9-24:30"), ("9-24:01", "9-24:01"), ("9:5-17", "9:5-17"), ("9am-5pm", "9am-5pm"),
-    ("123-130", "123-130"), ("9-17 ,x-3", "x-3"),
+    ("123-130", "123-130"), ("9-17 ,x-3", "x-3"), ("9-25", "9-25"), ("25-26", "25-26"), ("9-12-17", "9-12-17"),
 ])
 def test_parse_windows_refuses_malformed_ranges(text: str, part: str) -> None:
     expected = (f"--windows {text!r}: expected local hour ranges like 9-17 or 09:00-12:00,13:00-17:00, "
@@ -402,6 +406,8 @@ def _cadence_reference(stamps: list[float], zone: str) -> float | None:
     ("Europe/Berlin", [(2024, 1, 5, 9, 0), (2024, 1, 6, 9, 0), (2024, 1, 8, 9, 0)]),
     # one same-day gap (30 min) beside a gap of a day
     ("Europe/Berlin", [(2024, 1, 5, 9, 0), (2024, 1, 5, 9, 30), (2024, 1, 6, 9, 0)]),
+    # gaps of 3.5 min: the median rounds to 4 min (to the nearest minute, ties to even as round())
+    ("UTC", [(2024, 1, 5, 9, 0), (2024, 1, 5, 9, 3), (2024, 1, 5, 9, 7)]),
     # two scans
     ("UTC", [(2024, 1, 5, 9, 0), (2024, 1, 5, 9, 45)]),
 ])
@@ -409,6 +415,8 @@ def test_cadence_is_the_median_same_day_gap(zone: str, local: list[tuple[int, ..
     stamps = [_utc(zone, *x) for x in local]
     if zone == "Asia/Kolkata":
         stamps[0] += 24.0  # 13:01:24
+    if len(local) == 3 and local[1][4] == 3:
+        stamps[1] += 30.0  # 9:03:30, 3.5 min after 9:00 and before 9:07
     ref = _cadence_reference(stamps, zone)
     starts = pd.Series(pd.to_datetime(np.asarray(stamps) * 1e9, utc=True)).dt.tz_convert(zone)
     assert cadence_from_stamps(starts) == ref
