@@ -157,7 +157,8 @@ def test_intervals_reach_the_next_midnight_and_fractional_hours() -> None:
 
 
 def test_intervals_find_the_window_of_the_first_and_last_local_day() -> None:
-    # t0 late on a local day whose UTC date is the next one, t1 early on one whose UTC date is the day before
+    # the window of t0's own local day (its last hour) and of t1's own local day (its first hours), in zones
+    # 14 h ahead of and 11 h behind UTC
     zone = "Pacific/Kiritimati"  # UTC+14
     w = DailyWindows(((20.0, 24.0),), zone)
     t0 = _utc(zone, 2024, 6, 3, 23, 0)
