@@ -161,6 +161,37 @@ def _cases() -> list[dict[str, Any]]:
     ]
 
 
+def _short_walks() -> list[dict[str, Any]]:
+    """Walks and shortest paths below a metre: SPL's ratio where max(p, l) lies in (0, 1]."""
+    return [
+        {"category": "static", "reachable": True, "success": True, "aborted": False, "path_m": 0.8,
+         "shortest_path_m": 0.2},  # 0.25
+        {"category": "dynamic", "reachable": True, "success": True, "aborted": False, "path_m": 0.5,
+         "shortest_path_m": 0.4},  # 0.8
+        {"category": "absent", "reachable": False, "success": False, "aborted": True, "path_m": 0.5,
+         "shortest_path_m": math.nan},  # a correct abort after half a metre
+        {"category": "dynamic", "reachable": False, "success": False, "aborted": True, "path_m": 0.25,
+         "shortest_path_m": math.nan},  # unreachable, declined after a quarter metre
+    ]
+
+
+@pytest.mark.parametrize("absent_rule", ABSENT_RULES)
+@pytest.mark.parametrize("unreach_rule", UNREACHABLE_RULES)
+def test_short_walks_hand_counted(absent_rule: str, unreach_rule: str) -> None:
+    got = score_records(pd.DataFrame(_short_walks()), absent_in_overall=absent_rule, unreachable=unreach_rule)
+    assert got["static_spl"] == pytest.approx(0.25)
+    assert got["dynamic_spl"] == pytest.approx(0.8 / (2 if unreach_rule == "failure" else 1))
+    spl, n = 0.25 + 0.8, 2
+    if unreach_rule == "failure":
+        n += 1
+    if absent_rule != "exclude":
+        eff = 1.0 if absent_rule == "abort_is_success" else 0.0  # both aborts walked
+        spl, n = spl + eff, n + 1
+        if unreach_rule == "like_absent":
+            spl, n = spl + eff, n + 1
+    assert got["overall_spl"] == pytest.approx(spl / n)
+
+
 @pytest.mark.parametrize("absent_rule", ABSENT_RULES)
 @pytest.mark.parametrize("unreach_rule", UNREACHABLE_RULES)
 def test_edge_cases_hand_counted(absent_rule: str, unreach_rule: str) -> None:
@@ -187,6 +218,46 @@ def test_edge_cases_hand_counted(absent_rule: str, unreach_rule: str) -> None:
     assert got["overall_spl"] == pytest.approx(spl / n)
     assert (got["n_static"], got["n_dynamic"], got["n_absent"], got["n_unreachable"], got["n_queries"]) == (
         2, 2, 3, 2, 9)
+
+
+def test_defaults_are_abort_is_success_and_exclude() -> None:
+    """The signature's defaults: a correct abort is a success with efficiency 1; unreachable targets left out."""
+    rows = _cases() + _short_walks()
+    df = pd.DataFrame(rows)
+    ref = _reference_scores(rows, "abort_is_success", "exclude")
+    got = score_records(df)
+    assert all(_same(got[k], ref[k]) for k in ref)
+    terms = query_terms(df)
+    for m in METRICS:
+        want = [_reference_terms(q, "abort_is_success", "exclude")[m] for q in rows]
+        assert np.column_stack(terms[m]) == pytest.approx(np.array(want), rel=1e-12, abs=1e-12), m
+
+
+def _coded(df: pd.DataFrame, how: str) -> pd.DataFrame:
+    """The same records with the flags as a CSV or a nullable store may hand them over."""
+    flags = ["reachable", "success", "aborted"]
+    if how == "float":  # 0.0 / 1.0, as a column read with missing values allowed
+        return df.astype({f: np.float64 for f in flags})
+    if how == "nullable":  # pandas' nullable boolean
+        return df.astype({f: "boolean" for f in flags})
+    return df.astype({c: object for c in [*flags, "path_m", "shortest_path_m"]})  # Python objects
+
+
+@pytest.mark.parametrize("how", ["float", "nullable", "object"])
+@pytest.mark.parametrize("absent_rule", ABSENT_RULES)
+@pytest.mark.parametrize("unreach_rule", UNREACHABLE_RULES)
+def test_coded_flags_give_the_same_float_terms(how: str, absent_rule: str, unreach_rule: str) -> None:
+    rows = _cases() + _short_walks()
+    df = _coded(pd.DataFrame(rows), how)
+    terms = query_terms(df, absent_in_overall=absent_rule, unreachable=unreach_rule)
+    for m in METRICS:
+        num, den = terms[m]
+        assert num.dtype == den.dtype == np.float64, (m, num.dtype, den.dtype)
+        want = [_reference_terms(q, absent_rule, unreach_rule)[m] for q in rows]
+        assert np.column_stack((num, den)) == pytest.approx(np.array(want), rel=1e-12, abs=1e-12), m
+    got = score_records(df, absent_in_overall=absent_rule, unreachable=unreach_rule)
+    ref = _reference_scores(rows, absent_rule, unreach_rule)
+    assert all(_same(got[k], ref[k]) for k in ref)
 
 
 def test_integer_and_object_columns_read_as_booleans() -> None:
@@ -279,3 +350,19 @@ def test_summarise_navigation_against_the_recount(absent_rule: str, unreach_rule
                 a, b = row[f"{m}_ci_{end}"], getattr(iv, end)
                 assert _same(a, b), (m, end, a, b)
 
+
+def test_summarise_navigation_defaults() -> None:
+    """Defaults: abort_is_success, exclude, 95 %, 2000 resamples with seed 0 (the signature)."""
+    rec = _records(np.random.default_rng(21), ["a"], [0, 1], 12)
+    per_seed, summary = summarise_navigation(rec, ["a"])
+    rows = rec.to_dict("records")
+    row = summary.to_dict("records")[0]
+    for (_, sd), ps in zip(dict.fromkeys(zip(rec["method"], rec["seed"])), per_seed.to_dict("records")):
+        ref = _reference_scores([q for q in rows if q["seed"] == sd], "abort_is_success", "exclude")
+        assert all(_same(float(ps[k]), float(v)) for k, v in ref.items())
+    for m in METRICS:
+        terms = [_reference_terms(q, "abort_is_success", "exclude")[m] for q in rows]
+        iv = ratio_interval([t[0] for t in terms], [t[1] for t in terms], confidence=0.95, n_bootstrap=2000,
+                            seed=0, unit="queries")
+        assert _same(row[f"{m}_mean"], iv.estimate) and row[f"{m}_method"] == iv.method
+        assert _same(row[f"{m}_ci_low"], iv.low) and _same(row[f"{m}_ci_high"], iv.high), m
