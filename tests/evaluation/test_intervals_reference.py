@@ -285,6 +285,8 @@ def test_describe_interval_texts() -> None:
     assert describe_interval("none", "seeds", 1) == "±: no interval (a single seed, nothing varies)"
     assert describe_interval("none", "", 1, extra="; x") == "±: no interval (a single value, nothing varies); x"
     assert describe_interval("something else", "s", 0) == "±: no interval (a single value, nothing varies)"
+    # only the trailing s of a plural goes: a unit named in capitals keeps its letters
+    assert describe_interval("none", "ROI BOX", 1) == "±: no interval (a single ROI BOX, nothing varies)"
 
 
 def test_exact_rationals_are_read_as_floats() -> None:
