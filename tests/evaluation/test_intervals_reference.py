@@ -30,24 +30,24 @@ _CONF = st.sampled_from([0.5, 0.8, 0.9, 0.95, 0.99, 0.999])
 # --- t_interval ------------------------------------------------------------------------------------------
 
 
+def _stdev(values: list[float]) -> float:
+    """Sample standard deviation (ddof = 1), two-pass with exact sums."""
+    m = math.fsum(values) / len(values)
+    return math.sqrt(math.fsum((x - m) ** 2 for x in values) / (len(values) - 1))
+
+
 @settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.floats(-50.0, 50.0, allow_nan=False), min_size=2, max_size=12), _CONF)
 def test_t_interval_is_scipys(values: list[float], conf: float) -> None:
     v = np.array(values)
     iv = t_interval(v, confidence=conf, unit="lab draws")
     mean = math.fsum(values) / len(values)
-    sd = statistics_stdev(values)
+    sd = _stdev(values)
     lo, hi = stats.t.interval(conf, len(values) - 1, loc=mean, scale=sd / math.sqrt(len(values))) if sd > 0 else (
         mean, mean)
     assert iv.estimate == pytest.approx(mean, abs=1e-9)
     assert (iv.low, iv.high) == pytest.approx((lo, hi), rel=1e-9, abs=1e-9)
     assert (iv.n, iv.method, iv.unit, iv.confidence) == (len(values), "t", "lab draws", conf)
-
-
-def statistics_stdev(values: list[float]) -> float:
-    """Sample standard deviation (ddof = 1), two-pass in exact-sum arithmetic."""
-    m = math.fsum(values) / len(values)
-    return math.sqrt(math.fsum((x - m) ** 2 for x in values) / (len(values) - 1))
 
 
 def test_t_interval_drops_non_finite_values_and_flattens() -> None:
