@@ -195,5 +195,12 @@ def describe_interval(method: str, unit: str, n: int, confidence: float = 0.95, 
     elif method == "jackknife-t":
         what = f"t-interval over the {n} {unit} with a jackknife standard error (too few {unit} for a bootstrap)"
     else:
-        return f"±: no interval (a single {unit.rstrip('s') or 'value'}, nothing varies){extra}"
+        return f"±: no interval (a single {_singular(unit) or 'value'}, nothing varies){extra}"
     return f"±: half-width of the {pct} {what}{extra}"
+
+
+def _singular(unit: str) -> str:
+    """The singular of a plural unit name in English ("queries" -> "query", "objects" -> "object")."""
+    if unit.endswith("ies"):
+        return unit[:-3] + "y"
+    return unit[:-1] if unit.endswith("s") else unit

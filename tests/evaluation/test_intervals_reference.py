@@ -287,6 +287,9 @@ def test_describe_interval_texts() -> None:
     assert describe_interval("something else", "s", 0) == "±: no interval (a single value, nothing varies)"
     # only the trailing s of a plural goes: a unit named in capitals keeps its letters
     assert describe_interval("none", "ROI BOX", 1) == "±: no interval (a single ROI BOX, nothing varies)"
+    # -ies plurals (the navigation and door tables' queries) take -y, one trailing s only goes
+    assert describe_interval("none", "door queries", 1) == "±: no interval (a single door query, nothing varies)"
+    assert describe_interval("none", "passes", 1) == "±: no interval (a single passe, nothing varies)"
 
 
 def test_exact_rationals_are_read_as_floats() -> None:
