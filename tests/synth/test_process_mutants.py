@@ -384,3 +384,40 @@ def test_oracle_error_messages(tmp_path: Path) -> None:
     for _ in range(2):  # the failed belief is dropped: asking again fails the same way
         with pytest.raises(EstimatorError, match=msg):
             f.predict(np.array([t0 + 10.0]))
+
+
+# -- LLM-format schedules -------------------------------------------------------------------------------
+
+
+def test_weekday_marginals_of_a_seven_day_cycle_keep_the_initial_law_and_its_phase() -> None:
+    """A day chain that moves pattern q -> q + 1 (mod 7) every day never forgets day 0: on the day
+    w days after day 0's weekday, the pattern is day 0's plus w, so P(q | weekday) is the initial
+    law, restricted to day 0's mask, shifted by the weekday's distance from day 0's."""
+    from psg_data.synth._process import weekday_pattern_marginals
+
+    proc = tiny_process(3, D=7)
+    ent = proc.entities["obj"]
+    w0 = proc.start_date.weekday()
+    ent.pattern_allowed[:] = True
+    ent.pattern_allowed[w0, 6] = False  # day 0's weekday forbids pattern 6 (never reached there later)
+    ent.pattern_initial[:] = np.arange(1.0, 8.0) / 28.0
+    ent.pattern_transition[:] = np.roll(np.eye(7), 1, axis=1)
+    pi = np.arange(1.0, 8.0)
+    pi[6] = 0.0
+    pi /= pi.sum()
+    want = np.array([[pi[(q - (w - w0)) % 7] for q in range(7)] for w in range(7)])
+    for weeks in (30, 12):
+        np.testing.assert_allclose(weekday_pattern_marginals(proc, ent, weeks), want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(weekday_pattern_marginals(proc, ent), want, rtol=0, atol=1e-12)
+
+
+def test_intervals_are_listed_by_day_then_clock_time_with_minutes() -> None:
+    from psg_data.synth._process import _intervals
+
+    on = np.zeros(21, bool)  # K = 3: Monday's first and last slots on, the week's last slot off
+    on[[0, 2]] = True
+    hours = (9.25, 11.5, 13.75)
+    assert _intervals(on, 3, hours) == ["Mon: 09:15 - Mon: 11:30", "Mon: 13:45 - Tue: 09:15"]
+    on[[19, 20]] = True  # Sunday's last two slots: a run into Monday 09:15, listed under Sunday
+    on[0] = False
+    assert _intervals(on, 3, hours) == ["Mon: 13:45 - Tue: 09:15", "Sun: 11:30 - Mon: 09:15"]
