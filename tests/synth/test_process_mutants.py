@@ -421,3 +421,49 @@ def test_intervals_are_listed_by_day_then_clock_time_with_minutes() -> None:
     on[[19, 20]] = True  # Sunday's last two slots: a run into Monday 09:15, listed under Sunday
     on[0] = False
     assert _intervals(on, 3, hours) == ["Mon: 13:45 - Tue: 09:15", "Sun: 11:30 - Mon: 09:15"]
+
+
+def test_a_callers_own_variant_of_the_entity_stays_in_force_outside_the_regimes() -> None:
+    proc = _regime_process(7, start_day=2)
+    stored = proc.entities["obj"]
+    variant = dataclasses.replace(stored, jump=tiny_process(77).entities["obj"].jump,
+                                  routine_strength=np.full_like(stored.routine_strength, 0.3))
+    as_base = StepProcess(proc.timezone, proc.start_date, proc.days, proc.step_hours, {"obj": variant},
+                          proc.shifted_days, {}, proc.regimes)
+    b = ForwardBelief(proc, variant).start()
+    for n in range(6):  # days 0 and 1 under the variant, day 2 under the regime
+        b.advance_to(n)
+        np.testing.assert_allclose(b.alpha, enumerate_paths(as_base, n + 1, {}, 0.0, 0.0)[0], rtol=0, atol=1e-12)
+    assert b.entity is proc.regimes[0].entities["obj"]
+    path = sample_entity(proc, variant, 4, np.random.default_rng(0))  # days 0-1: the variant's routine strength
+    twin = sample_entity(as_base, variant, 4, np.random.default_rng(0))
+    np.testing.assert_array_equal(path.events, twin.events)
+    np.testing.assert_array_equal(path.states, twin.states)
+
+
+def test_sampling_draws_one_uniform_for_the_start_and_four_per_step() -> None:
+    proc = _regime_process(8, start_day=1)
+    for n in (1, 5):
+        rng, ref = np.random.default_rng(11), np.random.default_rng(11)
+        sample_entity(proc, proc.entities["obj"], n, rng)
+        ref.random(1 + 4 * n)
+        assert rng.random() == ref.random()
+
+
+class _ZeroUniforms:
+    """A generator whose uniforms are all 0 (the lower end of [0, 1))."""
+
+    def random(self, size: int | tuple[int, ...] | None = None) -> float | np.ndarray:
+        return 0.0 if size is None else np.zeros(size)
+
+
+def test_the_routine_acts_with_probability_rho_even_at_the_lowest_uniform() -> None:
+    """u < rho: a routine of strength 0 never acts, one of strength 1 always does (u = 0 included)."""
+    ent = tiny_process(9, rho=0.0).entities["obj"]
+    path = sample_entity(tiny_process(9, rho=0.0), ent, 6, _ZeroUniforms())  # type: ignore[arg-type]
+    assert path.events[0] == 2 and set(path.events.tolist()) <= {1, 2}  # holds and jumps only
+    proc = tiny_process(9, rho=1.0)
+    ent = proc.entities["obj"]
+    path = sample_entity(proc, ent, 6, _ZeroUniforms())  # type: ignore[arg-type]
+    assert set(path.events.tolist()) == {0}
+    np.testing.assert_array_equal(path.states, [ent.routine[path.patterns[n // 2], n % 2] for n in range(6)])
