@@ -467,3 +467,27 @@ def test_the_routine_acts_with_probability_rho_even_at_the_lowest_uniform() -> N
     path = sample_entity(proc, ent, 6, _ZeroUniforms())  # type: ignore[arg-type]
     assert set(path.events.tolist()) == {0}
     np.testing.assert_array_equal(path.states, [ent.routine[path.patterns[n // 2], n % 2] for n in range(6)])
+
+
+def test_shared_updates_stay_with_their_own_object() -> None:
+    """Two objects with the same receptacles: what the filters of one object receive after the
+    training data never reaches the other's (one tracker per object)."""
+    one = tiny_process(11, K=2, S=3)
+    cup = dataclasses.replace(tiny_process(12, K=2, S=3).entities["obj"], entity_id="cup")
+    proc = StepProcess(one.timezone, one.start_date, 30, one.step_hours, {"obj": one.entities["obj"], "cup": cup})
+    n = 16
+    t = np.array([proc.clock.step_start_s(i) + 120.0 for i in range(n)])
+    rng = np.random.default_rng(3)
+    ys = {(e, lab): rng.integers(0, 2, n).astype(np.int8) for e in ("obj", "cup") for lab in ("r0", "r1")}
+    cut = 8
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=0.2, p_f=0.2, share_updates=True)
+    est.fit([EdgeStream(edge, t[:cut], y[:cut]) for edge, y in ys.items()])
+    filters = {edge: est.make_filter(edge) for edge in ys}
+    for edge in (("cup", "r0"), ("cup", "r1"), ("obj", "r0")):
+        filters[edge].update_many(t, ys[edge])
+    f = filters[("obj", "r1")]
+    f.update_many(t[:12], ys[("obj", "r1")][:12])
+    obs = [(float(a), "r1", int(b)) for a, b in zip(t[:12], ys[("obj", "r1")][:12])]
+    obs += [(float(a), "r0", int(b)) for a, b in zip(t[:12], ys[("obj", "r0")][:12])]  # training and tracker
+    q = t[11] + np.array([0.0, 7200.0, 86400.0])
+    np.testing.assert_allclose(f.predict(q), _posterior(proc, obs, float(t[11]), q, "r1", p=0.2), rtol=0, atol=1e-12)
