@@ -400,9 +400,10 @@ def test_weekday_marginals_of_a_seven_day_cycle_keep_the_initial_law_and_its_pha
     w0 = proc.start_date.weekday()
     ent.pattern_allowed[:] = True
     ent.pattern_allowed[w0, 6] = False  # day 0's weekday forbids pattern 6 (never reached there later)
-    ent.pattern_initial[:] = np.arange(1.0, 8.0) / 28.0
+    raw = np.array([5.0, 1.0, 4.0, 2.0, 6.0, 3.0, 7.0])  # not a fixed point of day 0's matrix
+    ent.pattern_initial[:] = raw / raw.sum()
     ent.pattern_transition[:] = np.roll(np.eye(7), 1, axis=1)
-    pi = np.arange(1.0, 8.0)
+    pi = raw.copy()
     pi[6] = 0.0
     pi /= pi.sum()
     want = np.array([[pi[(q - (w - w0)) % 7] for q in range(7)] for w in range(7)])
@@ -491,3 +492,42 @@ def test_shared_updates_stay_with_their_own_object() -> None:
     obs += [(float(a), "r0", int(b)) for a, b in zip(t[:12], ys[("obj", "r0")][:12])]  # training and tracker
     q = t[11] + np.array([0.0, 7200.0, 86400.0])
     np.testing.assert_allclose(f.predict(q), _posterior(proc, obs, float(t[11]), q, "r1", p=0.2), rtol=0, atol=1e-12)
+
+
+def test_the_default_oracle_keeps_each_edge_to_its_own_updates_and_answers_empty_queries() -> None:
+    from psg_data.estimators._process_oracle import ProcessOracleFilter
+
+    proc = tiny_process(11, K=2, S=4)
+    proc.days = 30
+    streams, t_all = _lab_streams(proc, 8, 4)
+    cut = float(t_all[4 * proc.n_slots])
+    train = [s.between(-np.inf, cut) for s in streams]
+    est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P)
+    assert est.get_params()["share_updates"] is False and est.get_params()["output"] == "probability"
+    est.fit(train)
+    sib = est.make_filter(streams[1].edge)
+    sib.update_many(streams[1].t_s, streams[1].y)  # training and later observations of a sibling
+    f = est.make_filter(streams[0].edge)
+    f.update_many(streams[0].t_s, streams[0].y)
+    H = float(streams[0].t_s[-1])
+    info = [(float(a), s.edge[1], int(b)) for s in [streams[0]] + train[1:] for a, b in zip(s.t_s, s.y)]
+    q = H + np.array([0.0, 7200.0, 86400.0])
+    want = _posterior(proc, info, H, q, streams[0].edge[1], p=P)
+    np.testing.assert_allclose(f.predict(q), want, rtol=0, atol=1e-12)
+    assert f.predict(np.zeros(0)).shape == (0,) and f.predict(np.zeros((0, 3))).shape == (0, 3)
+    # the filter class on its own predicts probabilities unless asked for the median
+    g = ProcessOracleFilter(streams[0].edge, est.process_, est.observations_[("obj")], None, est.fit_end_s_, P, P)
+    g.update_many(streams[0].t_s, streams[0].y)
+    np.testing.assert_allclose(g.predict(q), want, rtol=0, atol=1e-12)
+
+
+def test_oracle_refusals_in_full() -> None:
+    with pytest.raises(EstimatorError, match=r"^process_oracle: needs the generator model of a synthetic dataset "
+                                             r"\(dataset=PATH of a psg-data synth dataset; psg-eval sets it for such "
+                                             r"datasets\); other datasets have no exact ceiling$"):
+        get_estimator("process_oracle").fit([])
+    with pytest.raises(EstimatorError, match=r"^process_oracle: edge \('redmug', 'table'\): 'redmug' is not an "
+                                             r"entity of the generator model \(is this the dataset the model "
+                                             r"belongs to\?\)$"):
+        get_estimator("process_oracle", process=tiny_process(0).to_dict()).fit(
+            [EdgeStream(("redmug", "table"), np.array([0.0]), np.array([1], np.int8))])
