@@ -531,3 +531,13 @@ def test_oracle_refusals_in_full() -> None:
                                              r"belongs to\?\)$"):
         get_estimator("process_oracle", process=tiny_process(0).to_dict()).fit(
             [EdgeStream(("redmug", "table"), np.array([0.0]), np.array([1], np.int8))])
+
+
+def test_a_state_held_all_week_gives_one_full_day_per_entry() -> None:
+    from psg_data.synth._process import _intervals
+
+    want = ["Mon: 00:00 - Tue: 00:00", "Tue: 00:00 - Wed: 00:00", "Wed: 00:00 - Thu: 00:00",
+            "Thu: 00:00 - Fri: 00:00", "Fri: 00:00 - Sat: 00:00", "Sat: 00:00 - Sun: 00:00",
+            "Sun: 00:00 - Mon: 00:00"]
+    assert _intervals(np.ones(14, bool), 2, (9.0, 15.0)) == want
+    assert _intervals(np.ones(7, bool), 1, (8.5,)) == want
