@@ -16,17 +16,8 @@ from psg_data.errors import EstimatorError, PsgDataError
 from psg_data.estimators import EdgeStream, get_estimator
 from psg_data.schemas._generator_model import Regime, StepProcess
 from psg_data.synth._process import ForwardBelief, observation_likelihood, sample_entity, save_process
+from tests.estimators.test_process_oracle import P, _reference, _streams
 from tests.synth.test_process_exact import tiny_process
-
-
-def _posterior(proc, obs, H, query, label, p=0.0):  # type: ignore[no-untyped-def]
-    ent = proc.entities["obj"]
-    b = ForwardBelief(proc, ent).start()
-    for t, lab, y in sorted(o for o in obs if o[0] <= H):
-        b.advance_to(int(proc.clock.step_of(np.array([t]))[0]))
-        b.observe(observation_likelihood(ent, lab, y, p, p))
-    b.advance_to(int(proc.clock.step_of(np.array([H]))[0]))
-    return b.forecast(np.maximum(proc.clock.step_of(query), b.n))[:, ent.state_index(label)]
 
 
 def test_the_oracle_reads_the_process_of_a_dataset_folder_or_file(tmp_path: Path) -> None:
@@ -36,7 +27,7 @@ def test_the_oracle_reads_the_process_of_a_dataset_folder_or_file(tmp_path: Path
     t = np.array([proc.clock.step_start_s(i) + 60.0 for i in range(4)])
     streams = [EdgeStream(("obj", "r0"), t, np.array([1, 0, 0, 1], np.int8))]
     q = t[-1] + np.array([0.0, 3600.0, 86400.0])
-    want = _posterior(proc, [(float(a), "r0", int(b)) for a, b in zip(t, streams[0].y)], float(t[-1]), q, "r0",
+    want = _reference(proc, [(float(a), "r0", int(b)) for a, b in zip(t, streams[0].y)], float(t[-1]), q, "r0",
                       p=0.1)
     for source in (str(tmp_path), str(tmp_path / "generator" / "process.json")):
         est = get_estimator("process_oracle", dataset=source, p_m=0.1, p_f=0.1).fit(streams)
@@ -252,30 +243,13 @@ def test_pick_never_returns_an_outcome_of_probability_zero() -> None:
 
 # -- the process oracle: the posterior of exactly its information set, in any order of calls ----------
 
-P = 0.1
-
-
-def _lab_streams(proc: StepProcess, days: int, seed: int) -> tuple[list[EdgeStream], np.ndarray]:
-    """One noisy observation per step (2 minutes after its start) of every receptacle edge."""
-    ent = proc.entities["obj"]
-    n = days * proc.n_slots
-    path = sample_entity(proc, ent, n, np.random.default_rng(seed))
-    t = np.array([proc.clock.step_start_s(i) + 120.0 for i in range(n)])
-    rng = np.random.default_rng(seed + 7)
-    out = []
-    for j, label in enumerate(ent.states):
-        if label is not None:
-            x = (path.states == j).astype(np.int8)
-            out.append(EdgeStream(("obj", label), t, np.where(rng.random(n) < P, 1 - x, x).astype(np.int8)))
-    return out, t
-
-
 @pytest.mark.parametrize(("share", "seed"), [(False, 0), (True, 1), (True, 2)])
 def test_every_prediction_is_the_posterior_of_the_information_set_in_a_random_schedule(share: bool,
                                                                                        seed: int) -> None:
     proc = tiny_process(11, K=2, S=4)
     proc.days = 30
-    streams, t_all = _lab_streams(proc, 12, seed)
+    streams = _streams(proc, 12, seed)
+    t_all = streams[0].t_s
     cut = float(t_all[5 * proc.n_slots])
     train = [s.between(-np.inf, cut) for s in streams]
     test = [s.between(cut, np.inf) for s in streams]
@@ -319,7 +293,7 @@ def test_every_prediction_is_the_posterior_of_the_information_set_in_a_random_sc
                 if share:
                     info += [o for o in fed[k] if fit_end < o[0] <= H]
         q = H + np.array([-7200.0, 0.0, 1800.0, 3 * 3600.0, 86400.0, 2.5 * 86400.0])
-        want = _posterior(proc, info, H, q, labels[j], p=P)
+        want = _reference(proc, info, H, q, labels[j], p=P)
         np.testing.assert_allclose(filters[j].predict(q), want, rtol=0, atol=1e-12, err_msg=f"step {step}")
         np.testing.assert_array_equal(medians[j].predict(q), (want >= 0.5).astype(float))
     assert min(nxt) > 0
@@ -356,7 +330,7 @@ def test_train_model_drops_the_regimes_and_generating_keeps_them() -> None:
         f = est.make_filter(("obj", "r0"))
         f.update_many(t, y)
         got[model] = f.predict(q)
-        np.testing.assert_allclose(got[model], _posterior(ref, obs, float(t[-1]), q, "r0", p=P), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(got[model], _reference(ref, obs, float(t[-1]), q, "r0", p=P), rtol=0, atol=1e-12)
     assert np.abs(got["generating"] - got["train"]).max() > 1e-3
 
 
@@ -491,7 +465,7 @@ def test_shared_updates_stay_with_their_own_object() -> None:
     obs = [(float(a), "r1", int(b)) for a, b in zip(t[:12], ys[("obj", "r1")][:12])]
     obs += [(float(a), "r0", int(b)) for a, b in zip(t[:12], ys[("obj", "r0")][:12])]  # training and tracker
     q = t[11] + np.array([0.0, 7200.0, 86400.0])
-    np.testing.assert_allclose(f.predict(q), _posterior(proc, obs, float(t[11]), q, "r1", p=0.2), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f.predict(q), _reference(proc, obs, float(t[11]), q, "r1", p=0.2), rtol=0, atol=1e-12)
 
 
 def test_the_default_oracle_keeps_each_edge_to_its_own_updates_and_answers_empty_queries() -> None:
@@ -499,7 +473,8 @@ def test_the_default_oracle_keeps_each_edge_to_its_own_updates_and_answers_empty
 
     proc = tiny_process(11, K=2, S=4)
     proc.days = 30
-    streams, t_all = _lab_streams(proc, 8, 4)
+    streams = _streams(proc, 8, 4)
+    t_all = streams[0].t_s
     cut = float(t_all[4 * proc.n_slots])
     train = [s.between(-np.inf, cut) for s in streams]
     est = get_estimator("process_oracle", process=proc.to_dict(), p_m=P, p_f=P)
@@ -512,7 +487,7 @@ def test_the_default_oracle_keeps_each_edge_to_its_own_updates_and_answers_empty
     H = float(streams[0].t_s[-1])
     info = [(float(a), s.edge[1], int(b)) for s in [streams[0]] + train[1:] for a, b in zip(s.t_s, s.y)]
     q = H + np.array([0.0, 7200.0, 86400.0])
-    want = _posterior(proc, info, H, q, streams[0].edge[1], p=P)
+    want = _reference(proc, info, H, q, streams[0].edge[1], p=P)
     np.testing.assert_allclose(f.predict(q), want, rtol=0, atol=1e-12)
     assert f.predict(np.zeros(0)).shape == (0,) and f.predict(np.zeros((0, 3))).shape == (0, 3)
     # the filter class on its own predicts probabilities unless asked for the median
