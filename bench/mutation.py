@@ -1,7 +1,8 @@
 """Mutation testing of the numerical core: ``python bench/mutation.py --group NAME [--max-children N]``.
 
 Runs mutmut (shared settings: ``[tool.mutmut]`` in pyproject.toml; the groups, each a list of modules
-and the narrow test selection that pins them: ``[tool.psg_data.mutation.NAME]``) for one group in its
+and the narrow test selection that pins them: ``[tool.psg_data.mutation.NAME]``, whose own ``mutmut`` table,
+if any, overrides shared settings such as the timeouts for that group) for one group in its
 own work folder ``bench/out/mutation/NAME`` (a fresh copy of the package, the tests and the files
 the tests read, with the group's settings written into its pyproject.toml), then counts, per module,
 the mutants that the tests killed (a test failed or timed out), the ones listed as equivalent in
@@ -36,7 +37,7 @@ KILLED = {1, 3, 36, -24, 24, 152, 255}  # a failing test, pytest's internal erro
 COPIED = ["psg_data", "tests"]
 
 
-def _config() -> tuple[dict[str, Any], dict[str, dict[str, list[str]]]]:
+def _config() -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
     tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]
     return tool["mutmut"], tool["psg_data"]["mutation"]
 
@@ -47,7 +48,7 @@ def _toml_value(v: Any) -> str:
     return json.dumps(v)  # strings, numbers and booleans read the same in TOML
 
 
-def prepare(group: str, settings: dict[str, Any], groups: dict[str, dict[str, list[str]]]) -> Path:
+def prepare(group: str, settings: dict[str, Any], groups: dict[str, dict[str, Any]]) -> Path:
     """Refresh the group's work folder: the sources, tests and files the tests read; its pyproject.toml."""
     work = WORK / group
     work.mkdir(parents=True, exist_ok=True)
@@ -62,8 +63,8 @@ def prepare(group: str, settings: dict[str, Any], groups: dict[str, dict[str, li
             shutil.copy2(src, dst)
     text = (ROOT / "pyproject.toml").read_text()
     text = text[: text.index("[tool.mutmut]")]
-    mine = dict(settings, only_mutate=groups[group]["only_mutate"],
-                pytest_add_cli_args_test_selection=groups[group]["tests"])
+    mine = dict(settings, **groups[group].get("mutmut", {}), only_mutate=groups[group]["only_mutate"],
+                pytest_add_cli_args_test_selection=groups[group]["tests"])  # a group's `mutmut` table overrides
     text += "[tool.mutmut]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in mine.items())
     tmp = work / "pyproject.toml.tmp"
     tmp.write_text(text)
