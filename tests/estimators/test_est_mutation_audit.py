@@ -8,7 +8,9 @@ from __future__ import annotations
 import datetime as dt
 import json
 import math
+import warnings
 import zoneinfo
+from typing import Any
 
 import numpy as np
 import pytest
@@ -105,3 +107,43 @@ def test_process_oracle_state_from_json_integers_is_normalised() -> None:
     fresh = est.make_filter(edge)
     fresh.update_many(np.array([float(v) for v in ts]), np.array([int(v) for v in ys], np.int8))
     assert json.dumps(state, sort_keys=True) == json.dumps(fresh.get_state(), sort_keys=True)
+
+
+_COMPONENTS = {"mean": 0.5, "k": [1, 3], "re": [0.1, -0.2], "im": [0.05, 0.0], "base_period_s": 604800.0}
+
+
+def test_fremen_components_from_json_floats_give_integer_periods() -> None:
+    """k written as JSON floats (1.0, 3.0, as another writer may) is read as the format's integers:
+    to_dict gives the canonical document (JSON integers) back."""
+    c = fremen.FremenComponents.from_dict(dict(_COMPONENTS, k=[1.0, 3.0]))
+    assert json.dumps(c.to_dict(), sort_keys=True) == json.dumps(_COMPONENTS, sort_keys=True)
+
+
+def _complex_calls() -> dict[str, Any]:
+    surv = SurvivalMixture("lognormal", np.array([0.5, 0.5]), np.log([600.0, 6000.0]), np.array([1.0, 1.0]))
+    week = np.arange(0.0, 7 * 86400.0, 3600.0)
+    model = fremen.FremenModel(n_periods=4).add(week, (np.arange(week.size) % 24 < 12).astype(np.float64))
+    return {
+        "MixtureFilter.update_many t": lambda: MixtureFilter(surv, 0.1, 0.2).update_many([0.0, 100.0 + 5j], [1, 1]),
+        "MixtureFilter log_prior": lambda: MixtureFilter(surv, 0.1, 0.2, log_prior=[-0.7 + 0j, -0.7 + 1j]),
+        "fourier_sums weights (direct)": lambda: fremen.fourier_sums([0.0, 3600.0], [1.0, 1j], 2, method="direct"),
+        "fourier_sums weights (fft)": lambda: fremen.fourier_sums([0.0, 3600.0], [1.0, 1j], 2, method="fft"),
+        "FremenModel.order_scores y": lambda: model.order_scores(week[:24], [1 + 1j] * 24),
+        "FremenModel.add tau": lambda: fremen.FremenModel(n_periods=4).add([0.0, 3600.0 + 1j], [1.0, 0.0]),
+        "FremenComponents.from_dict re": lambda: fremen.FremenComponents.from_dict(dict(_COMPONENTS, re=[0.1 + 1j, -0.2])),
+        "FremenComponents.from_dict im": lambda: fremen.FremenComponents.from_dict(dict(_COMPONENTS, im=[0.05j, 0.0])),
+    }
+
+
+@pytest.mark.parametrize("what", sorted(_complex_calls()))
+def test_complex_numbers_are_refused_as_float64_conversion_refuses_them(what: str) -> None:
+    """Times, weights, observations and log priors are real: numpy's float64 conversion of a list
+    with a Python complex number raises TypeError (the reference), and so does each entry point,
+    instead of dropping the imaginary part (ComplexWarning) or computing complex sums.
+    """
+    with pytest.raises(TypeError):
+        np.asarray([1.0, 1j], dtype=np.float64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(TypeError, match="complex"):
+            _complex_calls()[what]()
