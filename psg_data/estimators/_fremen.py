@@ -57,6 +57,11 @@ DURATION_FACTOR = 1.5
 _DIRECT_LIMIT = 100_000  # N*K below which the direct sum is used
 
 
+# the offset table's grid stays two days inside pandas' datetime64[ns] range (1677-09-21 .. 2262-04-11),
+# so that its local times fit too (UTC offsets, local mean times included, are under a day); times beyond
+# take the offset at the grid's end
+_PANDAS_FIRST_S = math.ceil(-9223372036.854775807 / 900.0) * 900.0 + 2 * 86400.0
+_PANDAS_LAST_S = math.floor(9223372036.854775807 / 900.0) * 900.0 - 2 * 86400.0
 _OFFSET_TABLES: dict[str, tuple[float, float, NDArray[np.float64], NDArray[np.float64]]] = {}
 
 
@@ -76,8 +81,8 @@ def _offset_table(timezone: str, lo: float, hi: float) -> tuple[NDArray[np.float
     tab = _OFFSET_TABLES.get(timezone)
     if tab is not None and tab[0] <= lo and hi <= tab[1]:
         return tab[2], tab[3]
-    a = math.floor(min(lo, tab[0] if tab else lo) / 900.0) * 900.0 - 400 * 86400.0
-    b = math.ceil(max(hi, tab[1] if tab else hi) / 900.0) * 900.0 + 400 * 86400.0
+    a = max(math.floor(min(lo, tab[0] if tab else lo) / 900.0) * 900.0 - 400 * 86400.0, _PANDAS_FIRST_S)
+    b = min(math.ceil(max(hi, tab[1] if tab else hi) / 900.0) * 900.0 + 400 * 86400.0, _PANDAS_LAST_S)
     grid = np.arange(a, b + 900.0, 900.0)  # zone transitions happen on quarter hours
     off = _pandas_offsets(grid, timezone)
     ch = np.flatnonzero(np.diff(off) != 0) + 1

@@ -147,3 +147,18 @@ def test_complex_numbers_are_refused_as_float64_conversion_refuses_them(what: st
         warnings.simplefilter("error")
         with pytest.raises(TypeError, match="complex"):
             _complex_calls()[what]()
+
+
+@pytest.mark.parametrize(("t", "zone"), [(9.19e9, "Europe/Berlin"), (-9.2e9, "America/New_York"),
+                                         (math.floor(_PANDAS_END_S) - 1.0, "Europe/Berlin")])
+def test_wall_seconds_within_400_days_of_pandas_range_ends_match_zoneinfo(monkeypatch: pytest.MonkeyPatch,
+                                                                         t: float, zone: str) -> None:
+    """Times inside pandas' range but within the offset table's 400-day margin of its ends (2261-03,
+    1678-06, the last second): t + the zone's offset from zoneinfo, not pandas' OutOfBoundsDatetime
+    (the audit's bug: the table's grid was padded past the range).
+    """
+    monkeypatch.setattr(fremen, "_OFFSET_TABLES", {})
+    ref = dt.datetime(1970, 1, 1, tzinfo=dt.timezone.utc) + dt.timedelta(seconds=t)
+    off = ref.astimezone(zoneinfo.ZoneInfo(zone)).utcoffset()
+    assert off is not None
+    np.testing.assert_array_equal(fremen.wall_seconds(np.array([t]), zone), [t + off.total_seconds()])
