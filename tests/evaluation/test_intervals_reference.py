@@ -222,8 +222,8 @@ def test_bootstrap_is_the_loop_by_loop_reference(n: int, conf: float, n_boot: in
 
 def test_bootstrap_ends_are_numpys_quantiles_of_the_float_ratios_to_the_sign_of_zero() -> None:
     """Resampled ratios of +-0 (subnormal numerators over a total weight that overflows to inf): the ends
-    are numpy's quantiles of the float64 ratios, bit for bit (an object array of ratios gives +0.0 for
-    the float array's -0.0: ``nanquantile`` sorts the two zeros differently)."""
+    are numpy's quantiles of the float64 ratios, bit for bit (``nanquantile`` of an object array of the
+    same ratios returns +0.0 here for the float array's -0.0)."""
     num, den = np.array([1e-320, -1e-320, 0.0]), np.array([1e308, 1e308, 1e308])
     with np.errstate(over="ignore"):
         iv = cluster_bootstrap(num, den, n_bootstrap=200, seed=0)
