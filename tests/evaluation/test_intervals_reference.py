@@ -220,6 +220,23 @@ def test_bootstrap_is_the_loop_by_loop_reference(n: int, conf: float, n_boot: in
     assert (iv.n, iv.method, iv.unit, iv.confidence) == (n, "bootstrap", "queries", conf)
 
 
+def test_bootstrap_ends_are_numpys_quantiles_of_the_float_ratios_to_the_sign_of_zero() -> None:
+    """Resampled ratios of +-0 (subnormal numerators over a total weight that overflows to inf): the ends
+    are numpy's quantiles of the float64 ratios, bit for bit (``nanquantile`` of an object array of the
+    same ratios returns +0.0 here for the float array's -0.0)."""
+    num, den = np.array([1e-320, -1e-320, 0.0]), np.array([1e308, 1e308, 1e308])
+    with np.errstate(over="ignore"):
+        iv = cluster_bootstrap(num, den, n_bootstrap=200, seed=0)
+    counts = np.random.default_rng(0).multinomial(3, [1.0 / 3] * 3, size=200)
+    ratios = [float(sum(int(k) * float(x) for k, x in zip(c, num))) / math.inf for c in counts]
+    assert {math.copysign(1.0, r) for r in ratios} == {-1.0, 1.0}  # both zeros occur
+    level = stats.norm.cdf(math.sqrt(3 / 2) * stats.t.ppf(0.025, df=2))
+    lo, hi = np.quantile(np.array(ratios, dtype=np.float64), [level, 1.0 - level])
+    assert (iv.low, iv.high) == (0.0, 0.0)
+    assert (np.signbit(iv.low), np.signbit(iv.high)) == (np.signbit(lo), np.signbit(hi))
+    assert json.dumps([iv.low, iv.high]) == json.dumps([float(lo), float(hi)])
+
+
 def test_bootstrap_level_by_hand() -> None:
     """n = 2 at 95 %: level Phi(sqrt 2 * t_{1, 0.025}) = Phi(-17.97) ~ 0: the interval spans the resamples."""
     num, den = np.array([0.0, 1.0]), np.array([1.0, 1.0])

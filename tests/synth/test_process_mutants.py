@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import math
 from pathlib import Path
 
 import numpy as np
@@ -229,6 +230,23 @@ def test_a_longer_path_extends_a_shorter_one() -> None:
         np.testing.assert_array_equal(getattr(long, name)[:3], getattr(short, name))
     np.testing.assert_array_equal(long.patterns[:2], short.patterns)
     assert long.before == short.before and long.patterns.shape == (4,)
+
+
+def test_fresh_dwells_are_the_uniform_draw_of_their_range_even_below_one() -> None:
+    """A fresh dwell is lo + floor(u (hi - lo + 1)) for the step's fourth uniform, recomputed here from the
+    same seed: the constructor does not check 1 <= lo (only ``problems()`` does), so the draw is pinned for
+    a range starting below 0 as well (a cap of hi + lo instead of hi - lo would bind there)."""
+    proc = tiny_process(4, rho=1.0)  # routine strength 1: every step draws a fresh dwell
+    ent = proc.entities["obj"]
+    ent.dwell[...] = np.array([-2, 3])
+    path = sample_entity(proc, ent, 30, np.random.default_rng(11))
+    rng = np.random.default_rng(11)
+    rng.random()  # the initial state's uniform
+    u = rng.random((30, 4))
+    expected = np.array([-2 + math.floor(float(x) * 6) for x in u[:, 3]])
+    assert set(expected) == set(range(-2, 4))  # the whole range occurs, negative dwells too
+    np.testing.assert_array_equal(path.events, np.zeros(30, np.int64))
+    np.testing.assert_array_equal(path.fresh, expected)
 
 
 def test_pick_never_returns_an_outcome_of_probability_zero() -> None:
