@@ -97,7 +97,8 @@ def wall_seconds(t_s: ArrayLike, timezone: str) -> NDArray[np.float64]:
     t = np.asarray(t_s, dtype=np.float64)
     if timezone in ("UTC", "Etc/UTC", "utc", "GMT") or t.size == 0:
         return t.copy()
-    trans, offs = _offset_table(timezone, float(np.min(t)), float(np.max(t)))
+    lo, hi = (min(max(float(x), _PANDAS_FIRST_S), _PANDAS_LAST_S) for x in (np.min(t), np.max(t)))
+    trans, offs = _offset_table(timezone, lo, hi)  # times beyond pandas' range take its end's offset
     return t + offs[np.searchsorted(trans, t, side="right") - 1]
 
 

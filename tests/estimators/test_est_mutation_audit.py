@@ -162,3 +162,20 @@ def test_wall_seconds_within_400_days_of_pandas_range_ends_match_zoneinfo(monkey
     off = ref.astimezone(zoneinfo.ZoneInfo(zone)).utcoffset()
     assert off is not None
     np.testing.assert_array_equal(fremen.wall_seconds(np.array([t]), zone), [t + off.total_seconds()])
+
+
+@pytest.mark.parametrize(("t", "zone"), [(9.3e9, "Europe/Berlin"), (-9.3e9, "America/New_York"), (1e12, "Europe/Berlin")])
+def test_wall_seconds_beyond_pandas_range_take_the_offset_at_its_end(monkeypatch: pytest.MonkeyPatch,
+                                                                   t: float, zone: str) -> None:
+    """Times beyond pandas' range (the second audit: IndexError on an empty cache, a value after an
+    earlier call): the zone's offset at the range's nearer end (from zoneinfo), whatever was asked before.
+    """
+    end = _PANDAS_END_S - 3 * 86400.0 if t > 0 else -_PANDAS_END_S + 3 * 86400.0
+    when = dt.datetime(1970, 1, 1, tzinfo=dt.timezone.utc) + dt.timedelta(seconds=end)
+    off = when.astimezone(zoneinfo.ZoneInfo(zone)).utcoffset()
+    assert off is not None
+    for earlier in ([], [math.copysign(9.25e9, t)]):
+        monkeypatch.setattr(fremen, "_OFFSET_TABLES", {})
+        for e in earlier:
+            fremen.wall_seconds(np.array([e]), zone)
+        np.testing.assert_array_equal(fremen.wall_seconds(np.array([t]), zone), [t + off.total_seconds()])
