@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 import importlib.metadata as md
 import re
 import sys
@@ -37,10 +38,13 @@ def _name(req: str) -> str:
     return re.sub(r"[-_.]+", "-", m.group(1)).lower()
 
 
-def _imports(paths: list[Path]) -> dict[str, set[str]]:
-    """Top-level module name -> files importing it (absolute imports only)."""
+@functools.cache
+def _imports(folder: str) -> dict[str, set[str]]:
+    """Top-level module name -> files under ``ROOT / folder`` importing it (absolute imports only).
+
+    Cached: three tests read the same trees (about 1 s each to parse)."""
     out: dict[str, set[str]] = {}
-    for p in paths:
+    for p in sorted((ROOT / folder).rglob("*.py")):
         for node in ast.walk(ast.parse(p.read_text(), str(p))):
             names = []
             if isinstance(node, ast.Import):
@@ -56,8 +60,14 @@ def _third_party(imports: dict[str, set[str]]) -> dict[str, set[str]]:
     return {m: f for m, f in imports.items() if m not in sys.stdlib_module_names and m not in ("psg_data", "tests")}
 
 
+@functools.cache
+def _packages_distributions() -> dict[str, list[str]]:
+    """Cached: each call scans every installed distribution's metadata (about 0.2 s)."""
+    return md.packages_distributions()
+
+
 def _distributions(module: str) -> set[str]:
-    dists = md.packages_distributions().get(module, [])
+    dists = _packages_distributions().get(module, [])
     assert dists, f"module {module!r} is imported but no installed distribution provides it"
     return {_name(d) for d in dists}
 
@@ -72,7 +82,7 @@ def _requirements() -> tuple[dict[str, str], dict[str, set[str]]]:
 def test_every_third_party_import_of_the_package_is_declared() -> None:
     runtime, extras = _requirements()
     problems = []
-    for module, files in sorted(_third_party(_imports(sorted((ROOT / "psg_data").rglob("*.py")))).items()):
+    for module, files in sorted(_third_party(_imports("psg_data")).items()):
         dists = _distributions(module)
         if dists & set(runtime):
             continue
@@ -87,7 +97,7 @@ def test_every_third_party_import_of_the_package_is_declared() -> None:
 def test_every_runtime_requirement_is_imported_by_the_package() -> None:
     runtime, _ = _requirements()
     imported = set()
-    for module in _third_party(_imports(sorted((ROOT / "psg_data").rglob("*.py")))):
+    for module in _third_party(_imports("psg_data")):
         imported |= _distributions(module)
     unused = []
     for name, req in runtime.items():
@@ -105,7 +115,7 @@ def test_every_runtime_requirement_is_imported_by_the_package() -> None:
 def test_every_third_party_import_of_the_tests_is_declared() -> None:
     runtime, extras = _requirements()
     declared = set(runtime).union(*extras.values())
-    missing = {m: sorted(f)[0] for m, f in _third_party(_imports(sorted((ROOT / "tests").rglob("*.py")))).items()
+    missing = {m: sorted(f)[0] for m, f in _third_party(_imports("tests")).items()
                if not _distributions(m) & declared}
     assert missing == {}
 
