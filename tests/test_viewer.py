@@ -3,9 +3,11 @@ reader (``rerun.chunk.RrdReader``), hold the expected entities and row counts.""
 
 from __future__ import annotations
 
+import sys
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -169,7 +171,21 @@ def test_recording_carries_a_blueprint_and_a_scan_timeline(make_dataset: Callabl
     assert len(eye) == 1 and len(plots) == 4 and len(views) == 7
 
 
-def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[..., Path]) -> None:
+def _wait_or_dump(proc: Any, timeout_s: float, stderr_path: Path) -> int:
+    """``proc.wait``; if it does not end in time, its Python stacks (``-X faulthandler``, SIGABRT)
+    are the failure message, so a hang names where it hangs."""
+    import signal
+    import subprocess
+
+    try:
+        return int(proc.wait(timeout=timeout_s))
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        proc.wait(timeout=10)
+        pytest.fail(f"did not exit within {timeout_s} s; its stacks:\n{stderr_path.read_text(errors='replace')}")
+
+
+def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
     import signal
     import socket
     import subprocess
@@ -180,8 +196,11 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
 
     root = make_dataset(scans=2, frames=1)
     port = _free_port("127.0.0.1")
-    proc = subprocess.Popen([sys.executable, "-c", "from psg_data.cli.psg_data_cmd import main; main()", "view",
-                             str(root), "--web", "--port", str(port), "-q"], stdout=subprocess.PIPE, text=True)
+    err = tmp_path / "stderr.txt"
+    with open(err, "wb") as err_file:
+        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c",
+                                 "from psg_data.cli.psg_data_cmd import main; main()", "view", str(root), "--web",
+                                 "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
     assert proc.stdout is not None
     try:
         url = proc.stdout.readline().strip()
@@ -191,7 +210,7 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
         with urllib.request.urlopen(url.split(": ", 1)[1], timeout=20) as page:
             assert page.status == 200 and b"<html" in page.read(4096).lower()
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0
+        assert _wait_or_dump(proc, 30.0, err) == 0
         assert proc.stdout.read().strip() == "stopped"
     finally:
         if proc.poll() is None:
@@ -200,6 +219,52 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
         proc.stdout.close()
     with socket.socket() as s:  # the server (and the viewer binary it ran) is gone: the port is free again
         s.bind(("127.0.0.1", port))
+
+
+def _tgkill(pid: int, tid: int, sig: int) -> None:
+    """Send ``sig`` to one thread ``tid`` of process ``pid`` (Linux's tgkill(2), through libc)."""
+    import ctypes
+    import platform
+
+    number = {"x86_64": 234, "aarch64": 131}.get(platform.machine())
+    if number is None:
+        pytest.skip(f"tgkill's system call number on {platform.machine()} is not in this test")
+    libc = ctypes.CDLL(None, use_errno=True)
+    assert libc.syscall(number, pid, tid, sig) == 0, f"tgkill failed: errno {ctypes.get_errno()}"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="threads picked through /proc and tgkill(2)")
+def test_web_viewer_stops_when_ctrl_c_reaches_another_thread(make_dataset: Callable[..., Path],
+                                                             tmp_path: Path) -> None:
+    """The kernel may hand a process's SIGINT to any of its threads; one taken by a Rerun SDK thread
+    must stop the viewer too (a blocking wait in the main thread missed it: 1 hang in ~8 suite runs)."""
+    import os
+    import signal
+    import subprocess
+
+    from psg_data.viewer._web import _free_port
+
+    root = make_dataset(scans=1, frames=1)
+    port = _free_port("127.0.0.1")
+    err = tmp_path / "stderr.txt"
+    with open(err, "wb") as err_file:
+        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c",
+                                 "from psg_data.cli.psg_data_cmd import main; main()", "view", str(root), "--web",
+                                 "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
+    assert proc.stdout is not None
+    try:
+        assert proc.stdout.readline().startswith("web viewer: ")
+        assert proc.stdout.readline().startswith("sent to the web viewer")
+        others = sorted(int(t) for t in os.listdir(f"/proc/{proc.pid}/task") if int(t) != proc.pid)
+        assert others, "the viewer process runs no thread besides its main one"
+        _tgkill(proc.pid, others[-1], signal.SIGINT)
+        assert _wait_or_dump(proc, 20.0, err) == 0
+        assert proc.stdout.read().strip() == "stopped"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
 
 
 def test_web_viewer_port_in_use_is_one_line(make_dataset: Callable[..., Path]) -> None:

@@ -72,10 +72,6 @@ def recording(save: str | Path | None = None, *, application_id: str = "psg-data
             rec.spawn(default_blueprint=blueprint)
         yield rec
         rec.flush()
-        if web is not None:
-            # close the gRPC sink while the server still runs: it keeps the data for its viewers, and
-            # a sink left open to a server that is gone can block the interpreter's exit (rerun#12620)
-            rec.disconnect()
         return
     from psg_data.writers._safe_output import check_file_output, replace_file
 

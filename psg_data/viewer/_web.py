@@ -108,10 +108,16 @@ class WebViewer:
         lines = [ln for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
         return f": {lines[-1].strip()}" if lines else ""
 
-    def wait(self) -> None:
-        """Block until the server ends (or Ctrl-C)."""
-        if self._proc is not None:
-            self._proc.wait()
+    def wait(self, poll_s: float = 0.2) -> None:
+        """Block until the server ends (or Ctrl-C).
+
+        Polls every ``poll_s`` seconds instead of one blocking wait: the kernel may hand a Ctrl-C
+        to any thread (the Rerun SDK runs a dozen), and a signal taken by another thread does not
+        interrupt the main thread's blocking ``waitpid``; a sleep ends, and the KeyboardInterrupt
+        is raised then.
+        """
+        while self._proc is not None and self._proc.poll() is None:
+            time.sleep(poll_s)
 
     def stop(self) -> None:
         """Stop the server (idempotent)."""
