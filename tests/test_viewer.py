@@ -171,18 +171,56 @@ def test_recording_carries_a_blueprint_and_a_scan_timeline(make_dataset: Callabl
     assert len(eye) == 1 and len(plots) == 4 and len(views) == 7
 
 
+VIEW_CLI = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "from psg_data.cli.psg_data_cmd import main; main()")
+"""``psg-data`` as a terminal starts it: a test run started in the background by a non-interactive
+shell inherits SIGINT ignored, and so would the command (which then rightly ignores the Ctrl-C);
+the earlier one-in-several "hang" of the Ctrl-C test was that (as in tests/format/test_interrupt.py)."""
+
+
 def _wait_or_dump(proc: Any, timeout_s: float, stderr_path: Path) -> int:
     """``proc.wait``; if it does not end in time, its Python stacks (``-X faulthandler``, SIGABRT)
     are the failure message, so a hang names where it hangs."""
+    import contextlib
+    import os
     import signal
     import subprocess
 
     try:
         return int(proc.wait(timeout=timeout_s))
     except subprocess.TimeoutExpired:
+        masks, servers = _signal_masks(proc.pid), _children(proc.pid)
         proc.send_signal(signal.SIGABRT)
         proc.wait(timeout=10)
-        pytest.fail(f"did not exit within {timeout_s} s; its stacks:\n{stderr_path.read_text(errors='replace')}")
+        for pid in servers:  # the Rerun server it started (a session of its own): not left running
+            with contextlib.suppress(OSError):
+                os.killpg(pid, signal.SIGKILL)
+        pytest.fail(f"did not exit within {timeout_s} s; signal masks (thread: blocked ignored caught):\n{masks}\n"
+                    f"its stacks:\n{stderr_path.read_text(errors='replace')}")
+
+
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid`` (Linux's /proc; empty elsewhere)."""
+    import contextlib
+
+    out: list[int] = []
+    with contextlib.suppress(OSError):
+        for tid in Path(f"/proc/{pid}/task").iterdir():
+            out += [int(c) for c in (tid / "children").read_text().split()]
+    return out
+
+
+def _signal_masks(pid: int) -> str:
+    """Each thread's blocked / ignored / caught signal masks from /proc (Linux; empty elsewhere)."""
+    import contextlib
+
+    lines = []
+    with contextlib.suppress(OSError):
+        for tid in sorted(Path(f"/proc/{pid}/task").iterdir()):
+            f = dict(ln.split(":\t", 1) for ln in (tid / "status").read_text().splitlines() if ":\t" in ln)
+            lines.append(f"{tid.name} {f.get('Name', '?').strip()}: {f.get('SigBlk', '?').strip()} "
+                         f"{f.get('SigIgn', '?').strip()} {f.get('SigCgt', '?').strip()}")
+    return "\n".join(lines)
 
 
 def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
@@ -198,8 +236,7 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
     port = _free_port("127.0.0.1")
     err = tmp_path / "stderr.txt"
     with open(err, "wb") as err_file:
-        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c",
-                                 "from psg_data.cli.psg_data_cmd import main; main()", "view", str(root), "--web",
+        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", VIEW_CLI, "view", str(root), "--web",
                                  "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
     assert proc.stdout is not None
     try:
@@ -248,8 +285,7 @@ def test_web_viewer_stops_when_ctrl_c_reaches_another_thread(make_dataset: Calla
     port = _free_port("127.0.0.1")
     err = tmp_path / "stderr.txt"
     with open(err, "wb") as err_file:
-        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c",
-                                 "from psg_data.cli.psg_data_cmd import main; main()", "view", str(root), "--web",
+        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", VIEW_CLI, "view", str(root), "--web",
                                  "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
     assert proc.stdout is not None
     try:
