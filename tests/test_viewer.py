@@ -3,9 +3,10 @@ reader (``rerun.chunk.RrdReader``), hold the expected entities and row counts.""
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -181,7 +182,6 @@ the earlier one-in-several "hang" of the Ctrl-C test was that (as in tests/forma
 def _wait_or_dump(proc: Any, timeout_s: float, stderr_path: Path) -> int:
     """``proc.wait``; if it does not end in time, its Python stacks (``-X faulthandler``, SIGABRT)
     are the failure message, so a hang names where it hangs."""
-    import contextlib
     import os
     import signal
     import subprocess
@@ -201,8 +201,6 @@ def _wait_or_dump(proc: Any, timeout_s: float, stderr_path: Path) -> int:
 
 def _children(pid: int) -> list[int]:
     """The child processes of ``pid`` (Linux's /proc; empty elsewhere)."""
-    import contextlib
-
     out: list[int] = []
     with contextlib.suppress(OSError):
         for tid in Path(f"/proc/{pid}/task").iterdir():
@@ -212,8 +210,6 @@ def _children(pid: int) -> list[int]:
 
 def _signal_masks(pid: int) -> str:
     """Each thread's blocked / ignored / caught signal masks from /proc (Linux; empty elsewhere)."""
-    import contextlib
-
     lines = []
     with contextlib.suppress(OSError):
         for tid in sorted(Path(f"/proc/{pid}/task").iterdir()):
@@ -223,11 +219,28 @@ def _signal_masks(pid: int) -> str:
     return "\n".join(lines)
 
 
+@contextlib.contextmanager
+def _web_view(root: Path, port: int, err: Path) -> Iterator[Any]:
+    """``psg-data view ROOT --web --port PORT -q`` as a child process (stderr to ``err``); killed if
+    still running when the block ends."""
+    import subprocess
+
+    with open(err, "wb") as err_file:
+        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", VIEW_CLI, "view", str(root), "--web",
+                                 "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
+    assert proc.stdout is not None
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
+
+
 def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
     import signal
     import socket
-    import subprocess
-    import sys
     import urllib.request
 
     from psg_data.viewer._web import _free_port
@@ -235,11 +248,7 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
     root = make_dataset(scans=2, frames=1)
     port = _free_port("127.0.0.1")
     err = tmp_path / "stderr.txt"
-    with open(err, "wb") as err_file:
-        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", VIEW_CLI, "view", str(root), "--web",
-                                 "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
-    assert proc.stdout is not None
-    try:
+    with _web_view(root, port, err) as proc:
         url = proc.stdout.readline().strip()
         assert url.startswith(f"web viewer: http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A")
         sent = proc.stdout.readline()
@@ -249,11 +258,6 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
         proc.send_signal(signal.SIGINT)
         assert _wait_or_dump(proc, 30.0, err) == 0
         assert proc.stdout.read().strip() == "stopped"
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
     with socket.socket() as s:  # the server (and the viewer binary it ran) is gone: the port is free again
         s.bind(("127.0.0.1", port))
 
@@ -274,21 +278,16 @@ def _tgkill(pid: int, tid: int, sig: int) -> None:
 def test_web_viewer_stops_when_ctrl_c_reaches_another_thread(make_dataset: Callable[..., Path],
                                                              tmp_path: Path) -> None:
     """The kernel may hand a process's SIGINT to any of its threads; one taken by a Rerun SDK thread
-    must stop the viewer too (a blocking wait in the main thread missed it: 1 hang in ~8 suite runs)."""
+    must stop the viewer too (a blocking ``waitpid`` in the main thread never returned)."""
     import os
     import signal
-    import subprocess
 
     from psg_data.viewer._web import _free_port
 
     root = make_dataset(scans=1, frames=1)
     port = _free_port("127.0.0.1")
     err = tmp_path / "stderr.txt"
-    with open(err, "wb") as err_file:
-        proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", VIEW_CLI, "view", str(root), "--web",
-                                 "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
-    assert proc.stdout is not None
-    try:
+    with _web_view(root, port, err) as proc:
         assert proc.stdout.readline().startswith("web viewer: ")
         assert proc.stdout.readline().startswith("sent to the web viewer")
         others = sorted(int(t) for t in os.listdir(f"/proc/{proc.pid}/task") if int(t) != proc.pid)
@@ -296,11 +295,6 @@ def test_web_viewer_stops_when_ctrl_c_reaches_another_thread(make_dataset: Calla
         _tgkill(proc.pid, others[-1], signal.SIGINT)
         assert _wait_or_dump(proc, 20.0, err) == 0
         assert proc.stdout.read().strip() == "stopped"
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
 
 
 def test_web_viewer_port_in_use_is_one_line(make_dataset: Callable[..., Path]) -> None:
