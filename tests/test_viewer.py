@@ -182,21 +182,30 @@ the earlier one-in-several "hang" of the Ctrl-C test was that (as in tests/forma
 def _wait_or_dump(proc: Any, timeout_s: float, stderr_path: Path) -> int:
     """``proc.wait``; if it does not end in time, its Python stacks (``-X faulthandler``, SIGABRT)
     are the failure message, so a hang names where it hangs."""
-    import os
     import signal
     import subprocess
 
     try:
         return int(proc.wait(timeout=timeout_s))
     except subprocess.TimeoutExpired:
-        masks, servers = _signal_masks(proc.pid), _children(proc.pid)
-        proc.send_signal(signal.SIGABRT)
-        proc.wait(timeout=10)
-        for pid in servers:  # the Rerun server it started (a session of its own): not left running
-            with contextlib.suppress(OSError):
-                os.killpg(pid, signal.SIGKILL)
+        masks = _signal_masks(proc.pid)
+        _end_with_servers(proc, signal.SIGABRT)
         pytest.fail(f"did not exit within {timeout_s} s; signal masks (thread: blocked ignored caught):\n{masks}\n"
                     f"its stacks:\n{stderr_path.read_text(errors='replace')}")
+
+
+def _end_with_servers(proc: Any, sig: int) -> None:
+    """End ``proc`` with ``sig`` and kill the Rerun server it started (in a session of its own, so
+    not reached through ``proc``; its pid is known only while ``proc`` lives)."""
+    import os
+    import signal
+
+    servers = _children(proc.pid)
+    proc.send_signal(sig)
+    proc.wait(timeout=10)
+    for pid in servers:
+        with contextlib.suppress(OSError):
+            os.killpg(pid, signal.SIGKILL)
 
 
 def _children(pid: int) -> list[int]:
@@ -222,7 +231,8 @@ def _signal_masks(pid: int) -> str:
 @contextlib.contextmanager
 def _web_view(root: Path, port: int, err: Path) -> Iterator[Any]:
     """``psg-data view ROOT --web --port PORT -q`` as a child process (stderr to ``err``); killed if
-    still running when the block ends."""
+    still running when the block ends, with the Rerun server it started."""
+    import signal
     import subprocess
 
     with open(err, "wb") as err_file:
@@ -233,8 +243,7 @@ def _web_view(root: Path, port: int, err: Path) -> Iterator[Any]:
         yield proc
     finally:
         if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+            _end_with_servers(proc, signal.SIGKILL)
         proc.stdout.close()
 
 
@@ -263,15 +272,11 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
 
 
 def _tgkill(pid: int, tid: int, sig: int) -> None:
-    """Send ``sig`` to one thread ``tid`` of process ``pid`` (Linux's tgkill(2), through libc)."""
+    """Send ``sig`` to one thread ``tid`` of process ``pid`` (Linux's tgkill(2), in glibc >= 2.30 and musl)."""
     import ctypes
-    import platform
 
-    number = {"x86_64": 234, "aarch64": 131}.get(platform.machine())
-    if number is None:
-        pytest.skip(f"tgkill's system call number on {platform.machine()} is not in this test")
     libc = ctypes.CDLL(None, use_errno=True)
-    assert libc.syscall(number, pid, tid, sig) == 0, f"tgkill failed: errno {ctypes.get_errno()}"
+    assert libc.tgkill(pid, tid, sig) == 0, f"tgkill failed: errno {ctypes.get_errno()}"
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="threads picked through /proc and tgkill(2)")

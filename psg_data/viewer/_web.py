@@ -26,6 +26,8 @@ DEFAULT_WEB_PORT = 9090
 """Port of the web viewer (Rerun's default)."""
 DEFAULT_BIND = "127.0.0.1"
 """Only this machine: another one reaches it through an SSH tunnel (``ssh -L 9090:127.0.0.1:9090``)."""
+_POLL_S = 0.2
+"""How often :meth:`WebViewer.wait` looks whether the server ended (seconds)."""
 
 
 def _free_port(bind: str) -> int:
@@ -108,16 +110,16 @@ class WebViewer:
         lines = [ln for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
         return f": {lines[-1].strip()}" if lines else ""
 
-    def wait(self, poll_s: float = 0.2) -> None:
+    def wait(self) -> None:
         """Block until the server ends (or Ctrl-C).
 
-        Polls every ``poll_s`` seconds instead of one blocking wait: the kernel may hand a Ctrl-C
+        Polls every ``_POLL_S`` seconds instead of one blocking wait: the kernel may hand a Ctrl-C
         to any thread (the Rerun SDK runs a dozen), and a signal taken by another thread does not
         interrupt the main thread's blocking ``waitpid``; a sleep ends, and the KeyboardInterrupt
         is raised then.
         """
         while self._proc is not None and self._proc.poll() is None:
-            time.sleep(poll_s)
+            time.sleep(_POLL_S)
 
     def stop(self) -> None:
         """Stop the server (idempotent)."""
