@@ -1,12 +1,16 @@
 """Benchmark of the synthetic lab: demo build time and renderer throughput.
 
-Run: ``python bench/bench_synth.py [--quick]`` (from the repository root; ``bench/run.py`` runs it
-too). The cold demo build is timed for the default generator (steps-v2) and, as the baseline in the
-same run, for continuous-v1 (median of 3; one with ``--quick``).
+Run: ``python bench/bench_synth.py [--quick] [--baseline-ref REF]`` (from the repository root;
+``bench/run.py`` runs it too). The cold demo build is timed for the default generator (steps-v2)
+and, as the baseline in the same run, for continuous-v1 (median of 3; one with ``--quick``). With
+``--baseline-ref REF`` the scan planning of git revision REF (imported in the same process, see
+``bench_loader_ab.py``) is timed against this tree's on the three layouts, alternating, best of 3,
+and their plans compared pose for pose.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import tempfile
 import time
@@ -17,7 +21,41 @@ import numpy as np
 from psg_data.synth import LabConfig, LabModel, build_lab
 
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def planning_against(ref_name: str) -> None:
+    """Scan planning (view candidates + plans) of this tree against REF's, per layout."""
+    from bench_loader_ab import import_ref
+
+    with tempfile.TemporaryDirectory(prefix="psg-synth-ab-") as tmp:
+        ref = import_ref(ref_name, Path(tmp))
+        from psg_data_ref.synth import LabConfig as RefConfig
+        from psg_data_ref.synth import LabModel as RefModel
+
+        print(f"scan planning, this tree vs {ref_name} (best of 3, alternating; load "
+              f"{Path('/proc/loadavg').read_text().split()[0]})")
+        for layout in ("corridor", "two_routes", "chain"):
+            best = {"this": float("inf"), "ref": float("inf")}
+            plans = {}
+            for _ in range(3):
+                for k, (M, C) in {"this": (LabModel, LabConfig), "ref": (RefModel, RefConfig)}.items():
+                    t0 = time.perf_counter()
+                    plans[k] = M(C(layout=layout)).scans
+                    best[k] = min(best[k], time.perf_counter() - t0)
+            same = all(np.array_equal(a.poses, b.poses) and a.scan_id == b.scan_id
+                       for a, b in zip(plans["this"], plans["ref"], strict=True))
+            print(f"  {layout:10s} this {best['this']:.2f} s, {ref_name[:12]} {best['ref']:.2f} s, "
+                  f"ratio {best['this'] / best['ref']:.2f}; plans identical: {same}")
+
+
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="one cold build per generator instead of three")
+    ap.add_argument("--baseline-ref", default=None, help="git revision whose scan planning is timed alongside")
+    args = ap.parse_args()
+    if args.baseline_ref:
+        planning_against(args.baseline_ref)
     cfg = LabConfig()
     t0 = time.perf_counter()
     lab = LabModel(cfg)
@@ -34,7 +72,7 @@ def main() -> None:
     # full cold build as demo() does it (model + planning + rendering + writing), three times, with
     # the first generator (continuous-v1) as the baseline measured in the same run
     colds: dict[str, list[float]] = {"steps-v2": [], "continuous-v1": []}
-    for _ in range(1 if "--quick" in sys.argv else 3):
+    for _ in range(1 if args.quick else 3):
         for gen in colds:
             with tempfile.TemporaryDirectory() as tmp:
                 t0 = time.perf_counter()

@@ -288,6 +288,16 @@ def camera_pose(x_m: float, y_m: float, yaw_rad: float, *, height_m: float = CAM
     return T
 
 
+def _candidate_poses(C: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(C, 4, 4) camera-to-world poses of (x, y, yaw) rows: :func:`camera_pose` of each row, its
+    rotation computed once per distinct yaw (the same numbers as one call per row).
+    """
+    rot = {yaw: camera_pose(0.0, 0.0, yaw) for yaw in np.unique(C[:, 2]).tolist()}
+    T = np.stack([rot[yaw] for yaw in C[:, 2].tolist()]) if len(C) else np.empty((0, 4, 4))
+    T[:, 0, 3], T[:, 1, 3] = C[:, 0], C[:, 1]
+    return T
+
+
 class LabModel:
     """The synthetic lab: geometry, ground-truth schedules, camera and scan plans, from a seed.
 
@@ -392,47 +402,52 @@ class LabModel:
 
     def _view_candidates(self) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Per room with receptacles: candidate (x, y, yaw) rows and their (C, K) visibility scores of
-        the view targets (:meth:`_view_targets`).
+        the view targets (:meth:`_view_targets`): the share of a target's 5 points that are in the
+        160 x 120 image, 0.4-6 m ahead, and seen unoccluded (one ray cast per room for all).
         """
         if self._candidates is not None:
             return self._candidates
         L = self.layout
-        closed = SceneState({}, {d: False for d in L.door_ids})
-        rend = LabRenderer(L, closed)
+        rend = LabRenderer(L, SceneState({}, {d: False for d in L.door_ids}))
         cam = d435_intrinsics(160, 120)
         tops_a, target_ids = self._view_targets()
+        pts = tops_a.reshape(-1, 3)
         out: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         for room in L.room_ids:
             if not any(r.room_id == room for r in L.receptacles):
                 continue
-            x0, x1, y0, y1 = L.room_bounds(room, inset_m=0.9)
-            xs, ys = np.arange(x0, x1 + 1e-9, 0.5), np.arange(y0, y1 + 1e-9, 0.5)
-            cands = []
-            for x in xs:
-                for y in ys:
-                    p = np.array([x, y, 0.3])
-                    if any(r.box.contains(p[None], margin_m=0.45)[0] for r in L.receptacles):
-                        continue
-                    for yaw in np.deg2rad(np.arange(0, 360, 15)):
-                        cands.append((x, y, yaw))
-            C = np.asarray(cands, float)
-            scores = np.zeros((len(C), len(target_ids)))
-            for ci, (x, y, yaw) in enumerate(C):
-                T = camera_pose(x, y, yaw)
-                Tinv = np.linalg.inv(T)
-                pc = tops_a.reshape(-1, 3) @ Tinv[:3, :3].T + Tinv[:3, 3]
-                z = pc[:, 2]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    u = cam.fx * pc[:, 0] / z + cam.cx
-                    v = cam.fy * pc[:, 1] / z + cam.cy
-                inimg = (z > 0.4) & (z < 6.0) & (u > 2) & (u < cam.width - 3) & (v > 2) & (v < cam.height - 3)
-                d = tops_a.reshape(-1, 3) - T[:3, 3]
-                t, iid, _ = rend.cast(np.broadcast_to(T[:3, 3], d.shape), d)
-                vis = inimg & (iid == np.repeat(target_ids, 5)) & (t > 0.97)
-                scores[ci] = vis.reshape(-1, 5).mean(axis=1)
-            out[room] = (C, scores)
+            C = self._room_candidates(room)
+            T = _candidate_poses(C)
+            Tinv = np.linalg.inv(T)
+            pc = np.matmul(pts[None], Tinv[:, :3, :3].transpose(0, 2, 1)) + Tinv[:, None, :3, 3]  # (C, 5K, 3)
+            z = pc[..., 2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = cam.fx * pc[..., 0] / z + cam.cx
+                v = cam.fy * pc[..., 1] / z + cam.cy
+            inimg = (z > 0.4) & (z < 6.0) & (u > 2) & (u < cam.width - 3) & (v > 2) & (v < cam.height - 3)
+            origins = np.broadcast_to(T[:, None, :3, 3], pc.shape).reshape(-1, 3)
+            t, iid, _ = rend.cast(origins, (pts[None] - T[:, None, :3, 3]).reshape(-1, 3))
+            vis = inimg & (iid.reshape(z.shape) == np.repeat(target_ids, 5)) & (t.reshape(z.shape) > 0.97)
+            out[room] = (C, vis.reshape(len(C), -1, 5).mean(axis=2))
         self._candidates = out
         return out
+
+    def _room_candidates(self, room: str) -> NDArray[np.float64]:
+        """(C, 3) candidate views (x m, y m, yaw rad) of a room: a 0.5 m grid 0.9 m inside its walls,
+        away from the receptacles, 24 yaws each.
+        """
+        L = self.layout
+        x0, x1, y0, y1 = L.room_bounds(room, inset_m=0.9)
+        xs, ys = np.arange(x0, x1 + 1e-9, 0.5), np.arange(y0, y1 + 1e-9, 0.5)
+        cands = []
+        for x in xs:
+            for y in ys:
+                p = np.array([x, y, 0.3])
+                if any(r.box.contains(p[None], margin_m=0.45)[0] for r in L.receptacles):
+                    continue
+                for yaw in np.deg2rad(np.arange(0, 360, 15)):
+                    cands.append((x, y, yaw))
+        return np.asarray(cands, float)
 
     def _plan_scans(self) -> list[ScanPlan]:
         cfg = self.config
