@@ -158,6 +158,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     goes to one worker in this order (``--dist loadfile --no-loadscope-reorder`` in pyproject.toml),
     so the long files start early and the run does not end with one worker busy on a long file and
     the other idle; xdist's own order (by number of tests only) started one of them last."""
-    count: Counter[str] = Counter(item.nodeid.split("::")[0] for item in items)
-    slow = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("slow") is not None}
-    items.sort(key=lambda item: (item.nodeid.split("::")[0] not in slow, -count[item.nodeid.split("::")[0]]))
+    files = [item.nodeid.split("::")[0] for item in items]
+    count = Counter(files)
+    slow = {f for f, item in zip(files, items) if item.get_closest_marker("slow") is not None}
+    key = {item.nodeid: (f not in slow, -count[f]) for f, item in zip(files, items)}
+    items.sort(key=lambda item: key[item.nodeid])

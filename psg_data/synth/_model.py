@@ -293,7 +293,7 @@ def _candidate_poses(C: NDArray[np.float64]) -> NDArray[np.float64]:
     rotation computed once per distinct yaw (the same numbers as one call per row).
     """
     rot = {yaw: camera_pose(0.0, 0.0, yaw) for yaw in np.unique(C[:, 2]).tolist()}
-    T = np.stack([rot[yaw] for yaw in C[:, 2].tolist()]) if len(C) else np.empty((0, 4, 4))
+    T = np.stack([rot[yaw] for yaw in C[:, 2].tolist()])
     T[:, 0, 3], T[:, 1, 3] = C[:, 0], C[:, 1]
     return T
 
@@ -417,6 +417,9 @@ class LabModel:
             if not any(r.room_id == room for r in L.receptacles):
                 continue
             C = self._room_candidates(room)
+            if len(C) == 0:  # no free spot on the grid: nothing to score
+                out[room] = (C, np.zeros((0, len(target_ids))))
+                continue
             T = _candidate_poses(C)
             Tinv = np.linalg.inv(T)
             pc = np.matmul(pts[None], Tinv[:, :3, :3].transpose(0, 2, 1)) + Tinv[:, None, :3, 3]  # (C, 5K, 3)
@@ -447,7 +450,7 @@ class LabModel:
                     continue
                 for yaw in np.deg2rad(np.arange(0, 360, 15)):
                     cands.append((x, y, yaw))
-        return np.asarray(cands, float)
+        return np.asarray(cands, float).reshape(-1, 3)
 
     def _plan_scans(self) -> list[ScanPlan]:
         cfg = self.config

@@ -49,3 +49,14 @@ def test_batched_view_scores_equal_one_candidate_at_a_time(layout: str, seed: in
         assert np.array_equal(S[rows], _scores_one_by_one(lab, C[rows]))
         seen_any += int(np.count_nonzero(S[rows]))
     assert seen_any > 0  # the comparison covers seen targets, not only zeros
+
+
+def test_a_room_without_a_free_spot_gets_no_candidates(monkeypatch: pytest.MonkeyPatch) -> None:
+    lab = LabModel(LabConfig(seed=0, layout="chain"))
+    full = lab._room_candidates
+    empty_room = lab.layout.receptacles[0].room_id
+    monkeypatch.setattr(lab, "_room_candidates", lambda room: full(room)[:0] if room == empty_room else full(room))
+    cands = lab._view_candidates()
+    n_targets = len(lab._view_targets()[1])
+    assert cands[empty_room][0].shape == (0, 3) and cands[empty_room][1].shape == (0, n_targets)
+    assert all(len(C) > 0 and S.shape == (len(C), n_targets) for r, (C, S) in cands.items() if r != empty_room)
