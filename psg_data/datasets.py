@@ -1,5 +1,12 @@
 """Ready-made datasets: :func:`demo` builds the default synthetic lab once and caches it.
 
+:func:`door_benchmark` and :func:`room_presence_benchmark` read the two public real long-term
+benchmarks (the FreMEn line of work's office door and the CASAS Aruba room presence; not shipped
+with psg-data: they carry no licence). Their files come from ``$PSG_DATA_SOURCES`` (a folder laid
+out as ``greg_door_2016_min/`` and ``aruba_location/``), else from the cache, fetched once from
+their public repositories at a pinned commit and checked file by file against a pinned SHA-256
+(:data:`REAL_SOURCES`, :func:`psg_data._fetch.ensure_source`).
+
 :data:`BUILTIN` is the one table of built-in dataset names that commands accept where they take a
 dataset (``psg-data info demo``, ``psg-eval --dataset persistence-benchmark``); :func:`resolve`
 turns a name or a path into a dataset directory, or refuses a name that is not one (saying which
@@ -20,7 +27,8 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["demo", "cache_dir", "DEMO_VERSION", "BuiltinDataset", "BUILTIN", "resolve", "navigation_benchmark",
-           "navigation_benchmark_scenes", "NAVIGATION_BENCHMARK_VERSION", "NAVIGATION_BENCHMARK_SCENES"]
+           "navigation_benchmark_scenes", "NAVIGATION_BENCHMARK_VERSION", "NAVIGATION_BENCHMARK_SCENES",
+           "REAL_SOURCES", "real_benchmark_root", "door_benchmark", "room_presence_benchmark", "STATE_BENCHMARKS"]
 
 log = logging.getLogger(__name__)
 
@@ -198,6 +206,15 @@ BUILTIN: dict[str, BuiltinDataset] = {
         "psg-eval --dataset navigation-benchmark (the persistence task over its scenes; --task navigation with "
         "--protocol paper-sim-predictive or paper-sim-adaptive)",
         scans=NAVIGATION_BENCHMARK_SCENES),
+    "door-benchmark": BuiltinDataset(
+        "door-benchmark", "a real office door, one state per minute, 10 training and 9 test weeks (the FreMEn "
+        "authors' benchmark; fetched by pinned checksum, or read from $PSG_DATA_SOURCES)", None,
+        "psg-eval --dataset door-benchmark (the persistence task; --protocol patrol or published)"),
+    "room-presence-benchmark": BuiltinDataset(
+        "room-presence-benchmark", "a real smart home (CASAS Aruba): the resident's room per minute, 16 weeks, ten "
+        "rooms (fetched by pinned checksum, or read from $PSG_DATA_SOURCES)", None,
+        "psg-eval --dataset room-presence-benchmark (the persistence task and locate; --protocol patrol or "
+        "published)"),
 }
 """The built-in dataset names (name -> :class:`BuiltinDataset`)."""
 
@@ -227,6 +244,83 @@ def resolve(dataset: str | os.PathLike[str], *, command: str = "this command",
         raise PsgDataError(f"{entry.name}: {entry.description}; {command} reads a dataset directory (a path, or "
                            f"{_directory_names()}); {entry.name} is read by {entry.accepted_by}")
     return entry.build(progress=progress)
+
+
+# -- the public real benchmarks ------------------------------------------------------------------------
+_FRAMEWORK2 = "682ac32cf2cb7f53b4e02f0d57e64a88c20a4d08"
+_ACTIVITY = "99f110d96633956a0c5cb29d83fe26079e431233"
+_DOOR_SHA256 = {
+    "training_data.txt": "8be478daea3bfaac7f3b3af3d94dcc80206fb0b996ad0ca53bed8030e04bacca",
+    "test_all_1.txt": "a092b847b7ac6b17dadd167a9715fed5110ebc2fe866087a1c2e47f4cdbafc72",
+    "test_all_2.txt": "f495bc3f004a584fe6f23782fa69a092c50ab3713cb49854b869cdae7b48b344",
+    "test_all_3.txt": "b2b678b4f399bdbdb68ba2138ded419a45c1ba86826cd8073bddb3fa3d9d8d70",
+    "test_all_4.txt": "15c045662ad619525d204cbb9ac704616ae426a3f59b73069e8cde89d7af3032",
+    "test_all_5.txt": "9c540630865f9389e104363a5ead1c423e82e9585df5d0c1e7fc6cee8f26bb35",
+    "test_all_6.txt": "ee9441a99b895b3cd1fb23892a3497dbc41eda4e09aee00d7b0b8970f8b9e8da",
+    "test_all_7.txt": "fca510afb8cb7a6a9e94ddf99a624468bf19cc99da1e00175ad816515968f6f4",
+    "test_all_8.txt": "ef0ebc84f23231a78237fe3881d843b0f0c1f5013992f7a687e7aa2871031863",
+    "test_all_9.txt": "8def67bb2273aa74091e48db129b55f9f0b497a2ba78db3c1965e790ad61250f",
+}
+_ROOM_SHA256 = {
+    "location.min": "aaccf6fa512651e4b20998cee0eff876ae73aa1b32b4624d10442eb65917b3c2",
+    "location.names": "4a0cbc239c3312499ca65ec9dff558005104fd1e216456a957c530c768377f85",
+}
+
+
+def _real_sources() -> dict[str, Any]:
+    from psg_data._fetch import RemoteFile, RemoteSource
+
+    gh = "https://raw.githubusercontent.com"
+    door = RemoteSource(
+        "door-benchmark", f"{gh}/chronorobotics/framework2/{_FRAMEWORK2}/",
+        tuple(RemoteFile(f"greg_door_2016_min/{n}", f"greg_door_2016_min/{n}", h) for n, h in _DOOR_SHA256.items()),
+        f"GitHub chronorobotics/framework2 at commit {_FRAMEWORK2}, folder greg_door_2016_min/")
+    room = RemoteSource(
+        "room-presence-benchmark", f"{gh}/gestom/fremen_activity_benchmark/{_ACTIVITY}/",
+        tuple(RemoteFile(f"aruba_location/{n}", f"data/aruba/{n}", h) for n, h in _ROOM_SHA256.items()),
+        f"GitHub gestom/fremen_activity_benchmark at commit {_ACTIVITY}, folder data/aruba/ (saved as aruba_location/)")
+    return {"door-benchmark": door, "room-presence-benchmark": room}
+
+
+REAL_SOURCES = ("door-benchmark", "room-presence-benchmark")
+"""The built-in real benchmarks whose files are fetched (pins: ``_real_sources``)."""
+
+
+def real_benchmark_root(name: str, *, progress: Callable[[int], None] | None = None) -> Path:
+    """Folder holding the benchmark's files as published, checked against their pinned SHA-256.
+
+    ``$PSG_DATA_SOURCES`` (a folder laid out as ``greg_door_2016_min/`` and ``aruba_location/``) is
+    read in place; otherwise the files are fetched once into ``cache_dir()/sources/NAME``.
+
+    Raises:
+        PsgDataError: a file missing or not as pinned, or no network (one line saying where to get them).
+    """
+    from psg_data._fetch import ensure_source
+
+    return ensure_source(_real_sources()[name], cache_dir() / "sources", progress=progress)
+
+
+def door_benchmark(*, state_one: str = "open", stamps: str = "wall-clock", progress: Callable[[int], None] | None = None
+                   ) -> Any:
+    """The door benchmark (:func:`psg_data.loaders.raw.read_door_benchmark`) from its pinned files."""
+    from psg_data.loaders.raw import read_door_benchmark
+
+    return read_door_benchmark(real_benchmark_root("door-benchmark", progress=progress), state_one=state_one,
+                               stamps=stamps)
+
+
+def room_presence_benchmark(*, start: str = "2010-11-04", train_weeks: int = 8,
+                            progress: Callable[[int], None] | None = None) -> Any:
+    """The room-presence benchmark (:func:`psg_data.loaders.raw.read_room_presence_benchmark`) from its pinned files."""
+    from psg_data.loaders.raw import read_room_presence_benchmark
+
+    return read_room_presence_benchmark(real_benchmark_root("room-presence-benchmark", progress=progress),
+                                        start=start, train_weeks=train_weeks)
+
+
+STATE_BENCHMARKS: dict[str, Callable[..., Any]] = {"door-benchmark": door_benchmark,
+                                                   "room-presence-benchmark": room_presence_benchmark}
+"""Real benchmark name -> its reader (settings as keyword arguments, e.g. ``door-benchmark:stamps=utc``)."""
 
 
 def _directory_names() -> str:

@@ -50,8 +50,19 @@ def _out_dir(out: Path | None, overwrite: bool, inputs: list[Path | None]) -> Pa
 def _eval_inputs(dataset: str | None, labels: str) -> list[Path | None]:
     """Paths psg-eval reads (``--out`` may not be, contain or lie inside one)."""
     paths: list[Path | None] = []
-    if dataset not in (None, "demo", "persistence-benchmark", "navigation-benchmark", "door-loop", "door-loop-lab"):
+    from psg_data.cli._eval_state import is_state_benchmark
+
+    if dataset not in (None, "demo", "persistence-benchmark", "navigation-benchmark", "door-loop", "door-loop-lab") \
+            and not is_state_benchmark(dataset):
         paths.append(Path(dataset))  # type: ignore[arg-type]
+    if is_state_benchmark(dataset):
+        import os
+
+        from psg_data.datasets import cache_dir
+
+        paths.append(cache_dir())
+        if os.environ.get("PSG_DATA_SOURCES"):
+            paths.append(Path(os.environ["PSG_DATA_SOURCES"]))
     if labels.startswith("detections:"):
         paths.append(Path(labels.split(":", 1)[1]))
     if dataset in (None, "demo", "navigation-benchmark"):
@@ -76,9 +87,12 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 
 
 @click.group(cls=ContractGroup, invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
-@click.option("--dataset", "dataset", default=None, metavar="PATH|demo|persistence-benchmark|navigation-benchmark",
+@click.option("--dataset", "dataset", default=None,
+              metavar="PATH|demo|persistence-benchmark|navigation-benchmark|door-benchmark|room-presence-benchmark",
               help="Dataset to evaluate on (default: demo, the built-in synthetic lab; navigation-benchmark: 15 "
-                   "procedural houses, hourly steps, a shifted test week, each scene a draw).")
+                   "procedural houses, hourly steps, a shifted test week, each scene a draw; door-benchmark, "
+                   "room-presence-benchmark: the public real benchmarks, read from $PSG_DATA_SOURCES or fetched by "
+                   "pinned checksum, settings after ':' e.g. door-benchmark:stamps=utc,patrol=8-18/1h).")
 @click.option("--estimator", "-e", "estimators", multiple=True, metavar="NAME[:key=value,...]",
               help=f"Estimator to score (repeatable; default {DEFAULT_ESTIMATOR}). Settings after ':'.")
 @click.option("--references/--no-references", default=True, show_default=True,
@@ -105,9 +119,14 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
                    "observation flipped (seeded; the paper's noised ground truth, the same in every task); "
                    "privileged, detections:FILE, observed (door states read from the depth; doors only) from the "
                    "dataset's labels table (psg-data label). Scoring always uses the schedule.")
-@click.option("--protocol", type=click.Choice(["sim", "paper-real", "paper-sim-predictive", "paper-sim-adaptive"]),
-              default="sim", show_default=True,
-              help="Navigation queries: sim (--queries per seed, random starts, natural mix) or paper-real (25: 10 "
+@click.option("--protocol", type=click.Choice(["sim", "paper-real", "paper-sim-predictive", "paper-sim-adaptive",
+                                              "patrol", "published"]),
+              default=None,
+              help="The real benchmarks (door-benchmark, room-presence-benchmark): patrol (default: observations only "
+                   "at a robot's patrol times, 09:00-17:00 every 2 h, scored in those hours) or published (the "
+                   "authors' protocol: fit on the dense training weeks, forecast each test week, mean squared error). "
+                   "Navigation queries (default sim): sim (--queries per seed, random starts, natural mix) or "
+                   "paper-real (25: 10 "
                    "static, 10 dynamic, 5 absent, one fixed start, adaptive, predicted doors; the paper's real-world "
                    "table); with --dataset navigation-benchmark: paper-sim-predictive (250 queries over 10 unshifted "
                    "houses) or paper-sim-adaptive (125 queries over 5 houses with the shifted test week, filters fed "
@@ -156,7 +175,7 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 @click.pass_context
 @handle_errors
 def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], references: bool, task: str,
-         setting: str, horizon: str, windows: str, weighting: str, labels: str, protocol: str,
+         setting: str, horizon: str, windows: str, weighting: str, labels: str, protocol: str | None,
          door_belief: str | None, seeds: tuple[int, ...] | None, lab_seeds: tuple[int, ...] | None,
          label_seed: int, queries: int | None, delta: str, reachable_only: bool, out: Path | None, overwrite: bool,
          quick: bool,
@@ -181,6 +200,9 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
       psg-eval --task navigation --dataset /data/lab --labels noisy:0.1 --protocol paper-real -e perpetua_star
       psg-eval --task navigation --dataset navigation-benchmark --protocol paper-sim-adaptive -e perpetua_star -e fremen
       psg-eval --task doors --dataset /data/lab -e perpetua_star   # blocked first plans, extra metres
+      psg-eval --dataset door-benchmark -e perpetua_star -e fremen   # a real door, patrol protocol
+      psg-eval --dataset door-benchmark --protocol published -e fremen:max_order=5   # the authors' protocol
+      psg-eval --dataset room-presence-benchmark -e perpetua_star  # a real home: which room, top-1 / top-3
       psg-eval compare res/a res/b                             # tabulate earlier runs
     """
     if ctx.invoked_subcommand is not None:
@@ -205,6 +227,23 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     check_estimators(specs)
     check_task_estimators(specs, task)
     check_scheduler(scheduler)
+    from psg_data.cli._eval_state import check_state_options, is_state_benchmark
+
+    if is_state_benchmark(dataset):
+        assert dataset is not None
+        state_protocol = check_state_options(dataset, task=task, protocol=protocol, lab_seeds=lab_seeds,
+                                             rerun=rerun_file, weighting=weighting)
+        _run_state(ctx, specs, dataset, state_protocol, setting=setting, horizon=horizon, windows=windows,
+                   labels=labels, label_seed=label_seed, seeds=seeds, jobs=jobs, scheduler=scheduler, out=out,
+                   overwrite=overwrite, no_plots=no_plots, quiet=quiet, references=references,
+                   table_format=table_format)
+        return
+    if protocol in ("patrol", "published"):
+        from psg_data.errors import EvaluationError
+
+        raise EvaluationError(f"--protocol {protocol}: a protocol of the real benchmarks (--dataset door-benchmark or "
+                              "room-presence-benchmark)")
+    protocol = protocol or "sim"
     _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
     deltas = parse_deltas(delta, task)
     p_opts = persistence_options(setting=setting, horizon=horizon, weighting=weighting, windows=windows, seeds=seeds)
@@ -259,6 +298,28 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
         raise
     commit_tree(tmp, out_dir, kind="results")
     click.echo(f"results written to {out_dir}/", err=table_format != "text")  # stdout: only the table
+    if not ok:
+        sys.exit(EXIT_PROBLEMS)
+
+
+def _run_state(ctx: click.Context, specs: list, dataset: str, protocol: str, *, out: Path | None, overwrite: bool,
+               **kw: object) -> None:
+    """A real-benchmark run into a staged results folder (committed only when it completes)."""
+    from psg_data.cli._eval_state import run_state_task
+    from psg_data.writers._safe_output import commit_tree, make_staging
+
+    out_dir = _out_dir(out, overwrite, _eval_inputs(dataset, "gt"))
+    new_parent = not out_dir.parent.exists()
+    tmp = make_staging(out_dir.with_name(out_dir.name + ".partial"))
+    try:
+        ok = run_state_task(specs, dataset, protocol, out=tmp, **kw)  # type: ignore[arg-type]
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if new_parent and out_dir.parent.exists() and not any(out_dir.parent.iterdir()):
+            out_dir.parent.rmdir()
+        raise
+    commit_tree(tmp, out_dir, kind="results")
+    click.echo(f"results written to {out_dir}/", err=kw.get("table_format") != "text")
     if not ok:
         sys.exit(EXIT_PROBLEMS)
 

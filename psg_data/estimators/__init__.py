@@ -4,7 +4,8 @@ Built-ins (``list_estimators()``): ``perpetua_star`` (FreMEn switching prior; ``
 "fremen", "profile", "oracle", "schedule" or "none"), ``perpetua_star_schedule``, ``perpetua_star_oracle``,
 ``perpetua_star_annealed`` (a variant whose prediction anneals to the prior, not the paper's),
 ``perpetua``, ``persistence_filter``, ``fremen``, ``last_seen``, ``always_present``, ``always_absent``,
-``time_of_week_frequency``. Plugins register in the entry-point group ``psg_data.estimators``
+``time_of_week_frequency``, ``training_mean``, ``time_of_day_histogram``. Plugins register in the
+entry-point group ``psg_data.estimators``
 and may declare their settings (``_parameters = {"alpha": Real(0, 1)}``, see :class:`Param`) so
 that ``set_params`` and ``psg-eval -e NAME:alpha=...`` check them before any work.
 
@@ -64,6 +65,7 @@ from psg_data.estimators._simple import (
     PersistenceFilterEstimator,
     TimeOfWeekFrequencyEstimator,
 )
+from psg_data.estimators._state_baselines import TimeOfDayHistogramEstimator, TrainingMeanEstimator
 from psg_data.estimators._survival import SURVIVAL_FAMILIES, SurvivalMixture
 from psg_data.estimators._training import fit_lognormal_mixture, segment_stream
 
@@ -98,6 +100,8 @@ __all__ = [
     "AlwaysPresentEstimator",
     "AlwaysAbsentEstimator",
     "TimeOfWeekFrequencyEstimator",
+    "TrainingMeanEstimator",
+    "TimeOfDayHistogramEstimator",
     "MixtureFilter",
     "SurvivalMixture",
     "SURVIVAL_FAMILIES",

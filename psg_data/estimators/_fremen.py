@@ -20,7 +20,10 @@ The two rules of the public FreMEn code (strands-project/fremen, ``CFrelement``)
   by the error rate of the *unclipped* estimate thresholded at 0.5 and moves to a higher order
   only when it beats the best so far by more than a tolerance (the public ``evaluate()``, 0.001);
   ``"mae"`` scores the mean |clipped prediction - y| and takes the smallest order within the
-  tolerance of the best (this library's rule before the reference one became the default).
+  tolerance of the best (this library's rule before the reference one became the default);
+  ``"train_mse"`` is the rule of the authors' benchmark framework (``chronorobotics/framework2``,
+  ``bruteForceTrain`` with ``meanError squareError`` in ``DoorState.hs``): orders 1..M, each scored
+  by the mean squared error of its clipped prediction on the training data itself, the lowest wins.
 
 Unlike the public code, periods are exact (one week / k in float64: the public code's integer
 periods ``floor(604800 / k)`` s are a defect, wrong for every k that does not divide 604800), angles
@@ -50,7 +53,9 @@ __all__ = ["WEEK_S", "ORDER_RULES", "FremenModel", "FremenComponents", "fourier_
 WEEK_S = 7 * 86400.0
 ORDER_RULES = {"reference": "error rate of (unclipped estimate > 0.5); a higher order only if better than the best "
                             "so far by more than the tolerance (public FreMEn evaluate())",
-               "mae": "mean |clipped prediction - y|; the smallest order within the tolerance of the best"}
+               "mae": "mean |clipped prediction - y|; the smallest order within the tolerance of the best",
+               "train_mse": "mean squared error of the clipped prediction on the training data itself; the lowest "
+                            "of orders 1..max_order (the authors' benchmark framework, framework2 bruteForceTrain)"}
 """Order rules by name, with what each scores and how it chooses (:func:`choose_order`)."""
 DURATION_FACTOR = 1.5
 """Duration rule: a period T is kept only if DURATION_FACTOR * T <= the span of the fitted data."""
@@ -315,7 +320,8 @@ class FremenModel:
         """(M+1,) held-out score of orders 0..M (M = ``max_order``, at most K; None: K), lower is better.
 
         ``rule`` (:data:`ORDER_RULES`): "reference" gives the error rate of (unclipped estimate > 0.5)
-        against y, "mae" the mean |clipped prediction - y|.
+        against y, "mae" the mean |clipped prediction - y|, "train_mse" the mean squared error of the
+        clipped prediction.
         """
         if rule not in ORDER_RULES:
             raise EstimatorError(f"FreMEn: order rule must be one of {', '.join(ORDER_RULES)}, got {rule!r}")
@@ -339,7 +345,8 @@ class FremenModel:
             np.cumsum(contrib, axis=1, out=pred[:, 1:])
             pred[:, 1:] += self.mean
             est = (pred > 0.5).astype(np.float64) if rule == "reference" else np.clip(pred, 0.0, 1.0)
-            err += np.abs(est - y[s:s + step, None]).sum(axis=0)
+            diff = np.abs(est - y[s:s + step, None])
+            err += (diff * diff if rule == "train_mse" else diff).sum(axis=0)
         return err / tau.size
 
     def to_dict(self) -> dict[str, Any]:
@@ -355,9 +362,12 @@ def choose_order(scores: ArrayLike, tol: float, rule: str = "reference") -> int:
 
     "reference": start at order 0 and move to order j only if ``scores[j] < best - tol``, best being
     the score of the order chosen so far (the public ``evaluate()``); "mae": the smallest order
-    whose score is within ``tol`` of the minimum.
+    whose score is within ``tol`` of the minimum; "train_mse": the lowest score among orders 1..M
+    (the first on a tie; order 0 only when M is 0), ``tol`` unused.
     """
     s = np.asarray(scores, dtype=np.float64).reshape(-1)
+    if rule == "train_mse":
+        return 1 + int(np.argmin(s[1:])) if s.size > 1 else 0
     if rule == "mae":
         return int(np.flatnonzero(s <= float(np.min(s)) + tol)[0])
     if rule != "reference":

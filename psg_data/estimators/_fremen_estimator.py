@@ -50,7 +50,9 @@ def fit_fremen_edge(train: Sequence[EdgeStream], val: Sequence[EdgeStream] | Non
     tau = clock(t)
     model = FremenModel(n_periods, duration_rule=duration_rule).add(tau, y)
     vt, vy = _cat(val or [])
-    if vt.size:
+    if order_rule == "train_mse":
+        scores, source, n_val = model.order_scores(tau, y, max_order, order_rule), "training data", int(t.size)
+    elif vt.size:
         scores = model.order_scores(clock(vt), vy, max_order, order_rule)
         source, n_val = "val_streams", int(vt.size)
     elif t.size and (t.max() - t.min()) > 1.5 * WEEK_S:
@@ -105,7 +107,9 @@ def fremen_order_parameters(prefix: str = "") -> dict[str, Param]:
                           "(error rate for reference, MAE for mae)"),
         "order_rule": Options(*ORDER_RULES, help=prefix + "order choice on validation data: reference (public "
                               "FreMEn: error rate of estimate > 0.5, a higher order only if better by more than "
-                              "order_tol) or mae (smallest order within order_tol of the best mean |p - y|)"),
+                              "order_tol), mae (smallest order within order_tol of the best mean |p - y|) or "
+                              "train_mse (the authors' benchmark framework: the lowest training MSE of orders "
+                              "1..max_order)"),
         "duration_rule": Boolean(help=prefix + "zero every period whose 1.5 x length exceeds the span of the "
                                  "data a model is fitted on (public FreMEn)"),
     }
@@ -137,7 +141,9 @@ class FremenEstimator(BaseEstimator):
         max_order: largest order tried on the validation data (None: K; the public ROS front end
             asks for at most 5).
         order_tol: tolerance of the order rule (error rate for "reference", MAE for "mae").
-        order_rule: "reference" (default) or "mae", see above.
+        order_rule: "reference" (default), "mae", or "train_mse" (the rule of the FreMEn authors'
+            benchmark framework: orders 1..max_order scored by their mean squared error on the
+            training data itself; what the door benchmark's published numbers use).
         duration_rule: True (default) drops periods longer than 2/3 of the fitted data's span.
     """
 

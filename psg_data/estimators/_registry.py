@@ -40,6 +40,8 @@ _BUILTINS: dict[str, str] = {
     "always_present": "psg_data.estimators._simple:AlwaysPresentEstimator",
     "always_absent": "psg_data.estimators._simple:AlwaysAbsentEstimator",
     "time_of_week_frequency": "psg_data.estimators._simple:TimeOfWeekFrequencyEstimator",
+    "training_mean": "psg_data.estimators._state_baselines:TrainingMeanEstimator",
+    "time_of_day_histogram": "psg_data.estimators._state_baselines:TimeOfDayHistogramEstimator",
     "process_oracle": "psg_data.estimators._process_oracle:ProcessOracleEstimator",
 }
 

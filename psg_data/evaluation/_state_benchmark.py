@@ -1,0 +1,331 @@
+"""Scoring estimators on a real long-term benchmark (door, room presence) under one of its protocols.
+
+:func:`state_rows` lists the rows of a run (the user's estimators, the paper's comparison methods
+and the reference rows that bound a real-data table: the hindsight upper reference, the baselines,
+the authors' simple methods, chance); :func:`run_state_benchmark` fits each row once per seed and
+scores every test period (:mod:`psg_data.evaluation._state_protocols`); :func:`summarize` turns the
+per-period values into the mean over periods with a 95 % t-interval, the headroom and the paired
+comparisons over periods. Every per-edge step is psg-eval's own (:func:`run_edge`: the same filter
+loop, horizon rule, checks of plugin predictions and metric conventions).
+
+Reference rows on real data (there is no generator model, so no exact ceiling):
+
+- ``hindsight``: ``time_of_week_frequency`` fitted on the scored test period itself (it sees the
+  answers: an upper reference, not a method);
+- baselines ``last_seen``, ``time_of_week_frequency``, and the authors' ``mean`` (the training base
+  rate, ``training_mean``) and ``hist`` (time-of-day bins, ``time_of_day_histogram``);
+- ``fremen:n_periods=84,max_order=5,order_rule=train_mse``: FreMEn as the authors run it
+  (84 periods of one week / k, orders 1-5 chosen on the training error), beside our default;
+- chance ``always_absent`` (B-Acc 0.5 as any constant; its MSE is the share of present time).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from psg_data.errors import EvaluationError
+from psg_data.estimators._base import EdgeKey, EdgeStream
+from psg_data.evaluation._edge_run import fit_estimator, run_edge
+from psg_data.evaluation._hints import EstimatorSpec
+from psg_data.evaluation._persistence_task import RegistryFactory, seeds_for
+from psg_data.evaluation._state_protocols import PatrolPlan, edge_jobs, patrol_streams, score_config
+
+__all__ = ["StateRow", "StateRunOptions", "StateRun", "state_rows", "run_state_benchmark", "summarize",
+           "METRICS", "LOWER_IS_BETTER", "AUTHORS_FREMEN", "HINDSIGHT"]
+
+METRICS = ("mse", "mae", "balanced_accuracy", "f1", "top1", "top3")
+"""Per-period metrics: mse (the authors'), psg-eval's time-integrated MAE / B-Acc / F1, and for a
+one-hot benchmark the share of rows whose true room is ranked first (top1) or in the first three (top3)."""
+LOWER_IS_BETTER = {"mse": True, "mae": True, "balanced_accuracy": False, "f1": False, "top1": False, "top3": False}
+AUTHORS_FREMEN = "fremen:n_periods=84,max_order=5,order_rule=train_mse"
+HINDSIGHT = "hindsight"
+
+
+@dataclass(frozen=True)
+class StateRow:
+    """One row of a real-benchmark table: its label, the registry spec and its role."""
+
+    label: str
+    spec: EstimatorSpec
+    role: str
+    description: str
+
+
+def _spec(label: str, name: str, **settings: Any) -> EstimatorSpec:
+    return EstimatorSpec(label, name, tuple(settings.items()))
+
+
+def state_rows(specs: Sequence[EstimatorSpec], *, references: bool = True) -> list[StateRow]:
+    """The rows of a run: the user's specs, then (``references``) perpetua / fremen and the reference rows."""
+    from psg_data.evaluation._references import PAPER_METHODS, describe_method
+
+    rows = [StateRow(s.label, s, "method", describe_method(s.label)) for s in specs]
+    if not references:
+        return rows
+    have = {r.label for r in rows}
+    extra = [StateRow(m, EstimatorSpec.of(m), "method", describe_method(m)) for m in PAPER_METHODS]
+    extra += [
+        StateRow(AUTHORS_FREMEN, _spec(AUTHORS_FREMEN, "fremen", n_periods=84, max_order=5, order_rule="train_mse"),
+                 "authors", "FreMEn as the authors run it: 84 periods (one week / k), orders 1-5 by training MSE"),
+        StateRow(HINDSIGHT, EstimatorSpec.of("time_of_week_frequency"), "hindsight",
+                 "time-of-week frequency fitted on the scored test week itself (sees the answers): upper reference"),
+        StateRow("last_seen", EstimatorSpec.of("last_seen"), "baseline", describe_method("last_seen")),
+        StateRow("time_of_week_frequency", EstimatorSpec.of("time_of_week_frequency"), "baseline",
+                 describe_method("time_of_week_frequency")),
+        StateRow("mean", EstimatorSpec.of("training_mean"), "baseline", "the training base rate (the authors' Mean)"),
+        StateRow("hist", EstimatorSpec.of("time_of_day_histogram"), "baseline",
+                 "training mean of the time-of-day bin, 3/4/6/12/24 bins a day by training MSE (the authors' Hist)"),
+        StateRow("always_absent", EstimatorSpec.of("always_absent"), "chance", describe_method("always_absent")),
+    ]
+    return rows + [r for r in extra if r.label not in have]
+
+
+@dataclass(frozen=True)
+class StateRunOptions:
+    """Settings of a run.
+
+    Attributes:
+        protocol: ``published`` or ``patrol``.
+        setting: ``adaptive`` or ``predictive`` (``published`` is predictive).
+        horizon_s: forecast horizon of the adaptive setting, seconds.
+        patrol: the patrol (``patrol`` protocol).
+        seeds: estimator seeds (``auto``: 0, 1, 2 for seed-dependent estimators, else 0).
+        windows: the scored hours of each day (a :class:`~psg_data.evaluation.DailyWindows` on the
+            benchmark's clock); None: every row (rows outside get code -1, excluded from every metric).
+    """
+
+    protocol: str = "patrol"
+    setting: str = "adaptive"
+    horizon_s: float = 7200.0
+    patrol: PatrolPlan = field(default_factory=PatrolPlan)
+    seeds: tuple[int, ...] | str = "auto"
+    windows: Any = None
+
+    def __post_init__(self) -> None:
+        if self.protocol not in ("published", "patrol"):
+            raise EvaluationError(f"protocol {self.protocol!r}; expected published or patrol")
+        if self.protocol == "published" and self.setting != "predictive":
+            object.__setattr__(self, "setting", "predictive")
+        if not (math.isfinite(self.horizon_s) and self.horizon_s >= 0):
+            raise EvaluationError(f"horizon {self.horizon_s!r} s; expected a finite duration >= 0")
+
+
+@dataclass
+class StateRun:
+    """Per-period values of every row, and the problems met.
+
+    Attributes:
+        values: row label -> period index -> metric -> value (mean over seeds).
+        periods: period labels, in order.
+        errors: one line per problem (a fit or an edge that failed; the row's values are then NaN).
+        fits: row label -> fit summaries (FreMEn orders, chosen bins), first seed.
+        options: the run's options; info: the benchmark's provenance.
+    """
+
+    values: dict[str, list[dict[str, float]]]
+    periods: list[str]
+    errors: list[str]
+    fits: dict[str, Any]
+    options: StateRunOptions
+    info: dict[str, Any]
+
+
+def _streams(bench: Any, opts: StateRunOptions) -> tuple[list[EdgeStream], list[dict[EdgeKey, EdgeStream]]]:
+    """Training streams and each period's test streams under the protocol."""
+    if opts.protocol == "published":
+        return bench.train_streams(), [{} for _ in bench.periods]
+    comp = not bench.one_hot
+    train = patrol_streams(bench.train, opts.patrol, bench.timezone, complement=comp, salt=0)
+    tests = [{s.edge: s for s in patrol_streams(p.truth, opts.patrol, bench.timezone, complement=comp, salt=k + 1)}
+             for k, p in enumerate(bench.periods)]
+    return train, tests
+
+
+def _scored(truth: dict[EdgeKey, Any], windows: Any) -> dict[EdgeKey, Any]:
+    """The truth with rows outside the scored windows set to -1 (excluded); as is without windows."""
+    if windows is None:
+        return truth
+    out = {}
+    for e, (t, y) in truth.items():
+        y2 = np.array(y, dtype=np.int64, copy=True)
+        y2[~windows.contains(t) & (y2 >= 0)] = -1
+        out[e] = (t, y2)
+    return out
+
+
+def _period_values(outcomes: list[Any], one_hot: bool) -> dict[str, float]:
+    """The period's metrics from its edges' outcomes (time metrics weighted by scored time, as psg-eval)."""
+    res = [o[0] for o in outcomes]
+    if any(r.status == "error" for r in res):
+        return {m: math.nan for m in METRICS}
+    span = np.array([r.span_s for r in res])
+    out = {m: float(np.sum(span * [r.metrics[m] for r in res]) / span.sum()) if span.sum() > 0 else math.nan
+           for m in ("mae", "balanced_accuracy", "f1")}
+    sq = [((tr.belief - tr.truth) ** 2)[tr.truth >= 0] for tr in (o[3] for o in outcomes)]
+    out["mse"] = float(np.mean(np.concatenate(sq)))
+    out["top1"] = out["top3"] = math.nan
+    if one_hot:
+        out["top1"], out["top3"] = _locate([o[3] for o in outcomes])
+    return out
+
+
+def _locate(traces: list[Any]) -> tuple[float, float]:
+    """Share of rows whose true receptacle is ranked first / in the first three by belief (ties: listed order)."""
+    b = np.stack([tr.belief for tr in traces], axis=1)
+    y = np.stack([tr.truth for tr in traces], axis=1)
+    ok = (y >= 0).all(axis=1) & (y == 1).any(axis=1)
+    rank = np.argsort(-b[ok], axis=1, kind="stable")
+    true = np.argmax(y[ok] == 1, axis=1)
+    pos = np.argmax(rank == true[:, None], axis=1)
+    return float(np.mean(pos < 1)), float(np.mean(pos < 3))
+
+
+def _row_job(bench: Any, row: StateRow, opts: StateRunOptions) -> tuple[list[dict[str, float]], list[str], Any]:
+    """Fit ``row`` (each seed) and score every period: per-period values (mean over seeds), problems, fit summary."""
+    factory = RegistryFactory(row.spec.name, row.spec.settings)
+    seeds = seeds_for(factory, opts.seeds)
+    train, tests = _streams(bench, opts)
+    hist = {s.edge: s for s in train}
+    cfg = score_config(opts.setting, opts.horizon_s)
+    per_seed, errors, summary = [], [], None
+    for seed in seeds:
+        vals, est = [], None
+        if row.role != "hindsight":
+            est, err = fit_estimator(row.label, factory, seed, train, None, bench.timezone)
+            if est is None:
+                errors.append(f"estimator {row.label!r} seed {seed}: fit raised {err}")
+                per_seed.append([{m: math.nan for m in METRICS} for _ in bench.periods])
+                continue
+            summary = summary or getattr(est, "fit_summary_", None)
+        for k, p in enumerate(bench.periods):
+            e, h, te, truth = est, hist, tests[k], _scored(p.truth, opts.windows)
+            if row.role == "hindsight":  # fitted on the period's own scored rows, then asked with nothing else
+                own = [EdgeStream(x, t[y >= 0], y[y >= 0]) for x, (t, y) in truth.items()]
+                e, msg = fit_estimator(row.label, factory, seed, own, None, bench.timezone)
+                h, te = {}, {}
+                if e is None:
+                    errors.append(f"{row.label} {p.label}: fit raised {msg}")
+                    vals.append({m: math.nan for m in METRICS})
+                    continue
+            jobs = edge_jobs(truth, bench.scored, h, te, k, bench.timezone)
+            outs = [run_edge(row.label, seed, e, j, cfg) for j in jobs]
+            errors += [i.message for o in outs for i in o[2]]
+            vals.append(_period_values(outs, bench.one_hot))
+        per_seed.append(vals)
+    mean = [{m: float(np.mean([s[k][m] for s in per_seed])) for m in METRICS} for k in range(len(bench.periods))]
+    return mean, errors, _fit_digest(summary)
+
+
+def _fit_digest(summary: Any) -> Any:
+    """The part of a fit summary worth keeping: FreMEn's chosen orders (else nothing)."""
+    if not isinstance(summary, dict):
+        return None
+    osel = summary.get("order_selection")
+    if isinstance(osel, dict):
+        return {"order_rule": osel.get("order_rule"),
+                "orders": {k: v.get("order") for k, v in (osel.get("edges") or {}).items()}}
+    return None
+
+
+def run_state_benchmark(bench: Any, rows: Sequence[StateRow], opts: StateRunOptions, *,
+                        executor: Any = None, progress: Callable[[int, int], None] | None = None) -> StateRun:
+    """Score every row on every period of ``bench`` (a :class:`~psg_data.loaders.raw.StateBenchmark`).
+
+    Args:
+        bench: the benchmark.
+        rows: from :func:`state_rows`.
+        opts: protocol, setting, horizon, patrol and seeds.
+        executor: a ``concurrent.futures.Executor`` (one job per row), or None (inline).
+        progress: called as ``progress(done_rows, total_rows)``.
+    """
+    values: dict[str, list[dict[str, float]]] = {}
+    errors: list[str] = []
+    fits: dict[str, Any] = {}
+    if executor is None:
+        results = {}
+        for k, r in enumerate(rows, 1):
+            results[r.label] = _row_job(bench, r, opts)
+            if progress is not None:
+                progress(k, len(rows))
+    else:
+        from concurrent.futures import as_completed
+
+        futs = {executor.submit(_row_job, bench, r, opts): r.label for r in rows}
+        results = {}
+        for k, fut in enumerate(as_completed(futs), 1):
+            results[futs[fut]] = fut.result()
+            if progress is not None:
+                progress(k, len(rows))
+    for r in rows:
+        values[r.label], errs, fits[r.label] = results[r.label]
+        errors += errs
+    return StateRun(values, [p.label for p in bench.periods], errors, fits, opts, dict(bench.info))
+
+
+def _interval(x: NDArray[np.float64]) -> tuple[float, float, float]:
+    """Mean, 95 % t half-width and standard deviation over periods (NaN half-width for one period)."""
+    from scipy import stats
+
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return math.nan, math.nan, math.nan
+    sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
+    hw = float(stats.t.ppf(0.975, x.size - 1) * sd / math.sqrt(x.size)) if x.size > 1 else math.nan
+    return float(np.mean(x)), hw, sd
+
+
+def summarize(run: StateRun, rows: Sequence[StateRow], *, one_hot: bool) -> dict[str, Any]:
+    """Mean over periods with a 95 % t-interval per row and metric, the headroom, and paired comparisons on MSE."""
+    metrics = [m for m in METRICS if one_hot or m not in ("top1", "top3")]
+    summary: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        per = run.values[r.label]
+        summary[r.label] = {m: dict(zip(("mean", "half_width", "std"),
+                                        _interval(np.array([p[m] for p in per], dtype=np.float64))))
+                            for m in metrics}
+    return {"metrics": metrics, "summary": summary, "headroom": _headroom(summary, rows, metrics),
+            "comparisons": _comparisons(run, rows)}
+
+
+def _headroom(summary: dict[str, Any], rows: Sequence[StateRow], metrics: Sequence[str]) -> dict[str, Any]:
+    """Per metric: the hindsight value, the best baseline (and which), and hindsight minus it (signed: > 0 = room)."""
+    base = [r.label for r in rows if r.role == "baseline"]
+    if HINDSIGHT not in summary or not base:
+        return {}
+    out = {}
+    for m in metrics:
+        vals = {b: summary[b][m]["mean"] for b in base if math.isfinite(summary[b][m]["mean"])}
+        if not vals:
+            continue
+        low = LOWER_IS_BETTER[m]
+        best = min(vals, key=lambda b: vals[b]) if low else max(vals, key=lambda b: vals[b])
+        hind = summary[HINDSIGHT][m]["mean"]
+        room = (vals[best] - hind) if low else (hind - vals[best])
+        out[m] = {"hindsight": hind, "best_baseline": best, "best_baseline_value": vals[best], "headroom": room}
+    return out
+
+
+def _comparisons(run: StateRun, rows: Sequence[StateRow]) -> list[dict[str, Any]]:
+    """Paired two-sided t-tests over periods on MSE for every pair of methods and baselines (the authors' test)."""
+    from scipy import stats
+
+    labels = [r.label for r in rows if r.role in ("method", "authors", "baseline")]
+    out = []
+    for i, a in enumerate(labels):
+        for b in labels[i + 1:]:
+            xa = np.array([p["mse"] for p in run.values[a]])
+            xb = np.array([p["mse"] for p in run.values[b]])
+            ok = np.isfinite(xa) & np.isfinite(xb)
+            d = xa[ok] - xb[ok]
+            if d.size < 2 or np.all(d == d[0]):
+                continue
+            t, p = stats.ttest_rel(xa[ok], xb[ok])
+            out.append({"a": a, "b": b, "mean_difference": float(d.mean()), "t": float(t), "p": float(p),
+                        "periods": int(d.size), "lower_mse": a if d.mean() < 0 else b, "significant": bool(p < 0.05)})
+    return out
