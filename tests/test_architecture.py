@@ -14,7 +14,8 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "psg_data"
 
 LAYERS = [
-    {"errors", "_cpus", "_pool", "_executors", "_geometry", "_settings", "open3d_import", "__version__"},  # foundations
+    {"errors", "_cpus", "_pool", "_executors", "_geometry", "_settings", "_fetch", "open3d_import",
+     "__version__"},  # foundations
     {"schemas"},  # the format: records, table schemas, manifest, validation
     {"loaders", "writers"},  # reading and writing the format (and raw recordings)
     {"convert", "synth"},  # producers of canonical datasets
