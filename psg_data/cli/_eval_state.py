@@ -112,7 +112,7 @@ def run_state_task(specs: list[Any], dataset: str, protocol: str, *, setting: st
     from psg_data.cli._eval_persistence import _executor
     from psg_data.cli._eval_provenance import provenance
     from psg_data.cli._progress import Progress
-    from psg_data.evaluation._state_benchmark import run_state_benchmark, state_rows, summarize
+    from psg_data.evaluation._state_benchmark import run_state_benchmark, state_rows, summarize_state_run
     from psg_data.evaluation._state_report import render, state_results, state_tables, write_state_outputs
 
     name, settings = parse_state_dataset(dataset)
@@ -127,7 +127,7 @@ def run_state_task(specs: list[Any], dataset: str, protocol: str, *, setting: st
             prog.update(0)
 
         run = run_state_benchmark(bench, rows, opts, executor=executor, progress=progress)
-    summary = summarize(run, rows, one_hot=bench.one_hot)
+    summary = summarize_state_run(run, rows, one_hot=bench.one_hot)
     info = provenance({"dataset": name, "dataset_spec": dataset, "labels": labels,
                        "windows": None if opts.windows is None else opts.windows.describe()})
     doc = state_results(run, rows, summary, info)

@@ -19,6 +19,11 @@
 - Persistence reports: :func:`persistence_results`, :func:`write_persistence_results`, the plots
   :func:`plot_beliefs`, :func:`plot_metric_bars`, :func:`plot_horizon`.
 
+- Real long-term benchmarks (dense state rows, test periods): :func:`evaluate_state_benchmark`
+  (any :class:`~psg_data.loaders.raw.StateBenchmark`, also one built from your own streams),
+  :func:`run_state_benchmark` / :func:`state_rows` / :func:`summarize_state_run`,
+  :class:`StateRunOptions`, :class:`PatrolPlan`, :data:`STATE_PROTOCOLS`.
+
 The metric functions themselves are in :mod:`psg_data.metrics`.
 """
 
@@ -93,6 +98,14 @@ from psg_data.evaluation._results import (
     results_frame,
     save_results,
 )
+from psg_data.evaluation._state_benchmark import (
+    StateRunOptions,
+    evaluate_state_benchmark,
+    run_state_benchmark,
+    state_rows,
+    summarize_state_run,
+)
+from psg_data.evaluation._state_protocols import STATE_PROTOCOLS, PatrolPlan
 from psg_data.evaluation._tables import format_compare, format_results, format_table, print_results, render_table
 from psg_data.evaluation._windows import (
     DailyWindows,
@@ -109,6 +122,8 @@ __all__ = [
     "TIME_METRICS", "SAMPLE_METRICS", "WEEKDAY_NAMES", "EvaluationIssue", "EdgeResult", "BreakdownRow",
     "WeekdayResult", "PersistenceResult", "PredictionTrace", "RegistryFactory", "resolve_estimators", "seeds_for",
     "merge_results", "evaluate_persistence", "run_persistence_task", "PersistenceOptions",
+    "StateRunOptions", "evaluate_state_benchmark", "run_state_benchmark", "state_rows", "summarize_state_run",
+    "STATE_PROTOCOLS", "PatrolPlan",
     "PersistenceTask", "persistence_task_from_dataset", "persistence_task_from_lab", "persistence_task_from_benchmark",
     "lab_ground_truth", "DenseGroundTruth",
     "EstimatorSpec", "dataset_hints", "with_hints", "require_hints",

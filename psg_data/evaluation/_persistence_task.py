@@ -192,12 +192,28 @@ def ground_truth_dict(ground_truth: Any) -> dict[EdgeKey, tuple[NDArray[np.float
             raise EvaluationError(f"ground_truth {key}: {e}") from None
         order = np.argsort(t, kind="stable")
         t, y = t[order], y[order].astype(np.int64)
-        if t.size > 1 and np.any(np.diff(t) == 0):
-            raise EvaluationError(f"ground_truth {key}: duplicate grid time t_s={t[int(np.argmax(np.diff(t) == 0))]!r}")
+        t, y = _merge_repeats(key, t, y)
         if key in out:
             raise EvaluationError(f"ground_truth: edge {key} appears twice")
         out[key] = (t, y)
     return out
+
+
+def _merge_repeats(key: EdgeKey, t: NDArray[np.float64], y: NDArray[np.int64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Sorted grid with each repeated time kept once when its states agree (test periods that overlap,
+    as a recording's weeks that repeat a day); refused when they do not.
+    """
+    same = np.diff(t) == 0 if t.size > 1 else np.zeros(0, bool)
+    if not same.any():
+        return t, y
+    clash = same & (y[1:] != y[:-1])
+    if clash.any():
+        i = int(np.argmax(clash))
+        raise EvaluationError(f"ground_truth {key}: time t_s={t[i]!r} appears twice with states {int(y[i])} and "
+                              f"{int(y[i + 1])}; expected one state per time")
+    keep = np.r_[True, ~same]
+    return t[keep], y[keep]
 
 
 def _weekdays(t_s: NDArray[np.float64], timezone: str) -> NDArray[np.int64]:
@@ -209,7 +225,7 @@ def _weekdays(t_s: NDArray[np.float64], timezone: str) -> NDArray[np.int64]:
     return np.asarray(idx.day_of_week, dtype=np.int64)
 
 
-def _check_task(task: PersistenceTask) -> None:
+def _check_task(task: PersistenceTask, setting: str = "adaptive") -> None:
     try:
         from zoneinfo import ZoneInfo
 
@@ -218,7 +234,7 @@ def _check_task(task: PersistenceTask) -> None:
         raise EvaluationError(f"unknown timezone {task.timezone!r}; expected an IANA name such as "
                               "'Europe/Zurich'") from None
     n_obs = sum(len(s) for s in task.test_streams)
-    if n_obs == 0:
+    if n_obs == 0 and setting != "predictive":  # the predictive setting applies none: a forecast needs no test data
         raise EvaluationError(f"test split is empty: {len(task.test_streams)} test streams with 0 observations; check "
                               "the split times (nothing to adapt to and no test window to score)")
     if not task.ground_truth or all(np.size(t) == 0 for t, _ in task.ground_truth.values()):
@@ -461,12 +477,12 @@ def run_persistence_task(estimators: Any, task: PersistenceTask, options: Persis
         A :class:`~psg_data.evaluation.PersistenceResult`; check ``result.ok`` / ``result.errors``.
 
     Raises:
-        EvaluationError: empty test split or ground truth, bad settings, unknown timezone, or an
-            estimator that cannot be sent to worker processes.
+        EvaluationError: empty test split (adaptive setting) or ground truth, bad settings, unknown
+            timezone, or an estimator that cannot be sent to worker processes.
     """
     given = options or PersistenceOptions()
     opts = given.resolve(task)
-    _check_task(task)
+    _check_task(task, str(opts.setting))
     jobs = _resolve_jobs(jobs)
     factories = resolve_estimators(estimators)
     cfg = ScoreConfig(opts.setting, float(opts.horizon), float(opts.threshold), opts.convention,  # type: ignore[arg-type]

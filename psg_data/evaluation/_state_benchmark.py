@@ -3,7 +3,7 @@
 :func:`state_rows` lists the rows of a run (the user's estimators, the paper's comparison methods
 and the reference rows that bound a real-data table: the hindsight upper reference, the baselines,
 the authors' simple methods, chance); :func:`run_state_benchmark` fits each row once per seed and
-scores every test period (:mod:`psg_data.evaluation._state_protocols`); :func:`summarize` turns the
+scores every test period (:mod:`psg_data.evaluation._state_protocols`); :func:`summarize_state_run` turns the
 per-period values into the mean over periods with a 95 % t-interval, the headroom and the paired
 comparisons over periods. Every per-edge step is psg-eval's own (:func:`run_edge`: the same filter
 loop, horizon rule, checks of plugin predictions and metric conventions).
@@ -36,7 +36,8 @@ from psg_data.evaluation._hints import EstimatorSpec
 from psg_data.evaluation._persistence_task import RegistryFactory, seeds_for
 from psg_data.evaluation._state_protocols import PatrolPlan, edge_jobs, patrol_streams, score_config
 
-__all__ = ["StateRow", "StateRunOptions", "StateRun", "state_rows", "run_state_benchmark", "summarize",
+__all__ = ["StateRow", "StateRunOptions", "StateRun", "state_rows", "run_state_benchmark", "summarize_state_run",
+           "evaluate_state_benchmark",
            "METRICS", "LOWER_IS_BETTER", "AUTHORS_FREMEN", "HINDSIGHT"]
 
 METRICS = ("mse", "mae", "balanced_accuracy", "f1", "top1", "top3")
@@ -280,7 +281,7 @@ def _interval(x: NDArray[np.float64]) -> tuple[float, float, float]:
     return float(np.mean(x)), hw, sd
 
 
-def summarize(run: StateRun, rows: Sequence[StateRow], *, one_hot: bool) -> dict[str, Any]:
+def summarize_state_run(run: StateRun, rows: Sequence[StateRow], *, one_hot: bool) -> dict[str, Any]:
     """Mean over periods with a 95 % t-interval per row and metric, the headroom, and paired comparisons on MSE."""
     metrics = [m for m in METRICS if one_hot or m not in ("top1", "top3")]
     summary: dict[str, dict[str, Any]] = {}
@@ -329,3 +330,35 @@ def _comparisons(run: StateRun, rows: Sequence[StateRow]) -> list[dict[str, Any]
             out.append({"a": a, "b": b, "mean_difference": float(d.mean()), "t": float(t), "p": float(p),
                         "periods": int(d.size), "lower_mse": a if d.mean() < 0 else b, "significant": bool(p < 0.05)})
     return out
+
+
+def evaluate_state_benchmark(bench: Any, estimators: Sequence[str | EstimatorSpec], *, protocol: str = "published",
+                             references: bool = True, jobs: int = 1, **options: Any) -> dict[str, Any]:
+    """Score estimators on a :class:`~psg_data.loaders.raw.StateBenchmark` (a real benchmark, or your own streams).
+
+    Args:
+        bench: the benchmark: training rows and test periods per edge.
+        estimators: registry names, or :class:`EstimatorSpec` with settings.
+        protocol: ``published`` (fit on the training rows, forecast each period) or ``patrol``.
+        references: also score the paper's methods and the reference rows (hindsight, baselines, chance).
+        jobs: worker processes (one row per job); 1 runs inline.
+        **options: fields of :class:`StateRunOptions` (``setting``, ``horizon_s``, ``patrol``, ``seeds``,
+            ``windows``).
+
+    Returns:
+        The results document (what ``results.json`` holds): per row its summary per metric (mean over
+        periods, 95 % t half-width, std) and its per-period values, the headroom and the paired comparisons.
+    """
+    from psg_data.evaluation._state_report import state_results
+
+    specs = [e if isinstance(e, EstimatorSpec) else EstimatorSpec.of(e) for e in estimators]
+    rows = state_rows(specs, references=references)
+    opts = StateRunOptions(protocol=protocol, **options)
+    if jobs == 1:
+        run = run_state_benchmark(bench, rows, opts)
+    else:
+        from psg_data._pool import process_pool
+
+        with process_pool(jobs) as pool:
+            run = run_state_benchmark(bench, rows, opts, executor=pool)
+    return state_results(run, rows, summarize_state_run(run, rows, one_hot=bench.one_hot), {})

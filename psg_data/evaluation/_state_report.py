@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from psg_data.evaluation._state_benchmark import HINDSIGHT, LOWER_IS_BETTER, StateRow, StateRun
+from psg_data.evaluation._state_benchmark import LOWER_IS_BETTER, StateRow, StateRun
 from psg_data.evaluation._table_formats import Grid, latex_table, markdown_table
 
 __all__ = ["SCHEMA", "state_results", "state_tables", "render", "write_state_outputs"]
@@ -102,8 +102,10 @@ def state_tables(doc: dict[str, Any], title: str) -> list[Grid]:
     setting = doc["setting"] + (f", horizon {doc['horizon_s'] / 3600:g} h" if doc.get("horizon_s") else "")
     notes = [f"± is the half-width of the 95 % t-interval over the {n} test weeks (paired per-week values in "
              "results.json); every estimator at its defaults, nothing tuned on the test weeks",
-             f"protocol {doc['protocol']} ({setting})" + (f"; patrol {doc['patrol']['label']}" if doc["patrol"] else ""),
-             "MSE: mean squared error of the predicted probability over the week's rows (the authors' metric); MAE, "
+             f"protocol {doc['protocol']} ({setting})"
+             + (f"; patrol {doc['patrol']['label']}" if doc["patrol"] else ""),
+             "MSE: mean squared error of the predicted probability over the week's rows and scored edges (the "
+             "authors' metric); MAE, "
              "B-Acc, F1: psg-eval's time-integrated metrics (threshold 0.5); a gap in the rows gets no weight"]
     if "top1" in metrics:
         notes.append("top-1 / top-3: share of minutes whose true room is ranked first / in the first three by "

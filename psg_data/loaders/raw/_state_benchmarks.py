@@ -168,7 +168,8 @@ def read_door_benchmark(root: str | Path, *, state_one: str = "open", stamps: st
     tz = "UTC" if stamps == "wall-clock" else site_timezone
     info = {"dataset": "door-benchmark", "source": "chronorobotics/framework2 greg_door_2016_min",
             "folder": str(folder), "state_one": state_one, "stamps": stamps, "clock": STAMP_CLOCKS[stamps],
-            "timezone": tz, "split": f"training_data.txt train; test_all_1..{len(names)}.txt, one week each, test", "train_rows": int(t.size)}
+            "timezone": tz, "split": f"training_data.txt train; test_all_1..{len(names)}.txt, one week each, test",
+            "train_rows": int(t.size)}
     return StateBenchmark("door-benchmark", ((DOOR_ID, "open"), (DOOR_ID, "closed")), ((DOOR_ID, "open"),),
                           train, tuple(periods), tz, False, 60.0, info)
 
