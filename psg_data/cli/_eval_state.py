@@ -130,8 +130,8 @@ def run_state_task(specs: list[Any], dataset: str, protocol: str, *, setting: st
     summary = summarize_state_run(run, rows, one_hot=bench.one_hot)
     info = provenance({"dataset": name, "dataset_spec": dataset, "labels": labels,
                        "windows": None if opts.windows is None else opts.windows.describe()})
-    doc = state_results(run, rows, summary, info)
     title = f"{name} ({len(bench.periods)} test weeks), protocol {protocol}"
+    doc = state_results(run, rows, summary, info, title)
     text = render(state_tables(doc, title), "text")
     write_state_outputs(doc, out, text, plots=not no_plots)
     if table_format == "text":

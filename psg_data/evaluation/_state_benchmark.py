@@ -361,4 +361,4 @@ def evaluate_state_benchmark(bench: Any, estimators: Sequence[str | EstimatorSpe
 
         with process_pool(jobs) as pool:
             run = run_state_benchmark(bench, rows, opts, executor=pool)
-    return state_results(run, rows, summarize_state_run(run, rows, one_hot=bench.one_hot), {})
+    return state_results(run, rows, summarize_state_run(run, rows, one_hot=bench.one_hot), {}, bench.name)

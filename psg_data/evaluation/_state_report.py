@@ -2,7 +2,8 @@
 
 What a run writes (``psg-eval --dataset door-benchmark|room-presence-benchmark``):
 
-- ``results.json``: schema ``psg-data/state-benchmark-results`` version 1: the protocol, the
+- ``results.json``: psg-eval's results schema (``psg-eval compare`` and ``load_results`` read its
+  main table) with ``kind`` ``psg-data/state-benchmark-results`` version 1 and its own keys: the protocol, the
   benchmark's provenance, every row with its role, its summary per metric (``mean``, ``half_width``
   of the 95 % t-interval over the test weeks, ``std`` across them) and its per-week values, the
   headroom, the paired comparisons, the fits' chosen orders and the problems;
@@ -35,13 +36,41 @@ LABELS = {"mse": "MSE", "mae": "MAE", "balanced_accuracy": "B-Acc", "f1": "F1", 
 ROLE_ORDER = {"hindsight": 0, "baseline": 1, "chance": 2, "authors": 3, "method": 4}
 
 
-def state_results(run: StateRun, rows: Sequence[StateRow], summary: dict[str, Any], info: dict[str, Any]
-                  ) -> dict[str, Any]:
-    """The results.json document."""
+_STANDARD_ROLE = {"hindsight": "ceiling", "baseline": "baseline", "chance": "chance", "authors": "baseline",
+                  "method": "method"}
+_DESCRIPTIONS = {"mse": "mean squared error of the predicted probability over the week's rows (the authors' metric)",
+                 "mae": "mean |truth - belief| over the scored time", "balanced_accuracy": "(recall of present + "
+                 "recall of absent) / 2 of belief >= 0.5", "f1": "F1 of present, belief >= 0.5",
+                 "top1": "share of minutes whose true room is ranked first", "top3": "share of minutes whose true "
+                 "room is in the first three"}
+
+
+def _standard_table(doc: dict[str, Any], title: str) -> dict[str, Any]:
+    """The main table in psg-eval's results schema (``psg-eval compare`` and ``load_results`` read it)."""
+    n = len(doc["periods"])
+    chance = next((r for r in doc["rows"] if r["role"] == "chance"), None)
+
+    def cell(s: dict[str, Any]) -> dict[str, Any]:
+        m, hw = s.get("mean"), s.get("half_width")
+        lo, hi = (m - hw, m + hw) if m is not None and hw is not None else (None, None)
+        return {"mean": m, "std": s.get("std"), "ci_low": lo, "ci_high": hi, "n": n, "method": "t",
+                "unit": "test weeks"}
+    metrics = [{"key": m, "label": LABELS[m], "better": "lower" if LOWER_IS_BETTER[m] else "higher", "digits": 4,
+                "description": _DESCRIPTIONS[m],
+                "chance": chance["summary"][m]["mean"] if chance else None} for m in doc["metrics"]]
+    rows = [{"method": r["label"], "role": _STANDARD_ROLE[r["role"]], "description": r["description"],
+             "values": {m: cell(r["summary"][m]) for m in doc["metrics"]}} for r in doc["rows"]]
+    return {"name": "persistence", "title": title, "metrics": metrics, "groups": [], "count_columns": [],
+            "primary": "mse", "rows": rows, "notes": [f"±: half-width of the 95 % t-interval over the {n} test weeks"]}
+
+
+def state_results(run: StateRun, rows: Sequence[StateRow], summary: dict[str, Any], info: dict[str, Any],
+                  title: str = "real benchmark") -> dict[str, Any]:
+    """The results.json document: psg-eval's results schema (one table) plus the benchmark's own keys."""
     from psg_data.evaluation._persistence_types import clean_json
 
     o = run.options
-    doc = {"schema": SCHEMA, "version": 1, "task": "persistence", "protocol": o.protocol, "setting": o.setting,
+    doc = {"kind": SCHEMA, "kind_version": 1, "task": "persistence", "protocol": o.protocol, "setting": o.setting,
            "horizon_s": o.horizon_s if o.setting == "adaptive" else None,
            "patrol": None if o.protocol == "published" else {"label": o.patrol.label, "p_m": o.patrol.p_m,
                                                               "p_f": o.patrol.p_f, "seed": o.patrol.seed},
@@ -53,7 +82,17 @@ def state_results(run: StateRun, rows: Sequence[StateRow], summary: dict[str, An
                     for r in rows],
            "headroom": summary["headroom"], "comparisons": summary["comparisons"], "fits": run.fits,
            "errors": run.errors}
-    return clean_json(doc)
+    doc = clean_json(doc)
+    from psg_data.evaluation._results import SCHEMA as RESULTS_SCHEMA
+    from psg_data.evaluation._results import SCHEMA_VERSION
+
+    n = len(run.periods)
+    doc.update({"schema": RESULTS_SCHEMA, "schema_version": SCHEMA_VERSION, "ok": not run.errors,
+                "tables": [_standard_table(doc, title)],
+                "interval": {"method": "t", "unit": "test weeks", "n": n, "confidence": 0.95,
+                             "text": f"±: half-width of the 95 % t-interval over the {n} test weeks"},
+                "config": {"protocol": o.protocol, "setting": o.setting, "horizon_s": doc["horizon_s"]}})
+    return doc
 
 
 def _cell(s: dict[str, float], digits: int = 4) -> str:

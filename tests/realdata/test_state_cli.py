@@ -48,7 +48,13 @@ def test_door_patrol_default(pinned: Path, tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     assert r.output.lstrip().startswith("door-benchmark (9 test weeks), protocol patrol: headroom")
     doc = json.loads((out / "results.json").read_text())
-    assert doc["schema"] == "psg-data/state-benchmark-results" and doc["protocol"] == "patrol"
+    assert doc["kind"] == "psg-data/state-benchmark-results" and doc["protocol"] == "patrol"
+    from psg_data.evaluation import load_results
+
+    table = load_results(out).tables[0]
+    assert table.primary == "mse" and {r.method for r in table.rows} >= {"last_seen", "hindsight"}
+    cmp = run("compare", str(out), "--metric", "mse")
+    assert cmp.exit_code == 0 and "hindsight" in cmp.output, cmp.output
     labels = [r["label"] for r in doc["rows"]]
     for need in ("last_seen", "perpetua", "fremen", "hindsight", "mean", "hist", "always_absent",
                  "fremen:n_periods=84,max_order=5,order_rule=train_mse"):
