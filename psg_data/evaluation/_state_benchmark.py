@@ -21,6 +21,7 @@ Reference rows on real data (there is no generator model, so no exact ceiling):
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -187,6 +188,27 @@ def _locate(traces: list[Any]) -> tuple[float, float]:
     return float(np.mean(pos < 1)), float(np.mean(pos < 3))
 
 
+class _WithHistory:
+    """An estimator whose filters start with their edge's training history, applied once and copied per period.
+
+    Every test period starts from the same history (the training rows or patrol observations), so
+    applying it once per edge instead of once per period gives the same filters (a deep copy each).
+    """
+
+    def __init__(self, est: Any, history: dict[EdgeKey, EdgeStream]) -> None:
+        self.est, self.history = est, history
+        self._ready: dict[EdgeKey, Any] = {}
+
+    def make_filter(self, edge: EdgeKey) -> Any:
+        if edge not in self._ready:
+            f = self.est.make_filter(edge)
+            h = self.history.get(edge)
+            if h is not None and len(h):
+                f.update_many(h.t_s, h.y)
+            self._ready[edge] = f
+        return copy.deepcopy(self._ready[edge])
+
+
 def _row_job(bench: Any, row: StateRow, opts: StateRunOptions) -> tuple[list[dict[str, float]], list[str], Any]:
     """Fit ``row`` (each seed) and score every period: per-period values (mean over seeds), problems, fit summary."""
     factory = RegistryFactory(row.spec.name, row.spec.settings)
@@ -204,8 +226,9 @@ def _row_job(bench: Any, row: StateRow, opts: StateRunOptions) -> tuple[list[dic
                 per_seed.append([{m: math.nan for m in METRICS} for _ in bench.periods])
                 continue
             summary = summary or getattr(est, "fit_summary_", None)
+        prepared = _WithHistory(est, hist) if est is not None else None
         for k, p in enumerate(bench.periods):
-            e, h, te, truth = est, hist, tests[k], _scored(p.truth, opts.windows)
+            e, h, te, truth = prepared, {}, tests[k], _scored(p.truth, opts.windows)
             if row.role == "hindsight":  # fitted on the period's own scored rows, then asked with nothing else
                 own = [EdgeStream(x, t[y >= 0], y[y >= 0]) for x, (t, y) in truth.items()]
                 e, msg = fit_estimator(row.label, factory, seed, own, None, bench.timezone)

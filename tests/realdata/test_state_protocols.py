@@ -190,3 +190,26 @@ def test_room_presence_locate(tmp_path: Path) -> None:
     assert s["summary"][HINDSIGHT]["top1"]["mean"] > 0.9
     first_room = np.mean([np.mean(p.truth[b.edges[0]][1] == 1) for p in b.periods])
     assert s["summary"]["always_absent"]["top1"]["mean"] == pytest.approx(first_room)
+
+
+def test_history_applied_once_equals_per_period(tmp_path: Path) -> None:
+    """Filters built once with the history and copied per period score as filters built per period do."""
+    from psg_data.evaluation._edge_run import run_edge
+    from psg_data.evaluation._state_protocols import edge_jobs, score_config
+
+    write_door(tmp_path, train_weeks=2, test_weeks=2)
+    b = read_door_benchmark(tmp_path)
+    rows = [r for r in state_rows([EstimatorSpec.of("perpetua")], references=False)]
+    run = run_state_benchmark(b, rows, StateRunOptions(protocol="patrol", seeds=(0,)))
+    plan = PatrolPlan()
+    train = patrol_streams(b.train, plan, "UTC", complement=True)
+    est = get_estimator("perpetua", random_state=0).fit(train, timezone="UTC")
+    for k, p in enumerate(b.periods):
+        test = {s.edge: s for s in patrol_streams(p.truth, plan, "UTC", complement=True, salt=k + 1)}
+        job = edge_jobs(p.truth, b.scored, {s.edge: s for s in train}, test, k, "UTC")[0]
+        res, _, issues, trace = run_edge("perpetua", 0, est, job, score_config("adaptive", 7200.0))
+        assert not issues
+        valid = trace.truth >= 0
+        assert run.values["perpetua"][k]["mse"] == pytest.approx(
+            np.mean((trace.belief[valid] - trace.truth[valid]) ** 2), rel=1e-12)
+        assert run.values["perpetua"][k]["balanced_accuracy"] == pytest.approx(res.metrics["balanced_accuracy"])
