@@ -144,9 +144,9 @@ def test_rvl_header_larger_than_the_camera_is_refused(tmp_path: Path, small_db: 
 
 
 def test_colour_png_bomb_is_refused_before_decoding(tmp_path: Path, small_db: Path) -> None:
-    """A 9000 x 9000 8-bit grey PNG in Data.image (not passed through: decoded, 81 MB, then converted to RGB)."""
-    _edit(small_db, "UPDATE Data SET image = ? WHERE id = 2", args=(png_bomb(9000, 9000, 8, 0),))
-    _assert_refused_bounded(tmp_path, small_db, "node 2: Data.image: 9000x9000")
+    """A 12000 x 12000 8-bit grey PNG in Data.image (not passed through: decoded, 144 MB, then made RGB)."""
+    _edit(small_db, "UPDATE Data SET image = ? WHERE id = 2", args=(png_bomb(12000, 12000, 8, 0),))
+    _assert_refused_bounded(tmp_path, small_db, "node 2: Data.image: 12000x12000")
 
 
 def test_camera_over_the_pixel_cap_is_refused_at_convert(tmp_path: Path, lab: Path) -> None:  # noqa: F811
@@ -248,3 +248,20 @@ def test_wal_database_in_a_read_only_folder(tmp_path: Path, small_db: Path) -> N
         small_db.parent.chmod(0o755)
     assert res.exit_code == 0 and "damaged" not in res.output, res.output
     assert listing == ["map.db"]
+
+
+def test_wal_with_unwritten_transactions_is_refused(tmp_path: Path, small_db: Path) -> None:
+    """RTAB-Map still has the map open: its last transactions are only in map.db-wal, which an
+    immutable reader would not see."""
+    _to_wal(small_db)
+    con = sqlite3.connect(small_db)
+    con.execute("PRAGMA wal_autocheckpoint=0")
+    con.execute("UPDATE Node SET label = 'late' WHERE id = 1")
+    con.commit()
+    try:
+        before = sorted(p.name for p in small_db.parent.iterdir())
+        assert "map.db-wal" in before
+        _assert_error(tmp_path, small_db, "map.db-wal holds transactions not yet written")
+        assert sorted(p.name for p in small_db.parent.iterdir()) == before
+    finally:
+        con.close()

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import sqlite3
 import struct
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
@@ -32,8 +31,8 @@ from psg_data.errors import ConversionError
 from psg_data.schemas._image_headers import inflate_bounded, parse_image_header, pixels_problem
 
 __all__ = ["RtabmapDatabase", "RtabNode", "RtabLink", "RtabCamera", "rtabmap_format", "parse_transform",
-           "uncompress_data", "parse_calibration", "decode_rvl", "decode_depth", "rvl_max_bytes", "MIN_VERSION", "RVL_SIGNATURE",
-           "GRAPH_LINK_TYPES"]
+           "uncompress_data", "parse_calibration", "decode_rvl", "decode_depth", "rvl_max_bytes", "MIN_VERSION",
+           "RVL_SIGNATURE", "GRAPH_LINK_TYPES"]
 
 MIN_VERSION = (0, 17, 0)
 """Oldest database schema read (``Admin.opt_ids`` / ``opt_poses`` exist from 0.17.0)."""
@@ -263,7 +262,8 @@ def decode_rvl(data: bytes | memoryview, n_pixels: int, where: str) -> NDArray[n
 
 def rvl_max_bytes(n_pixels: int) -> int:
     """Most bytes RVL codes ``n_pixels`` pixels in: at most one (zeros, non-zeros) pair of run lengths
-    (9 nibbles each below 2^27) and one delta (6 nibbles for 16 bits, zig-zagged) per pixel."""
+    (9 nibbles each below 2^27) and one delta (6 nibbles for 16 bits, zig-zagged) per pixel.
+    """
     return 12 * n_pixels + 16
 
 
@@ -364,7 +364,8 @@ class RtabmapDatabase:
 
     def _refuse_live_journal(self) -> None:
         """Refuse a database whose last transactions are in a journal beside it: opened ``immutable``,
-        SQLite would not read a write-ahead log (``-wal``) nor roll back a hot ``-journal``."""
+        SQLite would not read a write-ahead log (``-wal``) nor roll back a hot ``-journal``.
+        """
         for suffix, why in (("-wal", "holds transactions not yet written into the database"),
                             ("-journal", "means a transaction is being written (or was interrupted)")):
             side = self.path.with_name(self.path.name + suffix)
