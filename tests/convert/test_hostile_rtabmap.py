@@ -59,15 +59,17 @@ def _convert_measured(tmp_path: Path, db: Path) -> tuple[float, subprocess.Compl
     return peak, proc
 
 
-def _assert_refused_bounded(tmp_path: Path, db: Path, match: str) -> None:
-    before = sorted(p.name for p in db.parent.iterdir())
-    peak, proc = _convert_measured(tmp_path, db)
+def _assert_refused_bounded(tmp_path: Path, src: Path, match: str) -> None:
+    """One error line, peak memory < 200 MB above the baseline, the input's folder unchanged, no output."""
+    folder = src if src.is_dir() else src.parent
+    before = sorted(p.name for p in folder.iterdir())
+    peak, proc = _convert_measured(tmp_path, src)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     print(f"peak resident memory above baseline: {peak} MB")
     assert peak < 200, f"peak memory {peak} MB above baseline; {proc.stderr[-300:]}"
     assert proc.returncode == 1 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-3000:]
     assert match in lines[0], lines[0]
-    assert sorted(p.name for p in db.parent.iterdir()) == before
+    assert sorted(p.name for p in folder.iterdir()) == before
     assert not (tmp_path / "out").exists() and not (tmp_path / "out.partial").exists()
 
 
@@ -159,6 +161,22 @@ def test_camera_over_the_pixel_cap_is_refused_at_convert(tmp_path: Path, lab: Pa
     calib = camera_blob("0.18.0", 4000.0, 4000.0, 4099.5, 4099.5, 8200, 8200, LOCAL)
     _edit(db, "UPDATE Data SET image = ?, depth = ?, calibration = ?", args=(color, depth, calib))
     _assert_refused_bounded(tmp_path, db, "Data.calibration: width/height: image size 8200x8200")
+
+
+def test_folder_camera_over_the_pixel_cap_is_refused_at_convert(tmp_path: Path) -> None:
+    """The same rule for a frame folder: its camera's size is its images' (8200 x 8200, 0.3 MB each)."""
+    from .conftest import CAMERA
+    from .test_folders import make_tum
+
+    d = tmp_path / "fr1"
+    make_tum(d, n=2)
+    (d / "intrinsics.txt").write_text(f"{CAMERA.fx} {CAMERA.fy} {CAMERA.cx} {CAMERA.cy}\n")
+    color, depth = png_bomb(8200, 8200, 8, 2), png_bomb(8200, 8200, 16, 0)
+    for f in (d / "rgb").iterdir():
+        f.write_bytes(color)
+    for f in (d / "depth").iterdir():
+        f.write_bytes(depth)
+    _assert_refused_bounded(tmp_path, d, "width/height: image size 8200x8200")
 
 
 # ---- B: hostile values: one error line, nothing left ----
