@@ -283,3 +283,20 @@ def test_wal_with_unwritten_transactions_is_refused(tmp_path: Path, small_db: Pa
         assert sorted(p.name for p in small_db.parent.iterdir()) == before
     finally:
         con.close()
+
+
+def test_rvl_decoded_block_by_block_equals_the_image() -> None:
+    """Bounded RVL decoding (blocks of words, values cut across block ends) against the test
+    writer's encoder on an image of more than 2 blocks, with runs of zeros and large deltas."""
+    from psg_data.loaders.raw._rtabmap import _RVL_BLOCK_WORDS, decode_depth
+
+    from .rtabmap_writer import rvl_blob
+
+    rng = np.random.default_rng(3)
+    depth = rng.integers(0, 65536, (480, 640)).astype(np.uint16)
+    depth[rng.random(depth.shape) < 0.3] = 0
+    depth[50:80] = 0
+    blob = rvl_blob(depth)
+    assert (len(blob) - 16) // 4 > 2 * _RVL_BLOCK_WORDS
+    out = decode_depth(blob, "x", (640, 480))
+    assert out is not None and np.array_equal(out, depth)

@@ -218,23 +218,45 @@ def parse_calibration(blob: bytes, version: tuple[int, ...], where: str) -> list
     return cams
 
 
+_RVL_BLOCK_WORDS = 1 << 16
+"""RVL words expanded to nibbles at a time (a few MB of temporaries)."""
+
+
+def _rvl_values(data: bytes | memoryview, limit: int, n_pixels: int, where: str) -> NDArray[np.int64]:
+    """The first ``limit`` VLE values of RVL ``data`` (fewer if it holds fewer), a block of words at a time."""
+    words = np.frombuffer(data, "<u4", len(data) // 4)
+    shifts = np.arange(28, -1, -4, dtype=np.uint32)
+    out: list[NDArray[np.int64]] = []
+    have, carry = 0, np.empty(0, np.uint8)
+    for k in range(0, len(words), _RVL_BLOCK_WORDS):
+        nib = np.concatenate([carry, ((words[k:k + _RVL_BLOCK_WORDS, None] >> shifts) & 0xF).astype(np.uint8).ravel()])
+        ends = np.flatnonzero(nib < 8)
+        starts = np.r_[0, ends[:-1] + 1] if ends.size else ends
+        carry = nib[ends[-1] + 1:] if ends.size else nib
+        if carry.size > 10 or (ends.size and int((ends - starts).max()) > 10):
+            raise ConversionError(f"{where}: RVL value longer than 32 bits; expected RVL-coded depth")
+        if not ends.size:
+            continue
+        pos = np.arange(ends[-1] + 1) - np.repeat(starts, ends - starts + 1)
+        out.append(np.add.reduceat((nib[: ends[-1] + 1] & 7).astype(np.int64) << (3 * pos), starts))
+        have += out[-1].size
+        if have >= limit:
+            break
+    if not out:
+        raise ConversionError(f"{where}: RVL data cut short (no complete value); expected {n_pixels} pixels")
+    return np.concatenate(out)[:limit]
+
+
 def decode_rvl(data: bytes | memoryview, n_pixels: int, where: str) -> NDArray[np.uint16]:
     """RVL-coded 16-bit pixels (runs of zeros / non-zeros, zig-zag deltas in 3-bit-nibble VLE words).
 
-    Vectorised: the nibbles of every 32-bit word (most significant first) give the VLE values at
-    once; only the runs are walked in Python, and the non-zero pixels are the running sum of the
-    deltas (uint16 arithmetic, as the codec's).
+    Vectorised: the nibbles of the 32-bit words (most significant first), a block of words at a
+    time, give the VLE values; only the runs are walked in Python, and the non-zero pixels are the
+    running sum of the deltas (uint16 arithmetic, as the codec's). Memory is bounded by the block and
+    by the ``3 * n_pixels + 2`` values an image can need (each run pair covers a pixel), whatever
+    the length of ``data``.
     """
-    words = np.frombuffer(data, "<u4", len(data) // 4)
-    nib = ((words[:, None] >> np.arange(28, -1, -4, dtype=np.uint32)) & 0xF).astype(np.uint8).ravel()
-    ends = np.flatnonzero(nib < 8)
-    if ends.size == 0:
-        raise ConversionError(f"{where}: RVL data cut short (no complete value); expected {n_pixels} pixels")
-    starts = np.r_[0, ends[:-1] + 1]
-    pos = np.arange(ends[-1] + 1) - np.repeat(starts, ends - starts + 1)
-    if pos.max(initial=0) > 10:
-        raise ConversionError(f"{where}: RVL value longer than 32 bits; expected RVL-coded depth")
-    vals = np.add.reduceat((nib[: ends[-1] + 1] & 7).astype(np.int64) << (3 * pos), starts)
+    vals = _rvl_values(data, 3 * n_pixels + 2, n_pixels, where)
     runs, i, px, nv = [], 0, 0, vals.size
     while px < n_pixels:
         if i + 2 > nv:
