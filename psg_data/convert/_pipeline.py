@@ -413,6 +413,11 @@ def _open_writer(out: Path, name: str, timezone: str, color_encoding: str, overw
         raise ConversionError(f"{out}: cannot create the output ({exc})") from exc
 
 
+MAX_SCAN_ID_BYTES = 200
+"""Longest scan id (UTF-8 bytes) a conversion gives: files inside ``OUT.partial`` are named after it
+(``.scans/ID.arrow``, ``images/ID_007.tar`` with a split suffix), and a name takes at most 255 bytes."""
+
+
 def _plan_tasks(sources: list[tuple[Path, str]], side: SideData, cfg: ConvertConfig, out: str, color_encoding: str,
                 completed: dict[str, dict[str, Any]]) -> list[ScanTask]:
     """One task per source not already complete; scan ids from ``scans.csv`` or the source names.
@@ -428,6 +433,11 @@ def _plan_tasks(sources: list[tuple[Path, str]], side: SideData, cfg: ConvertCon
         row = scan_rows.get(path.name) or scan_rows.get(path.stem)
         scan_id = str(row["scan_id"]) if row else path.stem if path.is_file() else path.name
         split_label = (row.get("split") or None) if row else None
+        if len(scan_id.encode()) > MAX_SCAN_ID_BYTES:
+            raise ConversionError(f"{path}: scan id of {len(scan_id.encode())} bytes (the recording's name); expected "
+                                  f"at most {MAX_SCAN_ID_BYTES}, as the scan's files are named after it and a file "
+                                  f"name takes at most 255 bytes: rename the recording or give its scan_id in "
+                                  f"scans.csv")
         if scan_id in seen_ids:
             raise ConversionError(f"{path}: scan id {scan_id!r} also used by {seen_ids[scan_id]}; expected unique "
                                   f"recording names (or scan ids in scans.csv)")

@@ -73,7 +73,7 @@ def optimize_pose_graph(nodes: list[RtabNode], links: list[RtabLink]) -> dict[in
 
     posed = [n for n in nodes if n.pose is not None]
     init = _spanning_poses(posed, links)
-    if len(init) < len(posed):
+    if any(n.id not in init for n in posed):  # init may hold nodes without a pose reached through links
         return None
     reg = import_open3d().pipelines.registration
     index = {n.id: k for k, n in enumerate(posed)}
@@ -156,6 +156,16 @@ def _same_camera(a: CameraIntrinsics, b: CameraIntrinsics) -> bool:
         (b.width, b.height, b.fx, b.fy, b.cx, b.cy, b.distortion_model, b.distortion_coeffs)
 
 
+_HINTS = {
+    "no_depth": "no node with a colour image has a depth image in Data.depth (a map saved without depth?)",
+    "no_pose": "no node with images has a pose: not in Admin.opt_poses and no Node.pose to fall back on; open "
+               "and close the map in RTAB-Map to save its optimised graph",
+    "nonfinite_pose": "every node's pose (Admin.opt_poses or Node.pose, times the camera's local transform in "
+                      "Data.calibration) has NaN or infinite values",
+}
+"""Why no frame was converted, in the database's terms (the recording hints name options of bags)."""
+
+
 def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any] | None, writer: Any
                 ) -> list[ScanResult]:
     """Convert one RTAB-Map database into one scan per session (``{name}_{map_id:03d}`` when it
@@ -172,6 +182,7 @@ def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
             sessions[n.map_id].append(n)
         fw = _FrameWriter(task.color_encoding, cfg.depth_scale_m or 0.001, db.where, cfg.image_check)
         sink = _ScanSink(task, cfg, writer, fw, ("Data.image", "Data.depth"), progress)
+        sink.diagnosis["hints"] = _HINTS
         cams = _Cameras(db.version)
         cid = cfg.camera_id or task.camera_ids.get("") or "camera"
         labels: dict[str, dict[str, str]] = defaultdict(dict)
@@ -199,7 +210,12 @@ def run_rtabmap(task: ScanTask, cfg: ConvertConfig, progress: Callable[..., Any]
 
 def _convert_session(db: RtabmapDatabase, members: list[RtabNode], poses: dict[int, NDArray[np.float64]],
                      sink: _ScanSink, cams: _Cameras, cid: str, labels: dict[str, dict[str, str]]) -> None:
-    """Write the frames of one session's nodes (in stamp order), counting nodes without images."""
+    """Write the frames of one session's nodes (in stamp order), counting nodes without images.
+
+    Raises:
+        ConversionError: two nodes with images share a stamp (a dataset's frames have distinct stamps).
+    """
+    prev: RtabNode | None = None
     for n in members:
         where = f"{db.where}: node {n.id}"
         image, depth, calib = db.node_data(n.id)
@@ -217,9 +233,13 @@ def _convert_session(db: RtabmapDatabase, members: list[RtabNode], poses: dict[i
             raise ConversionError(f"{where}: Data.calibration: intrinsics differ from the session's first node "
                                   f"({intr.fx}, {intr.fy}, {intr.cx}, {intr.cy} vs {sink.camera.fx}, {sink.camera.fy}, "
                                   f"{sink.camera.cx}, {sink.camera.cy}); expected one camera per session")
+        if prev is not None and n.stamp_ns == prev.stamp_ns:
+            raise ConversionError(f"{where}: Node.stamp {n.stamp_ns / 1e9!r} s, the stamp of node {prev.id} too; "
+                                  f"expected distinct stamps for the nodes with images of a session")
+        prev = n
         base = poses.get(n.id)
         T = None if base is None else base @ cam.local
-        arr = decode_depth(depth, f"{where}: Data.depth")
+        arr = decode_depth(depth, f"{where}: Data.depth", (cam.width, cam.height))
         dp = _Payload("bytes", depth, "png", f"{where}: Data.depth") if arr is None else \
             _Payload("array", arr, "", f"{where}: Data.depth")
         cp = _Payload("bytes", image, "", f"{where}: Data.image")

@@ -38,7 +38,7 @@ from psg_data.loaders.raw._images import (
 from psg_data.loaders.raw._transforms import PoseSeries, TfBuffer
 from psg_data.schemas._camera_checks import intrinsics_problems
 from psg_data.schemas._image_check import DamagedImage, check_image, looks_like_image
-from psg_data.schemas._image_headers import parse_image_header_end
+from psg_data.schemas._image_headers import parse_image_header_end, pixels_problem
 from psg_data.schemas._records import CameraIntrinsics
 from psg_data.writers._dataset_writer import encode_color, encode_depth
 
@@ -491,8 +491,15 @@ class _FrameWriter:
         except OSError as exc:
             raise ConversionError(f"{p.obj}: cannot read the image ({exc.strerror or exc})") from exc
 
-    def _encoded(self, slot: str, data: Any, fmt: str, where: str, what: str) -> EncodedInfo:
-        """Header of an encoded image, checked at the configured level."""
+    def _encoded(self, slot: str, data: Any, fmt: str, where: str, what: str,
+                 size: tuple[int, int] | None) -> EncodedInfo:
+        """Header of an encoded image, checked against the pixel cap and the camera's ``size`` (width,
+        height; None: the cap only) before anything is inflated or decoded, then at the configured level.
+
+        Raises:
+            ConversionError: a size that does not fit (as any image of the wrong size).
+            ImageDataError: a damaged image.
+        """
         info = self._inspect(slot, data)
         if info is None:
             kind = looks_like_image(data) or next((k for k in ("png", "jpeg") if k in fmt.lower()), None)
@@ -500,6 +507,9 @@ class _FrameWriter:
                 raise ConversionError(f"{where}: unknown {what} format {fmt!r}: the data is neither PNG nor JPEG "
                                       f"(starts with {bytes(memoryview(data)[:4]).hex()}); expected PNG or JPEG data")
             raise ImageDataError(where, f"corrupt {(kind or 'image').upper()}: unreadable header")
+        problem = pixels_problem(info.width, info.height, size)
+        if problem:
+            raise ConversionError(f"{where}: {problem} ({what}); not decoded")
         if self.level != "none":
             try:
                 check_image(data, self.level, header=info)
@@ -507,20 +517,22 @@ class _FrameWriter:
                 raise ImageDataError(where, f"corrupt {info.kind.upper()}: {exc}") from None
         return info
 
-    def color(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
+    def color(self, p: _Payload, topic: str, size: tuple[int, int] | None = None
+              ) -> tuple[Any, NDArray[np.uint8] | None, tuple[int, int]]:
         where = self._where(topic, p)
         if p.kind == "msg" or p.kind == "array":
             arr = decode_color_image(p.obj, where) if p.kind == "msg" else p.obj
             return None, arr, (arr.shape[1], arr.shape[0])
         data = self._bytes(p, where)
-        info = self._encoded("color", data, p.fmt or "file", where, "colour image")
+        info = self._encoded("color", data, p.fmt or "file", where, "colour image", size)
         if _passthrough_ok(info, self.encoding):
             self.passthrough["color"] += 1
             return data, None, (info.width, info.height)
         arr = decode_compressed_color(data, p.fmt or "file", where)
         return None, arr, (arr.shape[1], arr.shape[0])
 
-    def depth(self, p: _Payload, topic: str) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
+    def depth(self, p: _Payload, topic: str, size: tuple[int, int] | None = None
+              ) -> tuple[Any, NDArray[np.uint16] | None, tuple[int, int]]:
         where = self._where(topic, p)
         if p.kind == "msg" or p.kind == "array":
             arr = decode_depth_image(p.obj, where, self.depth_scale_m) if p.kind == "msg" else p.obj
@@ -533,7 +545,7 @@ class _FrameWriter:
         png, src = data, "16UC1"
         if compressed_depth:
             png, src, _ = compressed_depth_png(data, fmt, where)
-        info = self._encoded("depth", png, fmt or "file", where, "depth image")
+        info = self._encoded("depth", png, fmt or "file", where, "depth image", size)
         if info.kind != "png":
             raise ConversionError(f"{where}: depth image is a {info.kind.upper()}; expected a 16-bit PNG "
                                   f"('16UC1; compressedDepth png')")
@@ -655,16 +667,17 @@ class _ScanSink:
             self.kf_dropped += 1
             return
         self.last_key_T = T
-        assert self.camera is not None
-        if self.camera.camera_id not in self.w.cameras:
-            self.w.add_camera(self.camera)
-        try:
-            cb, ca, csize = self.fw.color(cp, self.names[0])
-            db, da, dsize = self.fw.depth(dp, self.names[1])
+        cam = self.camera
+        assert cam is not None
+        if cam.camera_id not in self.w.cameras:
+            self.w.add_camera(cam)
+        size = (cam.width, cam.height)
+        try:  # ScanNet's colour images are larger than its depth (the camera's size): resized below
+            cb, ca, csize = self.fw.color(cp, self.names[0], None if self.task.kind == "scannet" else size)
+            db, da, dsize = self.fw.depth(dp, self.names[1], size)
         except ImageDataError as exc:
             self._corrupt(stamp, exc)
             return
-        cam = self.camera
         if ca is not None and self.task.kind == "scannet" and csize != dsize:
             import cv2
 
@@ -734,7 +747,10 @@ def explain_nothing(skipped: Counter[str], cfg: ConvertConfig, diag: dict[str, A
     color_topic, depth_topic = diag.get("names", ("colour", "depth"))
     counts = ", ".join(f"{k} {v}" for k, v in sorted(skipped.items()) if v) or "none"
     main = max(((v, k) for k, v in skipped.items() if v and k != "no_color"), default=(0, ""))[1]
-    if not main:
+    own = diag.get("hints", {}).get(main)  # an input's own words (RTAB-Map has no topics or --poses)
+    if own:
+        hint = own
+    elif not main:
         hint = (f"no colour image was read from {color_topic}" if not skipped.get("no_color") else
                 f"{skipped['no_color']} depth images but no colour image on {color_topic}; check --color-topic")
     elif main == "no_depth":

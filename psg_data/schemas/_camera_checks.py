@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+from psg_data.schemas._image_headers import MAX_IMAGE_PIXELS
+
 __all__ = ["intrinsics_problems", "MAX_FOCAL_PER_PIXEL"]
 
 MAX_FOCAL_PER_PIXEL = 50
@@ -33,6 +35,10 @@ def intrinsics_problems(width: object, height: object, fx: object, fy: object, c
     out: list[tuple[str, str]] = []
     if not (isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0):
         out.append(("width/height", f"image size {width}x{height}, expected positive"))
+        return out
+    if width * height > MAX_IMAGE_PIXELS:  # no image of the camera could be decoded (docs/SECURITY.md)
+        out.append(("width/height", f"image size {width}x{height} = {width * height} pixels, over the limit of "
+                                    f"{MAX_IMAGE_PIXELS} pixels per image"))
         return out
     for name, v in (("fx", fx), ("fy", fy)):
         if not (_finite(v) and 0 < v <= MAX_FOCAL_PER_PIXEL * max(width, height)):  # type: ignore[operator]

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from psg_data.schemas._image_headers import ImageHeader, parse_image_header
+from psg_data.schemas._image_headers import ImageHeader, inflate_bounded, parse_image_header, pixels_problem
 
 __all__ = ["IMAGE_CHECK_LEVELS", "DamagedImage", "check_image", "check_png", "check_jpeg", "decode_check",
            "verify_image",
@@ -146,25 +146,36 @@ def _crc(mv: memoryview, a: int, b: int) -> int:
     return crc
 
 
+_ADAM7 = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
+"""Adam7 passes: first column, first row, column step, row step."""
+
+
+def _png_data_size(w: int, h: int, bits: int, ctype: int, lace: int) -> tuple[int, int]:
+    """(bytes the image data inflates to, row length of a non-interlaced image) from IHDR."""
+    bpp = _PNG_CHANNELS[ctype] * bits
+    row = 1 + (w * bpp + 7) // 8
+    if not lace:
+        return h * row, row
+    size = 0
+    for x0, y0, dx, dy in _ADAM7:
+        pw, ph = (w - x0 + dx - 1) // dx, (h - y0 + dy - 1) // dy
+        if pw > 0 and ph > 0:
+            size += ph * (1 + (pw * bpp + 7) // 8)
+    return size, row
+
+
 def _inflate_png(parts: list[memoryview], ihdr: tuple[int, ...]) -> None:
     w, h, bits, ctype, _, _, lace = ihdr
-    d = zlib.decompressobj()
-    pieces = []
+    too_big = pixels_problem(w, h)
+    if too_big:
+        raise DamagedImage(f"IHDR: {too_big}; not inflated")
+    expect, row = _png_data_size(w, h, bits, ctype, lace)
     try:
-        for p in parts:
-            pieces.append(d.decompress(p))
-        pieces.append(d.flush())
-    except zlib.error as exc:
-        raise DamagedImage(f"image data: zlib stream is damaged ({exc})") from None
-    if not d.eof:
-        raise DamagedImage("image data: zlib stream ends early (truncated)")
-    size = sum(map(len, pieces))
+        data = inflate_bounded(parts, expect)
+    except ValueError as exc:
+        raise DamagedImage(f"image data: {exc} for {w}x{h}") from None
     if not lace:
-        row = 1 + (w * _PNG_CHANNELS[ctype] * bits + 7) // 8
-        expect = h * row
-        if size != expect:
-            raise DamagedImage(f"image data inflates to {size} bytes, expected {expect} for {w}x{h}")
-        filters = np.frombuffer(b"".join(pieces), np.uint8)[::row]
+        filters = np.frombuffer(data, np.uint8)[::row]
         bad = np.flatnonzero(filters > 4)
         if bad.size:
             raise DamagedImage(f"image data: row {int(bad[0])} has filter type {int(filters[bad[0]])}, expected 0-4")

@@ -7,12 +7,14 @@ the converter (encoded payloads of ``CompressedImage`` messages, checked before 
 from __future__ import annotations
 
 import struct
+import zlib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 __all__ = ["ImageHeader", "parse_image_header", "parse_image_header_end", "read_image_header", "header_problems",
-           "MAX_IMAGE_PIXELS", "max_encoded_bytes"]
+           "MAX_IMAGE_PIXELS", "max_encoded_bytes", "inflate_bounded", "pixels_problem"]
 
 _PNG_SIG = b"\x89PNG\r\n\x1a\n"
 _PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
@@ -157,3 +159,43 @@ def max_encoded_bytes(width: int, height: int, kind: str) -> int:
     """
     per_pixel = 3 if kind == "color" else 2
     return 2 * max(width, 0) * max(height, 0) * per_pixel + (1 << 20)
+
+
+def pixels_problem(width: int, height: int, expect: tuple[int, int] | None = None) -> str | None:
+    """Why an image declaring ``width`` x ``height`` must not be decoded (None: it may be): over
+    :data:`MAX_IMAGE_PIXELS`, or not the ``expect`` (width, height) of its camera. The one check every
+    reader makes on a header or a declared shape before it inflates or decodes a pixel.
+    """
+    if width * height > MAX_IMAGE_PIXELS:
+        return f"{width}x{height} = {width * height} pixels, over the limit of {MAX_IMAGE_PIXELS} pixels per image"
+    if expect is not None and (width, height) != tuple(expect):
+        return f"{width}x{height} pixels, expected the camera's {expect[0]}x{expect[1]}"
+    return None
+
+
+def inflate_bounded(parts: Iterable[Any], size: int) -> bytes:
+    """A zlib stream (given in ``parts``) that must inflate to exactly ``size`` bytes; the inflater is
+    told its maximum output, so a stream that inflates further is stopped at ``size + 1`` bytes.
+
+    Raises:
+        ValueError: the stream is damaged, ends early, inflates to fewer bytes, or to more.
+    """
+    d = zlib.decompressobj()
+    out: list[bytes] = []
+    have = 0
+    try:
+        for part in parts:
+            piece = d.decompress(part, size + 1 - have)  # max_length >= 1 (0 would mean unbounded)
+            out.append(piece)
+            have += len(piece)
+            if have > size:
+                raise ValueError(f"zlib stream inflates to more than {size} bytes")
+            if d.eof:
+                break
+    except zlib.error as exc:
+        raise ValueError(f"zlib stream is damaged ({exc})") from None
+    if not d.eof:
+        raise ValueError(f"zlib stream ends early (cut short after {have} bytes)")
+    if have != size:
+        raise ValueError(f"zlib stream inflates to {have} bytes, expected {size}")
+    return b"".join(out)

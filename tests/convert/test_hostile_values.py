@@ -190,7 +190,7 @@ def test_size_mismatch_names_the_file(tum: Path, tmp_path: Path) -> None:
     first = sorted((tum / "depth").iterdir())[1]
     cv2.imwrite(str(first), np.zeros((10, 12), np.uint16))
     r = _run([str(tum), str(tmp_path / "out")])
-    assert_one_error(r, f"{first}: depth is 12x10 but colour is")
+    assert_one_error(r, f"{first}: 12x10 pixels, expected the camera's 32x24 (depth image); not decoded")
 
 
 def test_out_of_order_warning_names_buffer_s(tmp_path: Path) -> None:

@@ -254,7 +254,7 @@ def test_calibration_and_compressed_layouts() -> None:
     assert (cam.cx, cam.cy) == (319.5, 239.5)  # CameraModel: a zero principal point is the image centre
     assert len(parse_calibration(old + old, (0, 17, 0), "x")) == 2
     a = np.arange(24, dtype=np.float32)[None, :]
-    assert np.array_equal(uncompress_data(compress_data(a), "x"), a)
+    assert np.array_equal(uncompress_data(compress_data(a), "x", a.nbytes), a)
 
 
 # ---- corrupt and hostile databases: one error line naming the node and field, exit 1, nothing left ----

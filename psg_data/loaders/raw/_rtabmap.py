@@ -8,14 +8,17 @@ versions): ``Node.pose``, ``Link.transform`` are 3x4 row-major float32 (12 x 4 b
 header, K, D, R, P float64, local transform float32) and before that 18 float32 per camera
 (fx, fy, cx, cy, width, height, local transform); ``Data.image`` is JPEG/PNG bytes; ``Data.depth``
 a 16-bit PNG (millimetres), an 8-bit 4-channel PNG holding float32 metres, or ``DEPTHRVL`` + uint32
-cols, rows + RVL words. The database is opened with a read-only URI and never written.
+cols, rows + RVL words. The database is opened with a read-only ``immutable`` URI and never written:
+SQLite takes no lock and creates no ``-wal`` / ``-shm`` file beside it (a read-only folder works); a
+database with a non-empty ``-wal`` or ``-journal`` beside it (still open in RTAB-Map, or left by a
+crash) is refused, since ``immutable`` would read it without those transactions. Every blob is
+checked against its declared size before it is inflated or decoded (docs/SECURITY.md).
 """
 
 from __future__ import annotations
 
 import sqlite3
 import struct
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
@@ -23,11 +26,13 @@ from urllib.parse import quote
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data._settings import STAMP_MAX_NS
 from psg_data.errors import ConversionError
+from psg_data.schemas._image_headers import inflate_bounded, parse_image_header, pixels_problem
 
 __all__ = ["RtabmapDatabase", "RtabNode", "RtabLink", "RtabCamera", "rtabmap_format", "parse_transform",
-           "uncompress_data", "parse_calibration", "decode_rvl", "decode_depth", "MIN_VERSION", "RVL_SIGNATURE",
-           "GRAPH_LINK_TYPES"]
+           "uncompress_data", "parse_calibration", "decode_rvl", "decode_depth", "rvl_max_bytes", "MIN_VERSION",
+           "RVL_SIGNATURE", "GRAPH_LINK_TYPES"]
 
 MIN_VERSION = (0, 17, 0)
 """Oldest database schema read (``Admin.opt_ids`` / ``opt_poses`` exist from 0.17.0)."""
@@ -110,8 +115,12 @@ def check_rotation(T: NDArray[np.float64], where: str) -> None:
                                   f"expected a proper rotation to float32 precision ({_ROT_TOL_F32:g})")
 
 
-def uncompress_data(blob: bytes, where: str) -> NDArray[np.generic]:
-    """A ``compressData2`` blob: zlib stream, then int32 rows, cols and OpenCV type; as a (rows, cols*cn) array."""
+def uncompress_data(blob: bytes, where: str, max_bytes: int) -> NDArray[np.generic]:
+    """A ``compressData2`` blob: zlib stream, then int32 rows, cols and OpenCV type; as a (rows, cols*cn) array.
+
+    The trailer's size is checked against ``max_bytes`` before anything is inflated, and the stream
+    is inflated to at most that size (:func:`~psg_data.schemas._image_headers.inflate_bounded`).
+    """
     if len(blob) < 12:
         raise ConversionError(f"{where}: {len(blob)} bytes; expected a zlib stream and a 12-byte matrix trailer")
     rows, cols, cv_type = struct.unpack("<3i", blob[-12:])
@@ -120,14 +129,15 @@ def uncompress_data(blob: bytes, where: str) -> NDArray[np.generic]:
         raise ConversionError(f"{where}: matrix trailer rows {rows}, cols {cols}, type {cv_type}; expected a "
                               f"non-negative size and an OpenCV depth 0-6")
     dtype = np.dtype(_CV_DTYPES[depth]).newbyteorder("<")
-    try:
-        raw = zlib.decompress(blob[:-12])
-    except zlib.error as exc:
-        raise ConversionError(f"{where}: zlib data cut short or corrupt ({exc})") from None
     want = rows * cols * channels * dtype.itemsize
-    if len(raw) != want:
-        raise ConversionError(f"{where}: {len(raw)} bytes inflated; expected {want} for {rows}x{cols}x{channels} "
-                              f"{dtype.name}")
+    if want > max_bytes:
+        raise ConversionError(f"{where}: matrix trailer declares {rows}x{cols}x{channels} {dtype.name} ({want} "
+                              f"bytes); expected at most {max_bytes} bytes for this database (not inflated)")
+    try:
+        raw = inflate_bounded([memoryview(blob)[:-12]], want)
+    except ValueError as exc:
+        msg = f"zlib data cut short or corrupt ({exc})" if "early" in str(exc) or "damaged" in str(exc) else str(exc)
+        raise ConversionError(f"{where}: {msg}; the trailer says {rows}x{cols}x{channels} {dtype.name}") from None
     return np.frombuffer(raw, dtype).reshape(rows, cols * channels)
 
 
@@ -138,6 +148,9 @@ def _camera(fx: float, fy: float, cx: float, cy: float, w: int, h: int, local: N
         raise ConversionError(f"{where}: non-finite or negative values (fx {fx}, fy {fy}, cx {cx}, cy {cy}, "
                               f"{w}x{h}); expected a camera calibration")
     check_rotation(local, f"{where}: local transform")
+    if not all(np.isfinite(dist)):
+        raise ConversionError(f"{where}: distortion coefficients {list(dist)}: NaN or infinite; expected finite "
+                              f"values")
     if cx == 0.0 and w > 0:  # CameraModel: a zero principal point means the image centre
         cx = w / 2.0 - 0.5
     if cy == 0.0 and h > 0:
@@ -205,23 +218,45 @@ def parse_calibration(blob: bytes, version: tuple[int, ...], where: str) -> list
     return cams
 
 
+_RVL_BLOCK_WORDS = 1 << 16
+"""RVL words expanded to nibbles at a time (a few MB of temporaries)."""
+
+
+def _rvl_values(data: bytes | memoryview, limit: int, n_pixels: int, where: str) -> NDArray[np.int64]:
+    """The first ``limit`` VLE values of RVL ``data`` (fewer if it holds fewer), a block of words at a time."""
+    words = np.frombuffer(data, "<u4", len(data) // 4)
+    shifts = np.arange(28, -1, -4, dtype=np.uint32)
+    out: list[NDArray[np.int64]] = []
+    have, carry = 0, np.empty(0, np.uint8)
+    for k in range(0, len(words), _RVL_BLOCK_WORDS):
+        nib = np.concatenate([carry, ((words[k:k + _RVL_BLOCK_WORDS, None] >> shifts) & 0xF).astype(np.uint8).ravel()])
+        ends = np.flatnonzero(nib < 8)
+        starts = np.r_[0, ends[:-1] + 1] if ends.size else ends
+        carry = nib[ends[-1] + 1:] if ends.size else nib
+        if carry.size > 10 or (ends.size and int((ends - starts).max()) > 10):
+            raise ConversionError(f"{where}: RVL value longer than 32 bits; expected RVL-coded depth")
+        if not ends.size:
+            continue
+        pos = np.arange(ends[-1] + 1) - np.repeat(starts, ends - starts + 1)
+        out.append(np.add.reduceat((nib[: ends[-1] + 1] & 7).astype(np.int64) << (3 * pos), starts))
+        have += out[-1].size
+        if have >= limit:
+            break
+    if not out:
+        raise ConversionError(f"{where}: RVL data cut short (no complete value); expected {n_pixels} pixels")
+    return np.concatenate(out)[:limit]
+
+
 def decode_rvl(data: bytes | memoryview, n_pixels: int, where: str) -> NDArray[np.uint16]:
     """RVL-coded 16-bit pixels (runs of zeros / non-zeros, zig-zag deltas in 3-bit-nibble VLE words).
 
-    Vectorised: the nibbles of every 32-bit word (most significant first) give the VLE values at
-    once; only the runs are walked in Python, and the non-zero pixels are the running sum of the
-    deltas (uint16 arithmetic, as the codec's).
+    Vectorised: the nibbles of the 32-bit words (most significant first), a block of words at a
+    time, give the VLE values; only the runs are walked in Python, and the non-zero pixels are the
+    running sum of the deltas (uint16 arithmetic, as the codec's). Memory is bounded by the block and
+    by the ``3 * n_pixels + 2`` values an image can need (each run pair covers a pixel), whatever
+    the length of ``data``.
     """
-    words = np.frombuffer(data, "<u4", len(data) // 4)
-    nib = ((words[:, None] >> np.arange(28, -1, -4, dtype=np.uint32)) & 0xF).astype(np.int64).ravel()
-    ends = np.flatnonzero(nib < 8)
-    if ends.size == 0:
-        raise ConversionError(f"{where}: RVL data cut short (no complete value); expected {n_pixels} pixels")
-    starts = np.r_[0, ends[:-1] + 1]
-    pos = np.arange(ends[-1] + 1) - np.repeat(starts, ends - starts + 1)
-    if pos.max(initial=0) > 10:
-        raise ConversionError(f"{where}: RVL value longer than 32 bits; expected RVL-coded depth")
-    vals = np.add.reduceat((nib[: ends[-1] + 1] & 7) << (3 * pos), starts)
+    vals = _rvl_values(data, 3 * n_pixels + 2, n_pixels, where)
     runs, i, px, nv = [], 0, 0, vals.size
     while px < n_pixels:
         if i + 2 > nv:
@@ -247,32 +282,46 @@ def decode_rvl(data: bytes | memoryview, n_pixels: int, where: str) -> NDArray[n
     return out
 
 
-def decode_depth(blob: bytes, where: str) -> NDArray[np.uint16] | None:
+def rvl_max_bytes(n_pixels: int) -> int:
+    """Most bytes RVL codes ``n_pixels`` pixels in: at most one (zeros, non-zeros) pair of run lengths
+    (9 nibbles each below 2^27) and one delta (6 nibbles for 16 bits, zig-zagged) per pixel.
+    """
+    return 12 * n_pixels + 16
+
+
+def decode_depth(blob: bytes, where: str, size: tuple[int, int]) -> NDArray[np.uint16] | None:
     """A ``Data.depth`` blob that is not a 16-bit PNG, as uint16 millimetres (0 = invalid).
 
     Returns None for a 16-bit PNG (stored as is by the caller). RVL (``DEPTHRVL``) is decoded;
     an 8-bit 4-channel PNG is RTAB-Map's lossless float32 metres (``compressImage`` of a 32FC1
-    image), rounded to millimetres.
+    image), rounded to millimetres. Nothing is decoded before the declared size (RVL header, PNG
+    IHDR) is checked against the camera's ``size`` (width, height) and the pixel cap, and the length
+    of RVL data against what that many pixels can take.
 
     Raises:
-        ConversionError: an unknown or damaged depth encoding.
+        ConversionError: an unknown or damaged depth encoding, or a size that does not fit.
     """
     import cv2
-
-    from psg_data.schemas._image_headers import parse_image_header
 
     if blob[:8] == RVL_SIGNATURE:
         if len(blob) < 16:
             raise ConversionError(f"{where}: RVL header cut short ({len(blob)} bytes); expected 16")
         cols, rows = struct.unpack_from("<2I", blob, 8)
-        if cols * rows == 0 or cols * rows > 1 << 28:
-            raise ConversionError(f"{where}: RVL image of {cols}x{rows} pixels; expected a positive size")
+        problem = "a positive size is expected" if cols * rows == 0 else pixels_problem(cols, rows, size)
+        if problem:
+            raise ConversionError(f"{where}: RVL image of {cols}x{rows}: {problem}; not decoded")
+        if len(blob) - 16 > rvl_max_bytes(cols * rows):
+            raise ConversionError(f"{where}: RVL data of {len(blob) - 16} bytes for {cols}x{rows} pixels; expected "
+                                  f"at most {rvl_max_bytes(cols * rows)}; not decoded")
         return decode_rvl(memoryview(blob)[16:], cols * rows, where).reshape(rows, cols)
     try:
         info = parse_image_header(blob)
     except ValueError:
         raise ConversionError(f"{where}: neither a PNG nor RVL depth image (starts with {bytes(blob[:8]).hex()}); "
                               f"expected 16-bit PNG, RVL or 32-bit float depth") from None
+    problem = pixels_problem(info.width, info.height, size)
+    if problem:
+        raise ConversionError(f"{where}: {problem}; not decoded")
     if info.kind == "png" and info.bit_depth == 16 and info.channels == 1:
         return None
     if info.kind == "png" and info.bit_depth == 8 and info.channels == 4:
@@ -321,7 +370,9 @@ class RtabmapDatabase:
         if magic != _SQLITE_MAGIC:
             raise ConversionError(f"{self.where}: not an SQLite database (header {magic[:16]!r}); expected an "
                                   f"RTAB-Map database (rtabmap.db)")
-        uri = f"file:{quote(str(self.path.resolve()))}?mode=ro"
+        self._refuse_live_journal()
+        # immutable: SQLite takes no lock and creates no -wal / -shm / -journal file beside the input
+        uri = f"file:{quote(str(self.path.resolve()))}?mode=ro&immutable=1"
         try:
             self.con = sqlite3.connect(uri, uri=True, timeout=1.0, check_same_thread=False)
         except sqlite3.Error as exc:
@@ -332,6 +383,22 @@ class RtabmapDatabase:
         except BaseException:
             self.con.close()
             raise
+
+    def _refuse_live_journal(self) -> None:
+        """Refuse a database whose last transactions are in a journal beside it: opened ``immutable``,
+        SQLite would not read a write-ahead log (``-wal``) nor roll back a hot ``-journal``.
+        """
+        for suffix, why in (("-wal", "holds transactions not yet written into the database"),
+                            ("-journal", "means a transaction is being written (or was interrupted)")):
+            side = self.path.with_name(self.path.name + suffix)
+            try:
+                size = side.stat().st_size
+            except OSError:
+                continue
+            if size > 0:
+                raise ConversionError(f"{self.where}: database is locked by another writer: {side.name} {why}; close "
+                                      f"RTAB-Map (or the process writing it) and rerun (after a crash, opening the "
+                                      f"database once with sqlite3 applies {side.name})")
 
     def _rows(self, sql: str, what: str, args: tuple[object, ...] = ()) -> list[tuple[object, ...]]:
         """Every row of a query; an SQLite error (locked, malformed, ...) as a ConversionError, and so
@@ -393,8 +460,9 @@ class RtabmapDatabase:
             T = parse_transform(pose, f"{where}: Node.pose")
             if T is not None and not np.all(np.isfinite(T)):
                 raise ConversionError(f"{where}: Node.pose: NaN or infinite values; expected a finite 3x4 transform")
-            if not isinstance(stamp, (int, float)) or not np.isfinite(stamp):
-                raise ConversionError(f"{where}: Node.stamp {stamp!r}; expected a finite time in seconds")
+            if not isinstance(stamp, (int, float)) or not 0 <= float(stamp) * 1e9 <= STAMP_MAX_NS:
+                raise ConversionError(f"{where}: Node.stamp {stamp!r}; expected a time in seconds from 0 to "
+                                      f"{STAMP_MAX_NS / 1e9:.0f} (int64 nanoseconds)")
             out.append(RtabNode(int(nid), int(map_id), int(round(float(stamp) * 1e9)), T,
                                 None if label is None else str(label)))
         return out
@@ -434,8 +502,11 @@ class RtabmapDatabase:
         if row is None or not row[0] or not row[1]:
             return {}
         w_ids, w_poses = f"{self.where}: Admin.opt_ids", f"{self.where}: Admin.opt_poses"
-        ids = uncompress_data(_blob(row[0], w_ids) or b"", w_ids).ravel()
-        poses = uncompress_data(_blob(row[1], w_poses) or b"", w_poses)
+        # one pose per node or landmark (a landmark is a Link row): the matrices are no larger than that
+        count = self._rows("SELECT (SELECT COUNT(*) FROM Node) + (SELECT COUNT(*) FROM Link)", "Node, Link")
+        n = int(count[0][0]) if count else 0  # type: ignore[call-overload]
+        ids = uncompress_data(_blob(row[0], w_ids) or b"", w_ids, 4 * n).ravel()
+        poses = uncompress_data(_blob(row[1], w_poses) or b"", w_poses, 48 * n)
         if ids.dtype != np.int32 or poses.dtype != np.float32 or poses.size != 12 * ids.size:
             raise ConversionError(f"{self.where}: Admin.opt_poses: {poses.size} {poses.dtype} values for {ids.size} "
                                   f"{ids.dtype} ids; expected 12 float32 per int32 id")
