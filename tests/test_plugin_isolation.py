@@ -120,9 +120,9 @@ def test_each_broken_plugin_is_reported_and_the_others_are_scored(attacked: tupl
 def test_a_plugin_editing_the_training_arrays_changes_nobody_elses_score(site: Path, tmp_path: Path) -> None:
     alone = run(site, tmp_path / "alone", "--dataset", "persistence-benchmark", "-e", "last_seen")
     both = run(site, tmp_path / "both", "--dataset", "persistence-benchmark", "-e", "hostile_edits", "-e", "last_seen")
+    for m in ("mae", "balanced_accuracy", "f1"):  # main: last_seen MAE 0.1059 became 0.1070
+        assert both["rows"]["last_seen"][m]["mean"] == alone["rows"]["last_seen"][m]["mean"], m
     assert alone["rc"] == 0 and both["rc"] == 1
-    for m in ("mae", "balanced_accuracy", "f1"):
-        assert both["rows"]["last_seen"][m]["mean"] == alone["rows"]["last_seen"][m]["mean"]
     assert any("read-only" in m for m in both["errors"]["hostile_edits"])
 
 

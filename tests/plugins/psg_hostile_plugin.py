@@ -44,7 +44,7 @@ class _Filter(BaseFilter):
 
     def update_many(self, t_s: Any, y: Any) -> None:
         if self.mode == "edits" and np.size(t_s):
-            np.asarray(y)[...] = 1 - np.asarray(y)  # in place: the caller's array
+            np.asarray(y)[...] = 0  # in place: the caller's array (every observation made "absent")
         super().update_many(t_s, y)
 
     def get_state(self) -> dict[str, Any]:
