@@ -204,3 +204,38 @@ def test_built_ins_are_not_wrapped_and_keep_their_repair() -> None:
     out = Raw(("o", "r")).predict([1.0, 2.0])
     assert np.isnan(out[0]) and out[1] == 1.5
     assert isinstance(isolate(type("P", (), {"make_filter": None, "get_params": None})()), GuardedEstimator)
+
+
+def test_built_ins_never_write_into_the_arrays_they_are_handed() -> None:
+    """Read-only training streams, observations and query times: every built-in that can fit with its
+    defaults runs on them (so no built-in relies on editing what it is given)."""
+    from psg_data.estimators import EdgeStream, conformance_streams, get_estimator, list_estimators
+    from psg_data.errors import EstimatorError
+
+    def frozen(a: np.ndarray) -> np.ndarray:
+        b = np.array(a)
+        b.setflags(write=False)
+        return b
+
+    streams = []
+    for s in conformance_streams(days=3):
+        s = EdgeStream(s.edge, s.t_s, s.y)
+        s.t_s.setflags(write=False)
+        s.y.setflags(write=False)
+        streams.append(s)
+    ran = []
+    for name in [n for n in list_estimators() if not n.startswith("hostile_")]:
+        est = get_estimator(name)
+        try:
+            est.fit(streams, val_streams=streams, timezone="UTC")
+        except EstimatorError as exc:  # needs a setting (a model, a schedule) the defaults do not give
+            assert "read-only" not in str(exc), name
+            continue
+        for s in streams:
+            f = est.make_filter(s.edge)
+            f.update_many(frozen(s.t_s[:-1]), frozen(s.y[:-1]))
+            f.update(float(s.t_s[-1]), int(s.y[-1]))
+            p = f.predict(frozen(s.t_s[-1] + np.array([0.0, 3600.0, 86400.0])))
+            assert np.all((p >= 0) & (p <= 1)), name
+        ran.append(name)
+    assert {"perpetua_star", "perpetua", "fremen", "last_seen", "time_of_week_frequency"} <= set(ran), ran
