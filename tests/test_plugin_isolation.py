@@ -29,8 +29,8 @@ EXPECTED = {
     "make_filter_none": r"make_filter returned NoneType, not a filter",
     "predict_raises": r"predict raised RuntimeError: predict boom",
     "wrong_shape": r"predict returned (\d+) values for (\d+) times",
-    "nan": r"predict returned NaN",
-    "out_of_range": r"predict returned 1\.5 outside \[0, 1\]",
+    "nan": r"(predict returned|prediction is) NaN",  # persistence: "prediction is", with the edge and time
+    "out_of_range": r"(predict returned|prediction is) 1\.5 outside \[0, 1\]",
     "edits": r"raised ValueError: assignment destination is read-only",
     "exits": r"fit called sys\.exit\(0\)",
 }

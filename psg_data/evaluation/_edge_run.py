@@ -198,9 +198,9 @@ def run_edge(name: str, seed: int, est: PersistenceEstimator, job: EdgeJob, cfg:
     try:
         p, last = _predictions(f, job, cfg, at)
     except PluginError as e:
-        if e.invalid:  # an invalid value: the stage "prediction", at the time of the first bad value
-            t_bad = e.t_s if e.t_s is not None else at.t
-            return result("error"), [], [issue("prediction", t_bad, f"{e.stage} {e.detail}")], None
+        if e.invalid and e.t_s is not None:  # NaN or out of range: stage "prediction", at the first bad time
+            msg = "prediction is " + e.detail.removeprefix("returned ")
+            return result("error"), [], [issue("prediction", e.t_s, msg)], None
         return result("error"), [], [issue(at.stage, at.t, str(e))], None
     except Exception as e:  # noqa: BLE001
         what = "update with a test observation" if at.stage == "update" else "predict"
