@@ -70,18 +70,21 @@ def check_estimators(specs: list[EstimatorSpec]) -> None:
     line, and not on every edge of the run.
     """
     from psg_data.estimators import get_estimator
+    from psg_data.estimators._guard import guarded_call, isolate
     from psg_data.estimators._params import declared
 
     for spec in specs:
-        try:
-            est = get_estimator(spec.name, **dict(spec.settings))
+        try:  # a plugin's __init__ or get_params that raises or exits: one line (guarded_call)
+            est = guarded_call(spec.name, "__init__", lambda s=spec: get_estimator(s.name, **dict(s.settings)),
+                               passthrough=(EstimatorError, TypeError))
+            guarded_call(spec.name, "get_params", est.get_params)
         except EstimatorError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: {exc}") from None
         except TypeError as exc:
             raise EstimatorError(f"--estimator {spec.label!r}: bad settings ({exc})") from None
         undeclared = [k for k, _ in spec.settings if k not in declared(est)]
         if undeclared:
-            _trial_fit(spec, est, undeclared)
+            _trial_fit(spec, isolate(est, spec.label), undeclared)
 
 
 def _trial_fit(spec: EstimatorSpec, est: Any, undeclared: list[str]) -> None:

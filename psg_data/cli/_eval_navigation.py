@@ -9,7 +9,7 @@ import click
 
 from psg_data.cli._eval_provenance import provenance
 
-__all__ = ["run_navigation_task", "run_doors_task", "navigation_options", "door_task_options"]
+__all__ = ["run_navigation_task", "run_doors_task", "navigation_options", "door_task_options", "print_problems"]
 
 
 def navigation_options(protocol: str, *, labels: str, seeds: list[int], queries: int | None, setting: str,
@@ -99,7 +99,7 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
     if table_format == "text":
         click.echo("")
     print_results(results, fmt=table_format)
-    return True
+    return print_problems(results.errors)
 
 
 def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Path, no_plots: bool,
@@ -116,4 +116,13 @@ def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Pat
     if table_format == "text":
         click.echo("")
     print_results(results, fmt=table_format)
-    return True
+    return print_problems(results.errors)
+
+
+def print_problems(errors: list[dict[str, Any]]) -> bool:
+    """List the estimators' failures on stderr (one ``error:`` line each, at most 20); True when there is none."""
+    if errors:
+        click.echo(f"\n{len(errors)} problem(s) (see results.json 'errors'):", err=True)
+        for e in errors[:20]:
+            click.echo(f"error: {e['message']}", err=True)
+    return not errors

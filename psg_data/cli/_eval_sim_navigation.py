@@ -93,7 +93,9 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
 
         records, outs = run_sim_navigation(paths, methods, settings, proto, labels=labels, label_seed=label_seed,
                                            executor=executor, progress=progress)
-    names = list(methods)
+    errors = [e for sc in proto.scenes for e in outs[sc].get("errors", [])]
+    names = _scored(methods, errors)
+    records = records[records["method"].isin(names)] if len(records) else records
     per_scene, summary = sim_summary(records, names)
     seconds = round(time.perf_counter() - t0, 2)
     config = {"protocol": proto.name, **proto.to_dict(), "labels": labels, "label_seed": label_seed,
@@ -104,7 +106,7 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     info = provenance({"task": "navigation", "dataset_label": "navigation-benchmark", "dataset": str(root),
                        "seconds": seconds, "jobs": jobs})
     text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths))
-    _write(out, records, per_scene, summary, config, roles, info, text)
+    _write(out, records, per_scene, summary, config, roles, info, text, errors)
     if not no_plots:
         plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
                       title=f"{proto.name}, labels {labels}: overall SR per scene (scene = house seed)")
@@ -116,9 +118,22 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
         from psg_data.evaluation._navigation_report import navigation_results
         from psg_data.evaluation._tables import print_results
 
-        print_results(navigation_results(_result(records, per_scene, summary, config), roles=roles, info=info),
-                      fmt=table_format)
-    return True
+        print_results(navigation_results(_result(records, per_scene, summary, config, errors), roles=roles,
+                                         info=info), fmt=table_format)
+    from psg_data.cli._eval_navigation import print_problems
+
+    return print_problems(errors)
+
+
+def _scored(methods: dict[str, str], errors: list[dict[str, Any]]) -> list[str]:
+    """The methods that ran on every scene (a plugin that failed on one is left out of every table)."""
+    from psg_data.errors import EvaluationError
+
+    failed = {e["estimator"] for e in errors}
+    names = [n for n in methods if n not in failed]
+    if not names:
+        raise EvaluationError("navigation: no method could be scored: " + "; ".join(e["message"] for e in errors))
+    return names
 
 
 def pick_disagreement(records: Any, labels: list[str]) -> int | None:
@@ -164,20 +179,22 @@ def _maps(out: Path, path: Path, proto: Any, raw: dict[str, Any], records: Any, 
                    title=title)
 
 
-def _result(records: Any, per_scene: Any, summary: Any, config: dict[str, Any]) -> Any:
+def _result(records: Any, per_scene: Any, summary: Any, config: dict[str, Any],
+            errors: list[dict[str, Any]] | None = None) -> Any:
     from psg_data.navigation import NavigationResult
 
-    return NavigationResult(records, per_scene, summary, {}, config)
+    return NavigationResult(records, per_scene, summary, {}, config, errors=list(errors or []))
 
 
 def _write(out: Path, records: Any, per_scene: Any, summary: Any, config: dict[str, Any],
-           roles: dict[str, tuple[str, str]], info: dict[str, Any], text: str) -> None:
+           roles: dict[str, tuple[str, str]], info: dict[str, Any], text: str,
+           errors: list[dict[str, Any]] | None = None) -> None:
     """results.json / table.txt / summary.csv (the results schema), records.parquet, per_seed.csv (per scene),
     results.csv, sim_table.txt (the paper-shaped table) and config.json.
     """
     from psg_data.evaluation._navigation_report import write_navigation_results
     from psg_data.writers._safe_output import write_atomically
 
-    write_navigation_results(_result(records, per_scene, summary, config), out, roles=roles, info=info)
+    write_navigation_results(_result(records, per_scene, summary, config, errors), out, roles=roles, info=info)
     write_atomically(out / "sim_table.txt", lambda tmp: tmp.write_text(text))
     write_atomically(out / "sim_config.json", lambda tmp: tmp.write_text(json.dumps(config, indent=1, default=str)))

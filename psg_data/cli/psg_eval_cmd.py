@@ -26,6 +26,9 @@ __all__ = ["main"]
 log = logging.getLogger(__name__)
 
 DEFAULT_ESTIMATOR = "perpetua_star"
+ESTIMATOR_TIMEOUT_S = 600.0
+"""Default ``--estimator-timeout``, seconds: ``psg_data.estimators._guard.DEFAULT_TIMEOUT_S`` (a copy: --help
+stays light)."""
 TABLE_FORMATS = ("text", "markdown", "latex")
 """``--format`` of the printed table (``psg_data.evaluation._table_formats``)."""
 COMPARE_FORMATS = ("text", "csv", "json", "markdown", "latex")
@@ -165,6 +168,9 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 @click.option("--rerun", "rerun_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
               metavar="FILE.rrd", help="Also save every estimator's beliefs over time for the scored edges (first "
                                        "seed) as a Rerun recording (needs psg-data[viewer]).")
+@click.option("--estimator-timeout", type=click.FloatRange(min=0), default=ESTIMATOR_TIMEOUT_S, show_default=True,
+              metavar="SECONDS", help="Time limit of one call into a plugin estimator (fit, predict, ...; 0: none): "
+                                      "a plugin that runs longer is reported and the other estimators are scored.")
 @click.option("--list-estimators", is_flag=True, help="List registered estimators (built-ins and plugins) and exit.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.option("--format", "table_format", type=click.Choice(TABLE_FORMATS), default="text", show_default=True,
@@ -179,8 +185,8 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
          door_belief: str | None, seeds: tuple[int, ...] | None, lab_seeds: tuple[int, ...] | None,
          label_seed: int, queries: int | None, delta: str, reachable_only: bool, out: Path | None, overwrite: bool,
          quick: bool,
-         jobs: int, scheduler: str | None, rerun_file: Path | None, list_estimators: bool, no_plots: bool,
-         table_format: str, quiet: bool) -> None:
+         jobs: int, scheduler: str | None, rerun_file: Path | None, estimator_timeout: float, list_estimators: bool,
+         no_plots: bool, table_format: str, quiet: bool) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1) next to a ceiling, baselines
     and chance, with a stated interval; or navigation (SR, SPL, AR, DIST) and doors with them.
 
@@ -208,6 +214,9 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     if ctx.invoked_subcommand is not None:
         return
     setup_logging(quiet)
+    from psg_data.estimators._guard import estimator_timeout_set
+
+    ctx.with_resource(estimator_timeout_set(estimator_timeout))  # every plugin call limited, in workers too
     from psg_data.cli._eval_checks import (
         check_builtin_task,
         check_lab_seeds,

@@ -136,9 +136,19 @@ class BaseFilter:
     Subclasses implement ``_update_many(t, y)`` (observations already validated: finite times in
     seconds, non-decreasing and not before the last one, values 0/1 as int8), ``_predict(t)`` (a
     1-D array of times already clamped to >= the last observation time; return P(present) in
-    [0, 1], NaN is read as 0.5) and ``get_state()`` (a JSON-serialisable dict, restored by the
-    estimator's ``filter_from_state``; include ``last_t_s`` and restore it into ``_last_t``).
+    [0, 1]: a built-in's NaN is read as 0.5 and values are clipped; a plugin's values are returned
+    unrepaired, and the tasks report NaN or a value out of range as its error) and ``get_state()``
+    (a JSON-serialisable dict, restored by the estimator's ``filter_from_state``; include
+    ``last_t_s`` and restore it into ``_last_t``).
     """
+
+    _repairs_predictions: ClassVar[bool] = True
+    """Built-in filters read a NaN of ``_predict`` as 0.5 and clip to [0, 1]; a plugin's (a subclass
+    defined outside psg_data) values are not repaired (psg_data.estimators._guard checks them)."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        cls._repairs_predictions = cls.__module__ == "psg_data" or cls.__module__.startswith("psg_data.")
 
     def __init__(self, edge: EdgeKey) -> None:
         self.edge = edge
@@ -195,6 +205,8 @@ class BaseFilter:
         if self._last_t is not None:
             t = np.maximum(t, self._last_t)
         out = np.asarray(self._predict(t.reshape(-1)), dtype=np.float64).reshape(t.shape)
+        if not self._repairs_predictions:
+            return out  # a plugin's values as they are: psg-eval checks them and reports NaN or out of range
         return np.clip(np.nan_to_num(out, nan=0.5), 0.0, 1.0)
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:  # pragma: no cover

@@ -138,7 +138,8 @@ def door_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None
         tables.append(_objects_table(res.objects))
     return EvalResults("doors", tables, config={**o.to_dict(), "setting_text": f"doors, {o.setting}"},
                        info=dict(info or {}), interval={"method": s.method if s else "none", "unit": "door queries",
-                                                        "n": s.n if s else 0, "confidence": 0.95})
+                                                        "n": s.n if s else 0, "confidence": 0.95},
+                       errors=list(getattr(res, "errors", None) or []))
 
 
 def _objects_table(objects: Any) -> ResultTable:

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from psg_data.estimators._base import EdgeKey, PersistenceEstimator
+from psg_data.estimators._guard import PluginError, build
 from psg_data.evaluation._persistence_types import (
     SAMPLE_METRICS,
     TIME_METRICS,
@@ -161,6 +162,13 @@ def _breakdowns(name: str, seed: int, job: EdgeJob, y: NDArray[np.int64], p: NDA
     return rows
 
 
+def _failure(what: str, e: Exception) -> str:
+    """What a call failed with: a :class:`PluginError`'s own words (the plugin's call named), else
+    ``what`` raised the exception.
+    """
+    return str(e) if isinstance(e, PluginError) else f"{what} raised {type(e).__name__}: {e}"
+
+
 EdgeOutcome = tuple[EdgeResult, list[BreakdownRow], list[EvaluationIssue], PredictionTrace | None]
 
 
@@ -184,14 +192,19 @@ def run_edge(name: str, seed: int, est: PersistenceEstimator, job: EdgeJob, cfg:
             f.update_many(job.hist_t, job.hist_y)
     except Exception as e:  # noqa: BLE001 - plugin failures are reported, not raised
         t0 = float(job.hist_t[0]) if job.hist_t.size else None
-        msg = f"filter creation/update with the training history raised {type(e).__name__}: {e}"
+        msg = _failure("filter creation/update with the training history", e)
         return result("error"), [], [issue("history", t0, msg)], None
     at = _Progress()
     try:
         p, last = _predictions(f, job, cfg, at)
+    except PluginError as e:
+        if e.invalid and e.t_s is not None:  # NaN or out of range: stage "prediction", at the first bad time
+            msg = "prediction is " + e.detail.removeprefix("returned ")
+            return result("error"), [], [issue("prediction", e.t_s, msg)], None
+        return result("error"), [], [issue(at.stage, at.t, str(e))], None
     except Exception as e:  # noqa: BLE001
         what = "update with a test observation" if at.stage == "update" else "predict"
-        return result("error"), [], [issue(at.stage, at.t, f"{what} raised {type(e).__name__}: {e}")], None
+        return result("error"), [], [issue(at.stage, at.t, _failure(what, e))], None
     bad = ~np.isfinite(p) | (p < 0.0) | (p > 1.0)
     if np.any(bad):
         i = int(np.argmax(bad))
@@ -220,10 +233,16 @@ def run_chunk(name: str, seed: int, est: PersistenceEstimator, jobs: Sequence[Ed
 
 def fit_estimator(name: str, factory: Any, seed: int, train: Sequence[Any], val: Sequence[Any] | None,
                   timezone: str) -> tuple[PersistenceEstimator | None, str | None]:
-    """Build with ``random_state=seed`` and fit; (estimator, None) or (None, the error)."""
+    """Build with ``random_state=seed`` and fit; (estimator, None) or (None, the error).
+
+    A plugin is isolated (:func:`psg_data.estimators._guard.isolate`): its calls are guarded, its
+    arrays read-only, its predictions checked.
+    """
     try:
-        est = factory(random_state=seed)
+        est = build(name, factory, random_state=seed)
         est.fit(train, val_streams=val, timezone=timezone)
         return est, None
+    except PluginError as e:
+        return None, str(e)
     except Exception as e:  # noqa: BLE001
-        return None, f"{type(e).__name__}: {e}"
+        return None, f"fit raised {type(e).__name__}: {e}"

@@ -55,11 +55,12 @@ def dataset_hints(ds: Any) -> dict[str, Any]:
 def with_hints(spec: EstimatorSpec, hints: dict[str, Any]) -> EstimatorSpec:
     """``spec`` plus the task's hints that the estimator accepts and the user did not set."""
     from psg_data.estimators import get_estimator
+    from psg_data.estimators._guard import build
 
     if not hints:
         return spec
-    try:
-        params = get_estimator(spec.name, **dict(spec.settings)).get_params()
+    try:  # guarded: a plugin's failure here is reported by the task, not raised
+        params = build(spec.name, lambda: get_estimator(spec.name, **dict(spec.settings))).get_params()
     except EstimatorError:
         return spec
     given = dict(spec.settings)

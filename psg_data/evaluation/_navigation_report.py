@@ -189,7 +189,8 @@ def navigation_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None 
     s = next((v for r in main.rows for v in r.values.values() if v.method != "none"), None)
     interval = ({"method": s.method, "unit": "queries", "n": s.n, "confidence": 0.95, "text": main.notes[-1]}
                 if s else {})
-    return EvalResults("navigation", tables, config=dict(res.config), info=dict(info or {}), interval=interval)
+    return EvalResults("navigation", tables, config=dict(res.config), info=dict(info or {}), interval=interval,
+                       errors=list(getattr(res, "errors", None) or []))
 
 
 def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,

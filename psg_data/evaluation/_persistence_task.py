@@ -53,6 +53,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream, PersistenceEstimator
+from psg_data.estimators._guard import build, guarded_call
 from psg_data.evaluation._dataset_task import PersistenceTask
 from psg_data.evaluation._edge_run import (
     EdgeJob,
@@ -121,11 +122,11 @@ def seeds_for(factory: EstimatorFactory, seeds: tuple[int, ...] | str) -> tuple[
     """The seeds an estimator is fitted with (see :class:`PersistenceOptions` ``seeds``)."""
     wanted: tuple[int, ...] = AUTO_SEEDS if seeds == "auto" else tuple(int(s) for s in seeds)
     try:
-        est = factory(random_state=wanted[0])
-        depends = getattr(est, "fit_depends_on_seed", None)
+        est = build("factory", factory, random_state=wanted[0])
+        depends = guarded_call("factory", "fit_depends_on_seed", getattr, est, "fit_depends_on_seed", None)
         if depends is None:
             depends = "random_state" in est.get_params()
-    except Exception:  # noqa: BLE001 - a broken factory is reported by the fit
+    except Exception:  # noqa: BLE001 - a broken factory is reported by the fit (guarded: SystemExit too)
         depends = True
     return wanted if depends else wanted[:1]
 
@@ -309,7 +310,7 @@ class _Run:
 
     def fit_failed(self, name: str, seed: int, msg: str) -> None:
         self.fit_issues[(name, seed)] = EvaluationIssue(name, seed, None, None, "fit", None,
-                                                        f"estimator {name!r} seed {seed}: fit raised {msg}")
+                                                        f"estimator {name!r} seed {seed}: {msg}")
         for i, j in enumerate(self.jobs):
             self.outcomes[(name, seed, i)] = (EdgeResult(name, seed, j.edge[0], j.edge[1], "error", 0, 0.0,
                                                          int(j.hist_t.size), int(j.test_t.size), nan_metrics(),

@@ -16,6 +16,7 @@ import numpy as np
 
 from psg_data.errors import EvaluationError, NotFittedError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream
+from psg_data.estimators._guard import GuardedEstimator, PluginError, guarded_call, isolate
 from psg_data.estimators._simple import ConstantFilter
 
 __all__ = ["resolve_estimator", "fresh_estimator", "fit_edge_filters", "fit_door_filters", "door_open_probabilities",
@@ -25,20 +26,25 @@ log = logging.getLogger(__name__)
 
 
 def resolve_estimator(spec: Any, settings: Mapping[str, Any] | None = None) -> Any:
-    """An estimator instance: ``spec`` itself, or the registry estimator named ``spec`` with ``settings``.
+    """An estimator instance: ``spec`` itself, or the registry estimator named ``spec`` with ``settings``;
+    a plugin isolated (:func:`psg_data.estimators._guard.isolate`: every call guarded).
 
     Raises:
-        EstimatorError: unknown name or invalid settings.
+        EstimatorError: unknown name or invalid settings. PluginError: a plugin's ``__init__`` failed.
     """
     if isinstance(spec, str):
         from psg_data.estimators._registry import get_estimator
 
-        return get_estimator(spec, **dict(settings or {}))
-    return spec
+        kw = dict(settings or {})
+        return isolate(guarded_call(spec, "__init__", lambda: get_estimator(spec, **kw), passthrough=(PsgDataError,)),
+                       spec)
+    return isolate(spec) if hasattr(spec, "make_filter") and hasattr(spec, "get_params") else spec
 
 
 def fresh_estimator(estimator: Any) -> Any:
     """An unfitted copy of an estimator with the same settings (scikit-learn's ``clone``)."""
+    if isinstance(estimator, GuardedEstimator):
+        return estimator.fresh()
     try:
         params = estimator.get_params(deep=False)
     except TypeError:  # a plugin whose get_params takes no ``deep``
@@ -81,6 +87,8 @@ def fit_edge_filters(estimator: Any, streams: Sequence[EdgeStream], *, timezone:
         kw = {"val_streams": val_streams} if val_streams is not None else {}
         try:
             est.fit(streams, timezone=timezone, **kw)
+        except PluginError:
+            raise
         except PsgDataError as exc:
             raise EvaluationError(f"{type(est).__name__}: fit on the map observations failed ({exc})") from exc
     out: dict[EdgeKey, EdgeFilter] = {}
@@ -131,10 +139,14 @@ def fit_door_filters(estimator: Any, streams: Sequence[EdgeStream], door_ids: Se
     if seen:
         try:
             est = resolve_estimator(est, settings)
+        except PluginError:
+            raise
         except PsgDataError as exc:
             raise EvaluationError(f"estimator {estimator!r}: {exc}") from exc
         try:
             est.fit(seen, timezone=timezone)
+        except PluginError:
+            raise
         except PsgDataError as exc:
             raise EvaluationError(f"{type(est).__name__}: fit on the door streams failed ({exc})") from exc
     for d in door_ids:

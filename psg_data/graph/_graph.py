@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError, GraphError, NotFittedError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream
+from psg_data.estimators._guard import PluginError
 from psg_data.graph._fit import fit_door_filters, fit_edge_filters, fresh_estimator, resolve_estimator
 from psg_data.graph._layout import SceneLayout
 from psg_data.graph._snapshot import Ranking, Snapshot, ranking
@@ -191,6 +192,8 @@ class PredictiveGraph:
         """
         try:
             est = resolve_estimator(estimator, settings)
+        except PluginError:
+            raise
         except PsgDataError as exc:
             raise EvaluationError(f"estimator {estimator!r}: {exc}") from exc
         ids = sorted(set(self.layout.doors) | {s.edge[0] for s in door_streams}) if door_ids is None else door_ids

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -168,6 +168,8 @@ class DoorTaskResult:
         world: the door world; first: the first seed's :class:`DoorNavigationResult`.
         objects: object navigation with the doors each method plans with (None when off).
         options: the settings.
+        errors: per failed plugin estimator its failure (``estimator``, ``stage``, ``message``): its
+            rows are left out, the other methods are scored.
     """
 
     summary: Any
@@ -177,6 +179,7 @@ class DoorTaskResult:
     first: Any
     objects: Any
     options: DoorTaskOptions
+    errors: list[dict[str, Any]] = field(default_factory=list)
 
     def format_table(self) -> str:
         """The door table and the objects table as plain text (:func:`psg_data.evaluation.door_results`)."""
@@ -214,9 +217,11 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
 
         world.hours = parse_windows(o.windows, world.timezone).hours[0]
     tables, records, first = [], [], None
+    errors: list[dict[str, Any]] = []
     for seed in o.seeds:
         res = run_door_navigation(world, estimators, n_queries=o.n_queries, seed=seed, threshold=o.threshold,
                                   settings=settings, no_path=o.no_path, rules=o.rules)
+        errors += [e for e in res.errors if e not in errors]
         tables.append(res.table.assign(seed=seed))
         records.append(res.records.assign(seed=seed))
         if first is None:
@@ -224,9 +229,12 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
     per_seed = pd.concat(tables, ignore_index=True)
     recs = pd.concat(records, ignore_index=True)
     summary = _door_summary(per_seed, recs, len(o.seeds))
-    obj_est = [e for e in estimators if objects_for is None or e[0] in objects_for]
+    failed = {e["estimator"] for e in errors}
+    obj_est = [e for e in estimators if (objects_for is None or e[0] in objects_for) and e[0] not in failed]
     objects = _objects_behind_doors(dataset, obj_est, o, settings) if o.objects and obj_est else None
-    return DoorTaskResult(summary, per_seed, recs, world, first, objects, o)
+    if objects is not None:
+        errors += [e for e in objects.errors if e not in errors]
+    return DoorTaskResult(summary, per_seed, recs, world, first, objects, o, errors)
 
 
 def _door_summary(per_seed: Any, records: Any, n_seeds: int) -> Any:

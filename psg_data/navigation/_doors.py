@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeStream
+from psg_data.estimators._guard import PluginError
 from psg_data.graph._fit import door_open_probabilities, fit_door_filters
 from psg_data.graph._graph import PredictiveGraph
 from psg_data.graph._layout import SceneLayout
@@ -364,6 +365,8 @@ class DoorNavigationResult:
         queries: the queries.
         episodes: method -> episodes (same order as ``queries``).
         p_open: method -> per-query P(open) dicts.
+        errors: per failed plugin estimator its failure (``estimator``, ``stage``, ``message``); its
+            rows are left out, the other methods are scored.
     """
 
     table: Any
@@ -371,6 +374,7 @@ class DoorNavigationResult:
     queries: list[DoorQuery]
     episodes: dict[str, list[DoorEpisode]]
     p_open: dict[str, list[dict[str, float]]]
+    errors: list[dict[str, Any]] = field(default_factory=list)
 
     def format_table(self) -> str:
         """The results as a plain-text table."""
@@ -382,9 +386,11 @@ class DoorNavigationResult:
 
 
 def _door_methods(world: DoorWorld, estimators: Sequence[Any], baselines: Sequence[str], unseen_prior: float,
-                  settings: Mapping[str, Mapping[str, Any]] | None
+                  settings: Mapping[str, Mapping[str, Any]] | None, errors: list[dict[str, Any]]
                   ) -> list[tuple[str, Callable[[DoorQuery], dict[str, float]], list[str]]]:
-    """(label, query -> P(open) per door, doors without observations) for every method."""
+    """(label, query -> P(open) per door, doors without observations) for every method; a plugin
+    whose fit fails is left out and its failure appended to ``errors``.
+    """
     bad = [b for b in baselines if b not in DOOR_BASELINES]
     if bad:
         raise EvaluationError(f"baselines {bad}: expected any of {DOOR_BASELINES}")
@@ -397,9 +403,13 @@ def _door_methods(world: DoorWorld, estimators: Sequence[Any], baselines: Sequen
             methods.append(("oracle", lambda q: {d: float(q.doors_open.get(d, True)) for d in doors}, []))
     for e in estimators:
         label, est = (e if isinstance(e, tuple) else (e if isinstance(e, str) else type(e).__name__, e))
-        graph = PredictiveGraph(SceneLayout(timezone=world.timezone), {}).with_door_model(
-            est, world.train_streams, settings=(settings or {}).get(str(label)), unseen_prior=unseen_prior,
-            door_ids=doors)
+        try:
+            graph = PredictiveGraph(SceneLayout(timezone=world.timezone), {}).with_door_model(
+                est, world.train_streams, settings=(settings or {}).get(str(label)), unseen_prior=unseen_prior,
+                door_ids=doors)
+        except PluginError as exc:
+            errors.append(exc.record(str(label)))
+            continue
         unseen = [d for d, k in graph.door_kinds.items() if k == "prior"]
         if unseen:
             log.info("%s: doors without training observations use P(open) = %s: %s", label, unseen_prior, unseen)
@@ -478,8 +488,9 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
     bad = [r for r in rules if r not in DOOR_RULES]
     if bad or not rules:
         raise EvaluationError(f"rules {list(rules)}: expected one or more of {DOOR_RULES}")
+    errors: list[dict[str, Any]] = []
     runs = []
-    for label, belief, unseen in _door_methods(world, estimators, baselines, unseen_prior, settings):
+    for label, belief, unseen in _door_methods(world, estimators, baselines, unseen_prior, settings, errors):
         if label in DOOR_BASELINES:
             runs.append((label, "threshold", belief, unseen))
             continue
@@ -487,12 +498,15 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
                  for r in rules]
     open_blocked = [_open_plan_blocked(world.cache, q) for q in qs]
     for label, rule, belief, unseen in runs:
-        eps, ps = [], []
-        for q, ob in zip(qs, open_blocked):
-            p = belief(q)
+        eps: list[DoorEpisode] = []
+        try:
+            ps = [belief(q) for q in qs]
+        except PluginError as exc:
+            errors.append(exc.record(label))
+            continue
+        for q, ob, p in zip(qs, open_blocked, ps):
             ep = run_door_episode(world.cache, q, p, threshold=threshold, method=label, no_path=no_path, rule=rule)
             eps.append(ep)
-            ps.append(p)
             recs.append({"estimator": label, "rule": rule, "query_id": q.query_id, "t_s": q.t_s, "goal": q.goal,
                          "success": ep.success, "first_plan_blocked": ep.first_plan_blocked, "walked_m": ep.walked_m,
                          "shortest_m": ep.shortest_m, "extra_m": ep.extra_m, "n_replans": ep.n_replans,
@@ -501,7 +515,7 @@ def run_door_navigation(world: DoorWorld, estimators: Sequence[Any] = ("perpetua
                          **{f"open:{d}": bool(q.doors_open.get(d, True)) for d in doors}})
         episodes[label], probs[label] = eps, ps
         rows.append(_door_row(label, eps, unseen))
-    return DoorNavigationResult(pd.DataFrame(rows), pd.DataFrame(recs), qs, episodes, probs)
+    return DoorNavigationResult(pd.DataFrame(rows), pd.DataFrame(recs), qs, episodes, probs, errors)
 
 
 # -- the evaluation world ---------------------------------------------------------------------------

@@ -82,7 +82,7 @@ def run_navigation_job(specs: Sequence[EstimatorSpec], dataset: Path, options: A
     full = {**(info or {}), "seconds": round(time.perf_counter() - t0, 2), **res.config}
     write_navigation_results(res, out, roles=roles, info=full)
     if plots and res.env is not None:
-        _maps(res, out, list(methods))
+        _maps(res, out, [m for m in methods if m in res.config["methods"]])  # failed plugins left out
         if res.sweep is not None:
             plot_delta_sweep(res, out / "delta_sweep.png", roles=roles)
     return res, navigation_results(res, roles=roles, info=full)
@@ -144,6 +144,6 @@ def run_door_job(specs: Sequence[EstimatorSpec], dataset: Path, options: Any, ou
     res = run_door_task(dataset, estimators, options, settings=settings or None, objects_for=objects_for)
     full = {**(info or {}), **options.to_dict(), "world": res.world.info, "seconds": round(time.perf_counter() - t0, 2)}
     results = write_door_results(res, out, roles=roles, info=full)
-    if plots and specs:
+    if plots and specs and specs[0].label not in {e["estimator"] for e in res.errors}:
         _door_figures(res, specs[0].label, specs[0], out)
     return res, results

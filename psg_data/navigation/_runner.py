@@ -26,6 +26,7 @@ import numpy as np
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeFilter, EdgeKey
+from psg_data.estimators._guard import PluginError
 from psg_data.evaluation._navigation_scores import ABSENT_RULES, METRICS, score_records, summarise_navigation
 from psg_data.graph._fit import fit_edge_filters, fresh_estimator, resolve_estimator
 from psg_data.graph._graph import PredictiveGraph
@@ -87,7 +88,7 @@ def build_filters(env: NavigationEnv, spec: MethodSpec, *, settings: Mapping[str
     if isinstance(spec, Mapping):
         return dict(spec)
     if hasattr(spec, "make_filter"):
-        return fit_edge_filters(spec, env.map_streams, timezone=env.timezone)
+        return fit_edge_filters(resolve_estimator(spec), env.map_streams, timezone=env.timezone)
     if callable(spec):
         return dict(spec(env))
     raise EvaluationError("method spec: expected a name, estimator, filter mapping or callable, got "
@@ -139,6 +140,8 @@ class NavigationResult:
         trails: (method, seed, query_id) -> flat cell indices walked (at ``delta``).
         beliefs: (method, seed, query_id) -> receptacle beliefs at the query time.
         sweep: per (method, delta) the summary of every delta run (``delta_sweep``; None without).
+        errors: per failed plugin method its failure (``estimator``, ``stage``, ``message``): the
+            method is left out of the records and tables, the others are scored.
     """
 
     records: Any
@@ -152,6 +155,7 @@ class NavigationResult:
     trails: dict[tuple[str, int, int], Any] = field(default_factory=dict, repr=False)
     beliefs: dict[tuple[str, int, int], dict[str, float]] = field(default_factory=dict, repr=False)
     sweep: Any = None
+    errors: list[dict[str, Any]] = field(default_factory=list)
 
     def format_table(self, *, layout: str = "auto", roles: Mapping[str, tuple[str, str]] | None = None) -> str:
         """The paper-shaped table as plain text (:func:`psg_data.evaluation.navigation_results`, rendered):
@@ -335,6 +339,22 @@ class _MethodRuns:
         self.beliefs: dict[tuple[str, int, int], dict[str, float]] = {}
         self.timings: dict[str, float] = {}
         self.fitted: dict[Any, PredictiveGraph] = {}
+        self.errors: list[dict[str, Any]] = []
+
+    def guarded(self, name: str, spec: MethodSpec, settings: Mapping[str, Any] | None, mode: str | None) -> bool:
+        """:meth:`method`; a plugin's failure is recorded and its partial rows dropped (False)."""
+        n = len(self.rows)
+        try:
+            self.method(name, spec, settings, mode)
+            return True
+        except PluginError as e:
+            del self.rows[n:]
+            for d in (self.trails, self.beliefs):
+                for k in [k for k in d if k[0] == name]:
+                    del d[k]
+            self.errors.append(e.record(name))
+            log.error("%s", self.errors[-1]["message"])
+            return False
 
     def _graph(self, spec: MethodSpec, settings: Mapping[str, Any] | None) -> PredictiveGraph:
         key = (spec, repr(sorted((settings or {}).items()))) if isinstance(spec, str) else id(spec)
@@ -466,9 +486,13 @@ def run_navigation(
     run = _MethodRuns(env, cache, opts, cfg, qsets, hook)
     for name, spec in methods:
         t0 = time.perf_counter()
-        run.method(name, spec, (estimator_settings or {}).get(name), modes.get(name))
+        if not run.guarded(name, spec, (estimator_settings or {}).get(name), modes.get(name)):
+            names.remove(name)
+            continue
         run.timings[name] = time.perf_counter() - t0
         log.info("navigation: %s done in %.2f s", name, run.timings[name])
+    if not names:
+        raise EvaluationError("navigation: no method could be scored: " + "; ".join(e["message"] for e in run.errors))
     rows, trails, beliefs_out, timings = run.rows, run.trails, run.beliefs, run.timings
     records = pd.DataFrame(rows)
     per_seed, summary, sweep = _summarise(records, names, opts)
@@ -479,7 +503,8 @@ def run_navigation(
               "sightings": {"p_miss": env.observation.p_miss, "p_false": env.observation.p_false},
               "truth": env.truth, "windows": env.windows.to_dict() if env.windows is not None else None,
               "query_windows": opts.windows}
-    res = NavigationResult(records, per_seed, summary, qsets, config, timings, env, cache, trails, beliefs_out, sweep)
+    res = NavigationResult(records, per_seed, summary, qsets, config, timings, env, cache, trails, beliefs_out, sweep,
+                           run.errors)
     if out_dir is not None:
         res.save(out_dir)
     return res

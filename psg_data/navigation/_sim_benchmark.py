@@ -56,6 +56,7 @@ import numpy as np
 
 from psg_data.errors import EvaluationError, PsgDataError
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream
+from psg_data.estimators._guard import PluginError
 from psg_data.navigation._env import WEEK_S, NavigationEnv
 from psg_data.navigation._queries import Query, make_queries
 from psg_data.navigation._runner import BUILTIN_METHODS
@@ -153,6 +154,8 @@ def method_filters(env: NavigationEnv, name: str, spec: str, settings: Mapping[s
                 if len(part):
                     f.update_many(part.t_s, part.y)
             out[a.edge] = f
+    except PluginError:
+        raise
     except PsgDataError as exc:
         raise EvaluationError(f"method {name}: fit / update on the map observations failed ({exc})") from exc
     return out
@@ -236,10 +239,9 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
     Returns:
         ``{"records": [...], "queries": [...], "trails": {(label, qid): cells}, "beliefs": {...}}``.
     """
-    from psg_data.graph._graph import PredictiveGraph
     from psg_data.loaders import open_dataset
     from psg_data.maps._planner import PlanningCache
-    from psg_data.navigation._agent import AgentConfig, episode_record, run_episode
+    from psg_data.navigation._agent import AgentConfig
 
     ds = open_dataset(path)
     ids = scene_split_ids(ds)
@@ -263,27 +265,47 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
         qs = make_queries(env, protocol.queries_per_scene, seed=scene, horizon_s=protocol.horizon_s, windows=None)
         pairs = [(q, env.t_map_s) for q in qs]
     out: dict[str, Any] = {"records": [], "queries": [(q, t_m) for q, t_m in pairs], "trails": {}, "beliefs": {},
-                           "env": env.name, "settings": {}}
+                           "env": env.name, "settings": {}, "errors": []}
     for label, spec in methods.items():
         given = scene_settings(ds, spec, settings.get(label))
         out["settings"][label] = {k: v for k, v in given.items() if k != "dataset"}
-        graph = PredictiveGraph(env.layout, method_filters(env, label, spec, given, val_start), grid=env.grid)
-        for q, t_m in pairs:
-            if protocol.adaptive:
-                ep, switches = _adaptive_query(graph, q, t_m, test, cache, cfg, sight, protocol.look_every_m)
-            else:
-                bel = {r: float(v[0]) for r, v in graph.object_probabilities(q.object_id, [q.t_s]).items()} \
-                    if q.object_id in graph.objects else {}
-                ep, switches = run_episode(cache, q, graph.filters_of(q.object_id), cfg, beliefs=bel,
-                                           observation=env.observation), 0
-            out["records"].append(episode_record(
-                ep, method=label, seed=scene, delta=protocol.delta, t_s=q.t_s, t_map_s=t_m, start_x_m=q.start_xy[0],
-                start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle, map_receptacle=q.map_receptacle,
-                n_switches=switches))
-            if q.query_id in keep:
-                out["trails"][(label, q.query_id)] = ep.trail
-                out["beliefs"][(label, q.query_id)] = ep.beliefs
+        n = len(out["records"])
+        try:
+            _method_episodes(out, env, label, spec, given, val_start, pairs, test, cache, cfg, sight, protocol, scene,
+                             keep)
+        except PluginError as exc:  # the plugin's failure is reported; the other methods are scored
+            del out["records"][n:]
+            for d in (out["trails"], out["beliefs"]):
+                for k in [k for k in d if k[0] == label]:
+                    del d[k]
+            err = exc.record(label)
+            out["errors"].append({**err, "scene": scene, "message": f"scene {scene}: {err['message']}"})
     return out
+
+
+def _method_episodes(out: dict[str, Any], env: NavigationEnv, label: str, spec: str, given: dict[str, Any],
+                     val_start: float, pairs: list[tuple[Query, float]], test: Mapping[EdgeKey, EdgeStream], cache: Any,
+                     cfg: Any, sight: Any, protocol: SimProtocol, scene: int, keep: Sequence[int]) -> None:
+    """One method's episodes of one scene, appended to ``out`` (records, trails, beliefs)."""
+    from psg_data.graph._graph import PredictiveGraph
+    from psg_data.navigation._agent import episode_record, run_episode
+
+    graph = PredictiveGraph(env.layout, method_filters(env, label, spec, given, val_start), grid=env.grid)
+    for q, t_m in pairs:
+        if protocol.adaptive:
+            ep, switches = _adaptive_query(graph, q, t_m, test, cache, cfg, sight, protocol.look_every_m)
+        else:
+            bel = {r: float(v[0]) for r, v in graph.object_probabilities(q.object_id, [q.t_s]).items()} \
+                if q.object_id in graph.objects else {}
+            ep, switches = run_episode(cache, q, graph.filters_of(q.object_id), cfg, beliefs=bel,
+                                       observation=env.observation), 0
+        out["records"].append(episode_record(
+            ep, method=label, seed=scene, delta=protocol.delta, t_s=q.t_s, t_map_s=t_m, start_x_m=q.start_xy[0],
+            start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle, map_receptacle=q.map_receptacle,
+            n_switches=switches))
+        if q.query_id in keep:
+            out["trails"][(label, q.query_id)] = ep.trail
+            out["beliefs"][(label, q.query_id)] = ep.beliefs
 
 
 def run_sim_navigation(paths: Sequence[Path], methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
