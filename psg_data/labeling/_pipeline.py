@@ -40,7 +40,6 @@ import numpy as np
 from psg_data.errors import LabelingError
 from psg_data.labeling._association import AssociationParams, PerceptionInfo, perception_labels
 from psg_data.labeling._codes import ErrorRates, LabelGrid, error_rates, ground_truth, inject_noise, privileged_codes
-from psg_data.labeling._scene_graphs import read_any_detections
 from psg_data.labeling._doors import (
     DoorObservations,
     DoorParams,
@@ -49,6 +48,7 @@ from psg_data.labeling._doors import (
     is_door_row,
     observe_doors,
 )
+from psg_data.labeling._scene_graphs import read_any_detections
 from psg_data.labeling._visibility import VisibilityParams, compute_visibility, visibility_matrix
 from psg_data.schemas._records import Box
 from psg_data.schemas._streams import EdgeStream

@@ -119,7 +119,11 @@ def _hovsg(d: Detections, i: int) -> dict[str, Any]:
 
 
 def _spark_graph(d: Detections, khronos: bool = False) -> Any:
-    import spark_dsg as dsg
+    try:
+        import spark_dsg as dsg
+    except ImportError as exc:
+        raise LabelingError("writing Spark-DSG graphs needs the spark_dsg package: pip install 'psg-data[graph]'"
+                            ) from exc
 
     G = dsg.DynamicSceneGraph()
     for i in range(len(d)):

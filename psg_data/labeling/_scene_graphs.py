@@ -169,6 +169,8 @@ def detect_format(path: str | Path) -> str:
             return "table"
         if p.suffix.lower() == ".sparkdsg":
             return "spark-dsg"
+        if p.suffix.lower() != ".json":
+            return "table"  # the table reader names the file types it reads
         return _format_of_json(p, _load_json(p))
     if p.is_dir():
         subs = [p, *sorted(d for d in p.iterdir() if d.is_dir())]
@@ -176,7 +178,7 @@ def detect_format(path: str | Path) -> str:
             return _format_of_file(f)
         raise _err(str(p), "no scene-graph files found (scene_graph.json, obj_json_*.json, a Spark-DSG .json / "
                            ".sparkdsg, objects/*.json), expected one folder per scan named by its scan_id")
-    raise _err(str(p), "detections file or folder not found")
+    raise _err(str(p), "detections file not found (nor a folder of scene graphs)")
 
 
 def _format_of_file(f: Path) -> str:
@@ -201,8 +203,7 @@ def _format_of_json(p: Path, data: Any) -> str:
         return "conceptgraphs"
     if isinstance(data, dict) and "vertices" in data and "object_id" in data:
         return "hovsg"
-    raise _err(str(p), "not a recognised detections file (psg-data table, ConceptGraphs, Spark-DSG or HOV-SG "
-                       "JSON); name the format with --detections-format")
+    return "table"  # anything else: the table reader says what a detections table must hold
 
 
 def _session_files(folder: Path) -> list[Path]:
@@ -602,7 +603,7 @@ def read_any_detections(ds: Any, path: str | Path, fmt: str = "auto", *, min_sco
         raise LabelingError(f"detections format {fmt!r}: expected one of {', '.join(iter_formats())}")
     p = Path(path)
     if not p.exists():
-        raise _err(str(p), "detections file or folder not found")
+        raise _err(str(p), "detections file not found (nor a folder of scene graphs)")
     kind = detect_format(p) if fmt == "auto" else fmt
     if kind == "table":
         return read_detections(p, scan_ids=list(ds.scan_ids), min_score=min_score)

@@ -36,12 +36,12 @@ from psg_data.loaders import open_dataset
 
 from .test_pipeline import RECS, _snapshot, scene  # noqa: F401  (fixture)
 
-
 DATA = Path(__file__).parent / "data"
 
 
 @pytest.fixture(scope="module")
 def lab_dets(lab_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Detections:
+    """The small lab's simulated detections: misses, spurious objects, confusions, noise."""
     from psg_data.synth import write_detections
 
     p = write_detections(lab_path, tmp_path_factory.mktemp("det") / "det.parquet", seed=3, miss_rate=0.1,
@@ -71,6 +71,7 @@ NAMED = {"conceptgraphs": "conceptgraphs", "conceptgraphs-realtime": "conceptgra
 
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_round_trip(fmt: str, lab_path: Path, lab_dets: Detections, tmp_path: Path) -> None:
+    """Export per scan in a tool's layout, read back: what the format holds; same streams as a table."""
     ds = open_dataset(lab_path)
     out = export_scene_graphs(lab_dets, tmp_path / fmt, fmt, vocabulary(ds).scan_spans)
     path = out / "khronos_dsg.json" if fmt == "khronos" else out
@@ -148,6 +149,7 @@ def test_mapping_synonyms_transform_and_unmapped(scene: Path, tmp_path: Path, ca
 
 
 def test_session_mapping_file(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """Sessions named otherwise map to scans through the mapping file; unmapped folders are an error."""
     root = tmp_path / "cg"
     _cg_session(root, "monday_run", [_node(0, "mug", [1.0, 1.0, 1.0])])
     with pytest.raises(LabelingError, match=r"monday_run: session folder 'monday_run' is not a scan_id"):
@@ -228,6 +230,7 @@ HOSTILE = {
 
 @pytest.mark.parametrize("case", sorted(HOSTILE))
 def test_hostile_files(case: str, scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """Each bad file: one line naming the file and node, exit 1, nothing written."""
     make, match = HOSTILE[case]
     root = tmp_path / "graphs"
     root.mkdir()
@@ -254,6 +257,7 @@ def _explode() -> None:
 
 @pytest.mark.parametrize("name", ["scene_map_cfslam_pruned.pkl.gz", "dualmap.pkl"])
 def test_pickled_map_refused_unopened(name: str, scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """A pickled map is refused by name, never unpickled (the pickle here raises if loaded)."""
     sess = tmp_path / "maps" / "scan_00"
     sess.mkdir(parents=True)
     data = pickle.dumps(_Bomb())
