@@ -300,3 +300,51 @@ def test_detections_format_option(scene: Path, tmp_path: Path) -> None:  # noqa:
                                        "conceptgraphs", "--quiet"])
     assert r.exit_code == 0, r.output
     shutil.rmtree(root)
+
+
+def test_spark_dsg_labelspace_names_semantic_labels(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """A Hydra graph with a label space: the node's semantic_label names it, not its name ('O(0)')."""
+    G = spark_dsg.DynamicSceneGraph()
+    G.set_labelspace(spark_dsg.Labelspace({3: "mug", 8: "table"}), 2)
+    for i, (sem, z) in enumerate([(3, 0.9), (8, 0.5), (5, 0.7)]):  # 5: not in the label space -> its name
+        a = spark_dsg.ObjectNodeAttributes()
+        a.name, a.semantic_label = f"O({i})", sem
+        a.bounding_box = spark_dsg.BoundingBox(np.array([0.2, 0.2, 0.2]), np.array([1.0, 0.0, z]))
+        G.add_node(spark_dsg.DsgLayers.OBJECTS, spark_dsg.NodeSymbol("O", i).value, a)
+    (tmp_path / "hydra" / "scan_01").mkdir(parents=True)
+    G.save(str(tmp_path / "hydra" / "scan_01" / "dsg.json"), include_mesh=False)
+    (tmp_path / "hydra" / "psg_mapping.json").write_text(json.dumps({"synonyms": {"O(2)": "mug"}}))
+    det = read_any_detections(open_dataset(scene), tmp_path / "hydra")
+    got = sorted(zip(det.label.tolist(), det.kind.tolist(), np.round(det.box_center_m[:, 2], 6).tolist()))
+    assert got == [("mug", "object", 0.7), ("mug", "object", 0.9), ("table", "receptacle", 0.5)]
+
+
+def test_khronos_intervals_give_scans(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """An object is detected in each scan whose time span overlaps one of its presence intervals."""
+    ds = open_dataset(scene)
+    spans = {s: (int(ds.scan(s).start_stamp_ns), int(ds.scan(s).end_stamp_ns)) for s in ds.scan_ids}
+    (a0, b0), (a1, b1) = spans["scan_00"], spans["scan_01"]
+    assert b0 < a1
+    G = spark_dsg.DynamicSceneGraph()
+    for i in range(3):
+        a = spark_dsg.KhronosObjectAttributes()
+        a.name = "mug"
+        a.bounding_box = spark_dsg.BoundingBox(np.array([0.1, 0.1, 0.1]), np.array([float(i), 0.0, 1.0]))
+        G.add_node(spark_dsg.DsgLayers.OBJECTS, spark_dsg.NodeSymbol("O", i).value, a)
+    path = tmp_path / "khronos.json"
+    G.save(str(path), include_mesh=False)
+    data = json.loads(path.read_text())
+    intervals = {0: ([a0 - 5], [a0]),  # touches scan_00's start
+                 1: ([b0 + 1, a1 + 1], [a1 - 1, b1 + 9]),  # between the scans, then in scan_01
+                 2: ([b1 + 1], [b1 + 100])}  # after both: in no scan
+    for n in data["nodes"]:
+        k = n["id"] - spark_dsg.NodeSymbol("O", 0).value
+        n["attributes"]["first_observed_ns"], n["attributes"]["last_observed_ns"] = intervals[k]
+    path.write_text(json.dumps(data))
+    assert spark_dsg.DynamicSceneGraph.load(str(path)).num_nodes() == 3  # still a graph spark_dsg reads
+    det = read_any_detections(ds, path)
+    assert sorted(zip(det.scan_id.tolist(), det.box_center_m[:, 0].tolist())) == [("scan_00", 0.0), ("scan_01", 1.0)]
+    data["nodes"][0]["attributes"]["last_observed_ns"] = [a0 - 10]  # ends before it starts
+    path.write_text(json.dumps(data))
+    with pytest.raises(LabelingError, match=r"khronos\.json: node \d+: first_observed_ns / last_observed_ns"):
+        read_any_detections(ds, path)
