@@ -89,6 +89,7 @@ class _Node:
     extent: NDArray[np.float64]
     rotation: NDArray[np.float64]
     where: str  # FILE: node
+    on: list[_Node] = field(default_factory=list)  # nodes a stated relation puts this one on
 
 
 def _err(where: str, msg: str) -> LabelingError:
@@ -250,7 +251,8 @@ def _read_conceptgraphs(p: Path, scan_id: str) -> list[_Node]:
         rel_glob = "cfslam_object_relations.json"
     else:
         raise _err(str(p), "expected a ConceptGraphs scene_graph.json list or an obj_json {\"object_N\": {...}} map")
-    nodes, ids = [], set()
+    nodes: list[_Node] = []
+    ids: dict[Any, _Node] = {}
     for key, rec in items:
         where = f"{p}: node {key}"
         if not isinstance(rec, dict):
@@ -260,18 +262,21 @@ def _read_conceptgraphs(p: Path, scan_id: str) -> list[_Node]:
         where = f"{p}: node {rec['id']!r}"
         if rec["id"] in ids:
             raise _err(where, "duplicate id, expected unique node ids")
-        ids.add(rec["id"])
         if "bbox_center" not in rec or "bbox_extent" not in rec:
             raise _err(where, "no box (bbox_center, bbox_extent), expected both")
         nodes.append(_box_node(scan_id, rec.get("object_tag"), rec["bbox_center"], rec["bbox_extent"], np.eye(3),
                                where))
+        ids[rec["id"]] = nodes[-1]
+    # cfslam relations name nodes by their position in scene_graph.json (build_scenegraph's segmentidx into
+    # the pruned map, which generate_scenegraph_json writes in order); edge_json by obj_json's id
+    by_ref = ids if rel_glob.startswith("edge") else dict(enumerate(nodes))
     for rp in sorted(p.parent.glob(rel_glob)):
-        _check_relations(rp, ids)
+        _read_relations(rp, by_ref)
     return nodes
 
 
-def _check_relations(p: Path, ids: set[Any]) -> None:
-    """Every relation of ``cfslam_object_relations.json`` / ``edge_json_*.json`` names known node ids."""
+def _read_relations(p: Path, nodes: dict[Any, _Node]) -> None:
+    """Stated 'on' relations of ``cfslam_object_relations.json`` / ``edge_json_*.json`` (ids checked)."""
     data = _load_json(p)
     recs = list(data.values()) if isinstance(data, dict) else data
     if not isinstance(recs, list):
@@ -279,12 +284,37 @@ def _check_relations(p: Path, ids: set[Any]) -> None:
     for i, r in enumerate(recs):
         if not isinstance(r, dict):
             raise _err(f"{p}: relation {i}", "expected an object")
-        pairs = ([r.get("object1", {}).get("id"), r.get("object2", {}).get("id")] if "object1" in r
-                 else [r.get("object_1_id"), r.get("object_2_id")])
-        for ref in pairs:
-            if ref not in ids:
+        if "object1" in r:
+            o1, o2 = r.get("object1"), r.get("object2")
+            refs = [o.get("id") if isinstance(o, dict) else None for o in (o1, o2)]
+            rel = {"a on b": (0, 1), "b on a": (1, 0)}.get(str(r.get("object_relation")))
+        else:
+            refs = [r.get("object_1_id"), r.get("object_2_id")]
+            rel = (0, 1) if r.get("relationship") == "on top of" else None
+        for ref in refs:
+            if isinstance(ref, (dict, list)) or ref not in nodes:
                 raise _err(f"{p}: relation {i}", f"names unknown node id {ref!r}, expected an id of the session's "
                                                  "objects")
+        if rel is not None:
+            nodes[refs[rel[0]]].on.append(nodes[refs[rel[1]]])
+
+
+def _check_stated_on(path: str, kept: list[_Node], kinds: list[str]) -> None:
+    """Log how many stated 'a on b' relations (object on receptacle) the geometric association agrees with.
+
+    The test is relative (the object in the receptacle's box frame), so the world transform does not change it.
+    """
+    from psg_data.labeling._association import AssociationParams, associate_objects
+    from psg_data.schemas._records import Box
+
+    kind = {id(n): k for n, k in zip(kept, kinds)}
+    pairs = [(a, b) for a in kept for b in a.on if kind.get(id(a)) == "object" and kind.get(id(b)) == "receptacle"]
+    if not pairs:
+        return
+    agree = sum(int(associate_objects(a.center[None], [Box(b.center, b.extent, b.rotation)],
+                                      params=AssociationParams())[0] == 0) for a, b in pairs)
+    log.info("%s: %d of %d stated 'on' relations (object on receptacle) agree with the geometric association "
+             "(on top within the default footprint margin)", path, agree, len(pairs))
 
 
 # ----------------------------------------------------------------------------------------------- Spark-DSG
@@ -547,6 +577,7 @@ def _to_detections(path: str, nodes: list[_Node], vocab: Vocabulary, mapping: Sc
         log.warning("%s: %d scene-graph nodes with %d labels that are no dataset object or receptacle (left out; "
                     "map them with synonyms): %s", path, sum(unmapped.values()), len(unmapped),
                     ", ".join(f"{k} ({v})" for k, v in unmapped.most_common(10)))
+    _check_stated_on(path, keep, kinds)
     if not keep:
         raise LabelingError(f"{path}: no scene-graph node maps onto a dataset object or receptacle "
                             f"({sum(unmapped.values())} unmapped nodes), expected labels or synonyms of the dataset")

@@ -348,3 +348,33 @@ def test_khronos_intervals_give_scans(scene: Path, tmp_path: Path) -> None:  # n
     path.write_text(json.dumps(data))
     with pytest.raises(LabelingError, match=r"khronos\.json: node \d+: first_observed_ns / last_observed_ns"):
         read_any_detections(ds, path)
+
+
+@pytest.mark.parametrize("layout", ["scene_graph", "realtime"])
+def test_stated_relations_checked_against_geometry(layout: str, scene: Path, tmp_path: Path, caplog) -> None:  # noqa: F811
+    """'a on b' relations name nodes (cfslam: by position in scene_graph.json, realtime: by id); the
+    log says how many the on-top association agrees with."""
+    import logging
+
+    caplog.set_level(logging.INFO, logger="psg_data.labeling._scene_graphs")
+    table = RECS[0]
+    top = table.box.center_m + [0, 0, table.box.extent_m[2] / 2 + 0.05]
+    nodes = [_node(40, "table", table.box.center_m.tolist(), table.box.extent_m.tolist()),
+             _node(17, "mug", top.tolist()), _node(23, "book", (top + [3.0, 0, 0]).tolist())]  # book far off
+    root = tmp_path / "cg"
+    if layout == "scene_graph":
+        rel = [{"object1": {"id": 1}, "object2": {"id": 0}, "object_relation": "a on b"},
+               {"object1": {"id": 0}, "object2": {"id": 2}, "object_relation": "b on a"},
+               {"object1": {"id": 1}, "object2": {"id": 2}, "object_relation": "none of these"}]
+        _cg_session(root, "scan_00", nodes, rel)
+    else:
+        d = root / "scan_00"
+        d.mkdir(parents=True)
+        (d / "obj_json_x.json").write_text(json.dumps({f"object_{i + 1}": n for i, n in enumerate(nodes)}))
+        (d / "edge_json_x.json").write_text(json.dumps({
+            "edge_0": {"object_1_id": 17, "object_2_id": 40, "relationship": "on top of"},
+            "edge_1": {"object_1_id": 23, "object_2_id": 40, "relationship": "on top of"},
+            "edge_2": {"object_1_id": 23, "object_2_id": 17, "relationship": "next to"}}))
+    det = read_any_detections(open_dataset(scene), root)
+    assert len(det) == 3
+    assert "1 of 2 stated 'on' relations (object on receptacle) agree" in caplog.text
