@@ -22,7 +22,7 @@ docs/RAW_FORMATS.md, "Scene graphs"):
 Sessions map to scans: ``PATH`` is a folder holding one sub-folder per scan named by its
 ``scan_id`` (each with that session's files as the tool writes them), or a single file / session
 folder named in the mapping file's ``sessions``. A mapping file ``psg_mapping.json`` in ``PATH``
-(or given explicitly) may hold ``{"sessions": {folder: scan_id}, "synonyms": {tool label: dataset
+(or given explicitly) may hold ``{"sessions": {folder: scan_id or time_ns}, "synonyms": {tool label: dataset
 label}, "transform": 4x4 world-from-graph matrix}``. A label is an object when it (or its
 synonym) is a dataset object id or name, a receptacle when it is a receptacle id, name or
 category; other labels are counted and reported, and left out.
@@ -36,7 +36,7 @@ import json
 import logging
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,7 +67,7 @@ _PICKLE_SUFFIXES = (".pkl", ".pickle", ".pkl.gz", ".pickle.gz")
 class SceneGraphMapping:
     """How a tool's sessions, labels and frame map onto the dataset (module docstring)."""
 
-    sessions: dict[str, str] = field(default_factory=dict)
+    sessions: dict[str, str | int] = field(default_factory=dict)
     synonyms: dict[str, str] = field(default_factory=dict)
     transform: NDArray[np.float64] | None = None
 
@@ -141,8 +141,11 @@ def load_mapping(path: str | Path) -> SceneGraphMapping:
     out = SceneGraphMapping()
     for key in ("sessions", "synonyms"):
         d = data.get(key, {})
-        if not isinstance(d, dict) or not all(isinstance(k, str) and isinstance(v, str) and v for k, v in d.items()):
-            raise _err(f"{p}: {key}", "expected an object of non-empty strings")
+        ok = (lambda v: isinstance(v, str) and v) if key == "synonyms" else (
+            lambda v: (isinstance(v, str) and v) or (isinstance(v, int) and not isinstance(v, bool)))
+        if not isinstance(d, dict) or not all(isinstance(k, str) and ok(v) for k, v in d.items()):
+            raise _err(f"{p}: {key}", "expected an object of non-empty strings" + (
+                " (a scan_id) or integer times (ns, the scan that contains it)" if key == "sessions" else ""))
         setattr(out, key, dict(d))
     if data.get("transform") is not None:
         try:
@@ -476,14 +479,26 @@ def _read_hovsg(folder: Path, scan_id: str) -> list[_Node]:
 # ----------------------------------------------------------------------------------------------- sessions
 
 
-def _sessions(root: Path, mapping: SceneGraphMapping, scan_ids: Sequence[str]) -> list[tuple[Path, str | None]]:
+def _scan_of(v: str | int | None, spans: Mapping[str, tuple[int, int]], where: Path) -> str | None:
+    """A sessions value as a scan_id: itself, or the scan whose time span contains an integer time (ns)."""
+    if not isinstance(v, int):
+        return v
+    hit = [s for s, (t0, t1) in spans.items() if t0 <= v <= t1]
+    if not hit:
+        raise _err(str(where), f"session time {v} ns lies in no scan, expected a time inside a scan's "
+                               "[start_stamp_ns, end_stamp_ns]")
+    return hit[0]
+
+
+def _sessions(root: Path, mapping: SceneGraphMapping, spans: Mapping[str, tuple[int, int]]
+              ) -> list[tuple[Path, str | None]]:
     """(session path, scan_id) pairs; scan_id None for a whole-run map (Khronos intervals)."""
     if root.is_file():
-        return [(root, mapping.sessions.get(root.name, mapping.sessions.get(root.stem)))]
-    known = set(scan_ids)
+        return [(root, _scan_of(mapping.sessions.get(root.name, mapping.sessions.get(root.stem)), spans, root))]
+    known = set(spans)
     out: list[tuple[Path, str | None]] = []
     for d in sorted(x for x in root.iterdir() if x.is_dir()):
-        sid = mapping.sessions.get(d.name, d.name if d.name in known else None)
+        sid = _scan_of(mapping.sessions.get(d.name, d.name if d.name in known else None), spans, d)
         if sid is None:
             if _session_files(d):
                 raise _err(str(d), f"session folder {d.name!r} is not a scan_id of the dataset and not in the "
@@ -493,7 +508,7 @@ def _sessions(root: Path, mapping: SceneGraphMapping, scan_ids: Sequence[str]) -
             raise _err(str(d), f"session maps to unknown scan {sid!r}, expected a scan_id of tables/scans.parquet")
         out.append((d, sid))
     loose = [f for f in root.iterdir() if f.is_file() and f.name != MAPPING_FILE and f.suffix in (".json", ".sparkdsg")]
-    out += [(f, mapping.sessions.get(f.name)) for f in loose]
+    out += [(f, _scan_of(mapping.sessions.get(f.name), spans, f)) for f in loose]
     if not out:
         raise _err(str(root), "no sessions found, expected one folder per scan named by its scan_id")
     return out
@@ -551,7 +566,7 @@ def read_scene_graphs(path: str | Path, fmt: str, vocab: Vocabulary, *, mapping:
         mf = root / MAPPING_FILE
         mapping = load_mapping(mf) if root.is_dir() and mf.is_file() else SceneGraphMapping()
     nodes: list[_Node] = []
-    for sess, sid in _sessions(root, mapping, list(vocab.scan_spans)):
+    for sess, sid in _sessions(root, mapping, vocab.scan_spans):
         nodes += _read_session(sess, sid, fmt, vocab)
     det = _to_detections(str(root), nodes, vocab, mapping)
     if receptacle_boxes:

@@ -156,6 +156,13 @@ def test_session_mapping_file(scene: Path, tmp_path: Path) -> None:  # noqa: F81
         read_any_detections(open_dataset(scene), root)
     (root / "psg_mapping.json").write_text(json.dumps({"sessions": {"monday_run": "scan_01"}}))
     assert read_any_detections(open_dataset(scene), root).scan_id.tolist() == ["scan_01"]
+    ds = open_dataset(scene)
+    t0, t1 = ds.scan("scan_00").start_stamp_ns, ds.scan("scan_00").end_stamp_ns
+    (root / "psg_mapping.json").write_text(json.dumps({"sessions": {"monday_run": int((t0 + t1) // 2)}}))
+    assert read_any_detections(ds, root).scan_id.tolist() == ["scan_00"]  # by time: the scan containing it
+    (root / "psg_mapping.json").write_text(json.dumps({"sessions": {"monday_run": int(t0) - 1}}))
+    with pytest.raises(LabelingError, match=r"monday_run: session time \d+ ns lies in no scan"):
+        read_any_detections(ds, root)
 
 
 def _spark_file(path: Path, *, version: dict | None | str = "keep", bbox: dict | None = None,
