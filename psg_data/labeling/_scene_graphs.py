@@ -47,8 +47,8 @@ from numpy.typing import NDArray
 from psg_data.errors import LabelingError
 from psg_data.labeling._detections import Detections
 
-__all__ = ["FORMATS", "SceneGraphMapping", "Vocabulary", "detect_format", "read_scene_graphs", "load_mapping",
-           "MAX_FILE_BYTES", "MAX_DEPTH", "Y_UP_TO_Z_UP"]
+__all__ = ["FORMATS", "SceneGraphMapping", "Vocabulary", "detect_format", "read_scene_graphs", "read_any_detections",
+           "load_mapping", "vocabulary", "MAX_FILE_BYTES", "MAX_DEPTH", "Y_UP_TO_Z_UP"]
 
 log = logging.getLogger(__name__)
 
