@@ -64,9 +64,16 @@ from psg_data.labeling._pipeline import (
     parse_source,
     summarize,
 )
-from psg_data.labeling._scene_graph_export import export_scene_graphs, representable, write_detections_table
+from psg_data.labeling._scene_graph_export import (
+    EXPORT_FORMATS,
+    export_scene_graphs,
+    representable,
+    write_detections_table,
+)
 from psg_data.labeling._scene_graphs import (
+    DETECTION_FORMATS,
     SceneGraphMapping,
+    Vocabulary,
     detect_format,
     load_mapping,
     read_any_detections,
@@ -94,8 +101,8 @@ __all__ = [
     "is_yaw_only", "polygon_area", "top_face_samples",
     "LabelResult", "LabelSummary", "SourceSpec", "compute_labels", "grid_streams", "label_dataset", "label_streams",
     "load_label_streams", "parse_source", "summarize",
-    "SceneGraphMapping", "detect_format", "export_scene_graphs", "load_mapping", "read_any_detections",
-    "read_scene_graphs", "representable", "vocabulary", "write_detections_table",
+    "DETECTION_FORMATS", "EXPORT_FORMATS", "SceneGraphMapping", "Vocabulary", "detect_format", "export_scene_graphs",
+    "load_mapping", "read_any_detections", "read_scene_graphs", "representable", "vocabulary", "write_detections_table",
     "SurfaceVisibility", "VisibilityParams", "compute_visibility", "surface_visibility", "visibility_matrix",
     "visibility_statistics",
 ]

@@ -47,12 +47,12 @@ from numpy.typing import NDArray
 from psg_data.errors import LabelingError
 from psg_data.labeling._detections import Detections
 
-__all__ = ["FORMATS", "SceneGraphMapping", "Vocabulary", "detect_format", "read_scene_graphs", "read_any_detections",
-           "load_mapping", "vocabulary", "MAX_FILE_BYTES", "MAX_DEPTH", "Y_UP_TO_Z_UP"]
+__all__ = ["DETECTION_FORMATS", "SceneGraphMapping", "Vocabulary", "detect_format", "read_scene_graphs",
+           "read_any_detections", "load_mapping", "vocabulary"]
 
 log = logging.getLogger(__name__)
 
-FORMATS = ("table", "conceptgraphs", "spark-dsg", "hovsg")
+DETECTION_FORMATS = ("table", "conceptgraphs", "spark-dsg", "hovsg")
 MAPPING_FILE = "psg_mapping.json"
 MAX_FILE_BYTES = 100 * 2**20
 """Largest scene-graph file read (bytes)."""
@@ -634,7 +634,7 @@ def vocabulary(ds: Any) -> Vocabulary:
 
 def iter_formats() -> Iterable[str]:
     """The names ``--detections-format`` accepts (plus ``auto``)."""
-    return ("auto", *FORMATS)
+    return ("auto", *DETECTION_FORMATS)
 
 
 def read_any_detections(ds: Any, path: str | Path, fmt: str = "auto", *, min_score: float = 0.0) -> Detections:
