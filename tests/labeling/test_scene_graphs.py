@@ -385,3 +385,11 @@ def test_stated_relations_checked_against_geometry(layout: str, scene: Path, tmp
     det = read_any_detections(open_dataset(scene), root)
     assert len(det) == 3
     assert "1 of 2 stated 'on' relations (object on receptacle) agree" in caplog.text
+
+
+def test_label_help_shows_each_format() -> None:
+    """`psg-data label --help`: one example per scene-graph format and the --detections-format choices."""
+    out = CliRunner().invoke(label_cmd, ["--help"]).output
+    for word in ("ConceptGraphs sg_cache", "Spark-DSG dsg.json", "khronos_map.json", "HOV-SG objects",
+                 "--detections-format", "conceptgraphs|spark-dsg|hovsg"):
+        assert word in out, word
