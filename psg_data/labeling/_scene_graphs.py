@@ -525,15 +525,34 @@ def _read_session(path: Path, scan_id: str | None, fmt: str, vocab: Vocabulary) 
         if not dirs:
             raise _err(str(path), "no objects/*.json, expected HOV-SG's graph folder")
         return [n for d in dirs for n in _read_hovsg(d, _need_scan(scan_id, d))]
-    nodes: list[_Node] = []
-    for f in files:
-        if fmt == "spark-dsg":
-            nodes += _read_spark_dsg(f, scan_id, vocab)
-        elif fmt == "conceptgraphs":
-            nodes += _read_conceptgraphs(f, _need_scan(scan_id, f))
-        else:
-            raise _err(str(f), f"format {fmt!r} is not a scene-graph format")
-    return nodes
+    f = files[0] if path.is_file() else _one_graph(path, files, fmt)
+    if fmt == "spark-dsg":
+        return _read_spark_dsg(f, scan_id, vocab)
+    if fmt == "conceptgraphs":
+        return _read_conceptgraphs(f, _need_scan(scan_id, f))
+    raise _err(str(f), f"format {fmt!r} is not a scene-graph format")
+
+
+_HYDRA_ORDER = ("backend/dsg.json", "backend/dsg_with_mesh.json", "dsg.json", "dsg_with_mesh.json",
+                "frontend/dsg.json", "frontend/dsg_with_mesh.json")
+"""Hydra saves its graph twice per stage (``DsgUpdater::save``: ``dsg.json``, ``dsg_with_mesh.json``): the
+first found is read."""
+
+
+def _one_graph(session: Path, files: list[Path], fmt: str) -> Path:
+    """The one scene graph of a session folder (Hydra: the backend graph first); several others are an error."""
+    if fmt == "spark-dsg":
+        for rel in _HYDRA_ORDER:
+            if (session / rel).is_file():
+                return session / rel
+        files = [f for f in files if f.suffix.lower() == ".sparkdsg" or "dsg" in f.name]
+    else:
+        files = [f for f in files if f.name == "scene_graph.json" or f.name.startswith("obj_json_")]
+    if len(files) != 1:
+        names = ", ".join(str(f.relative_to(session)) for f in files) or "none"
+        raise _err(str(session), f"{len(files)} {fmt} scene graphs in one session folder ({names}), expected one "
+                                 "per scan folder")
+    return files[0]
 
 
 def _need_scan(scan_id: str | None, f: Path) -> str:

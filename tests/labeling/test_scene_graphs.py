@@ -393,3 +393,18 @@ def test_label_help_shows_each_format() -> None:
     for word in ("ConceptGraphs sg_cache", "Spark-DSG dsg.json", "khronos_map.json", "HOV-SG objects",
                  "--detections-format", "conceptgraphs|spark-dsg|hovsg"):
         assert word in out, word
+
+
+def test_hydra_output_folder_reads_the_backend_graph_once(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """Hydra writes backend/ and frontend/ graphs, each as dsg.json and dsg_with_mesh.json: one is read."""
+    sess = tmp_path / "hydra" / "scan_00"
+    for rel in ("backend/dsg.json", "backend/dsg_with_mesh.json", "frontend/dsg.json"):
+        _spark_file(sess / rel)
+    det = read_any_detections(open_dataset(scene), tmp_path / "hydra")
+    assert sorted(det.label.tolist()) == ["mug", "table"]
+    cg = tmp_path / "cg"
+    _cg_session(cg, "scan_00", [_node(0, "mug", [1.0, 0.0, 0.8])])
+    (cg / "scan_00" / "obj_json_run.json").write_text(json.dumps({"object_1": _node(0, "mug", [1.0, 0.0, 0.8])}))
+    with pytest.raises(LabelingError, match=r"scan_00: 2 conceptgraphs scene graphs in one session folder "
+                                            r"\(obj_json_run\.json, sg_cache/scene_graph\.json\)"):
+        read_any_detections(open_dataset(scene), cg)
