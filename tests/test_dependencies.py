@@ -19,7 +19,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 EXTRAS_USED_BY = {"viewer": ("psg_data/viewer/",), "dask": ("psg_data/_executors.py",),
-                  "graph": ("psg_data/graph/_convert.py",)}
+                  "graph": ("psg_data/graph/_convert.py", "psg_data/labeling/_scene_graph")}
 """Where each optional extra may be imported (lazily, with an error that names the extra)."""
 IMPORTED_INDIRECTLY = {"tzdata": "zoneinfo reads its time-zone files where the system has none"}
 

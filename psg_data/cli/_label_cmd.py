@@ -14,7 +14,8 @@ __all__ = ["label_cmd"]
 @click.argument("dataset", metavar="DATASET")
 @click.option("--source", "-s", required=True, metavar="SOURCE",
               help="gt | privileged | noisy:P[,P_F] | observed (door states read from the depth) | "
-                   "detections:FILE (.parquet or .json).")
+                   "detections:FILE (.parquet or .json) or detections:PATH (ConceptGraphs, Spark-DSG / Khronos or "
+                   "HOV-SG scene graphs: a folder per scan named by its scan_id).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the noise (noisy sources).")
 @click.option("--valid", "valid_file", type=click.Path(), default=None,
               help="JSON {object_id: [receptacle_id, ...]} of valid receptacles (default: the schedule's support).")
@@ -24,6 +25,9 @@ __all__ = ["label_cmd"]
               help="detections: minimum 3D IoU to match a receptacle node to an annotated box.")
 @click.option("--margin", "margin_m", type=float, default=0.10, show_default=True,
               help="detections: footprint margin of the on-top association, metres.")
+@click.option("--detections-format", "detections_format", default="auto", show_default=True,
+              type=click.Choice(["auto", "table", "conceptgraphs", "spark-dsg", "hovsg"]),
+              help="detections: format of PATH (auto: recognised from the content).")
 @click.option("--doors/--no-doors", default=True, show_default=True,
               help="Also write door-state rows (door_id, 'open'/'closed') and door visibility (datasets with doors).")
 @click.option("--overwrite", is_flag=True,
@@ -31,7 +35,7 @@ __all__ = ["label_cmd"]
 @quiet_option
 @handle_errors
 def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, observed: str, min_iou: float,
-              margin_m: float, doors: bool, overwrite: bool, quiet: bool) -> None:
+              margin_m: float, doors: bool, overwrite: bool, quiet: bool, detections_format: str = "auto") -> None:
     """Label a dataset: write tables/labels.parquet (and tables/visibility.parquet).
 
     Codes per (scan, object, receptacle): 1 present, 0 absent, -1 not observed, -2 receptacle not
@@ -45,6 +49,10 @@ def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, obse
       psg-data label /tmp/lab --source noisy:0.1 --seed 3
       psg-data label /tmp/lab --source observed
       psg-data label /tmp/lab --source detections:/tmp/lab_detections.parquet
+      psg-data label /tmp/lab --source detections:/tmp/cg_sessions    # ConceptGraphs sg_cache per scan
+      psg-data label /tmp/lab --source detections:/tmp/hydra_dsgs     # Spark-DSG dsg.json / .sparkdsg
+      psg-data label /tmp/lab --source detections:/tmp/khronos_map.json --detections-format spark-dsg
+      psg-data label /tmp/lab --source detections:/tmp/hovsg_graphs   # HOV-SG objects/*.json per scan
     """
     setup_logging(quiet)
     from psg_data._settings import INT64_MAX, Integral, check_settings
@@ -65,7 +73,7 @@ def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, obse
     valid = _valid_from_file(valid_file) if valid_file else None
     prog = Progress("visibility", total=len(ds.scan_ids), unit="scans", quiet=quiet)
     summary = label_dataset(path, source, seed=seed, overwrite=overwrite, progress=prog, valid=valid,
-                            association=assoc, doors=doors)
+                            association=assoc, doors=doors, detections_format=detections_format)
     if prog.done:
         prog.close()
     for line in summary.lines():

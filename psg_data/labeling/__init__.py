@@ -7,6 +7,7 @@ Main entry points:
     compute_visibility(ds)                   what each scan saw of every receptacle top surface
     observe_doors(ds)                        door visibility and open/closed state read from the depth
     error_rates(labels, gt)                  P_M / P_F with confidence intervals
+    read_any_detections(ds, path)            detections from a table or ConceptGraphs / Spark-DSG / HOV-SG graphs
 """
 
 from psg_data.labeling._association import (
@@ -63,6 +64,22 @@ from psg_data.labeling._pipeline import (
     parse_source,
     summarize,
 )
+from psg_data.labeling._scene_graph_export import (
+    EXPORT_FORMATS,
+    export_scene_graphs,
+    representable,
+    write_detections_table,
+)
+from psg_data.labeling._scene_graphs import (
+    DETECTION_FORMATS,
+    SceneGraphMapping,
+    Vocabulary,
+    detect_format,
+    load_mapping,
+    read_any_detections,
+    read_scene_graphs,
+    vocabulary,
+)
 from psg_data.labeling._statistics import visibility_statistics
 from psg_data.labeling._visibility import (
     SurfaceVisibility,
@@ -84,6 +101,8 @@ __all__ = [
     "is_yaw_only", "polygon_area", "top_face_samples",
     "LabelResult", "LabelSummary", "SourceSpec", "compute_labels", "grid_streams", "label_dataset", "label_streams",
     "load_label_streams", "parse_source", "summarize",
+    "DETECTION_FORMATS", "EXPORT_FORMATS", "SceneGraphMapping", "Vocabulary", "detect_format", "export_scene_graphs",
+    "load_mapping", "read_any_detections", "read_scene_graphs", "representable", "vocabulary", "write_detections_table",
     "SurfaceVisibility", "VisibilityParams", "compute_visibility", "surface_visibility", "visibility_matrix",
     "visibility_statistics",
 ]

@@ -6,7 +6,9 @@ Sources (``source`` strings, also the ``--source`` of ``psg-data label``):
 * ``privileged``: ground truth filtered by what the scan saw (visibility from the depth images).
 * ``noisy:P`` or ``noisy:P_M,P_F``: privileged codes with observed codes flipped (present -> absent
   with P_M, absent -> present with P_F), seeded.
-* ``detections:FILE``: the perception path from a detections file (Parquet or JSON).
+* ``detections:FILE``: the perception path from a detections file (Parquet or JSON), or from
+  ConceptGraphs / Spark-DSG / HOV-SG scene graphs (a file or a folder of per-scan sessions;
+  :mod:`psg_data.labeling._scene_graphs`).
 * ``observed``: door states read from the depth images only (no object rows; see
   :mod:`psg_data.labeling._doors`).
 
@@ -38,7 +40,6 @@ import numpy as np
 from psg_data.errors import LabelingError
 from psg_data.labeling._association import AssociationParams, PerceptionInfo, perception_labels
 from psg_data.labeling._codes import ErrorRates, LabelGrid, error_rates, ground_truth, inject_noise, privileged_codes
-from psg_data.labeling._detections import read_detections
 from psg_data.labeling._doors import (
     DoorObservations,
     DoorParams,
@@ -47,6 +48,7 @@ from psg_data.labeling._doors import (
     is_door_row,
     observe_doors,
 )
+from psg_data.labeling._scene_graphs import read_any_detections
 from psg_data.labeling._visibility import VisibilityParams, compute_visibility, visibility_matrix
 from psg_data.schemas._records import Box
 from psg_data.schemas._streams import EdgeStream
@@ -150,7 +152,7 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
                    object_boxes: Mapping[str, Mapping[str, Box]] | None = None,
                    visibility: Any = None, reuse_visibility: bool = True,
                    progress: Callable[..., Any] | None = None, doors: bool = True,
-                   door_params: DoorParams | None = None) -> LabelResult:
+                   door_params: DoorParams | None = None, detections_format: str = "auto") -> LabelResult:
     """Compute the label grid of one source (nothing is written).
 
     Args:
@@ -167,6 +169,8 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
         progress: called as ``progress(1)`` per scan of the visibility pass.
         doors: also label the doors (datasets with a doors table; module docstring).
         door_params: thresholds of the door observation.
+        detections_format: ``auto`` (recognised from the content), ``table``, ``conceptgraphs``,
+            ``spark-dsg`` or ``hovsg`` (:mod:`psg_data.labeling._scene_graphs`).
     """
     ds = _open(dataset)
     spec = parse_source(source) if isinstance(source, str) else source
@@ -213,7 +217,7 @@ def compute_labels(dataset: Any, source: str | SourceSpec, *, seed: int = 0,
             labels = inject_noise(labels, spec.p_m, spec.p_f, seed, spec.name)
     else:
         t_read = time.perf_counter()
-        det = read_detections(spec.path or "", scan_ids=scan_ids, min_score=assoc.min_score)
+        det = read_any_detections(ds, spec.path or "", detections_format, min_score=assoc.min_score)
         timings["detections.read"] = time.perf_counter() - t_read
         t1 = time.perf_counter()
         labels, perception = perception_labels(ds, det, assoc, receptacle_visible=rec_vis, source=spec.name)
