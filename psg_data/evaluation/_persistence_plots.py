@@ -219,7 +219,7 @@ def plot_metric_bars(results: Any, out_path: str | Path | None = None) -> Figure
     from psg_data.evaluation._tables import ordered_rows
 
     table = type(table)(table.name, table.title, table.metrics, ordered_rows(table.rows), table.notes, table.groups,
-                        table.count_columns, table.primary)
+                        table.count_columns, table.primary, table.spread)
     colours = _colours(table.rows)
     fig = Figure(figsize=(4.2 * len(table.metrics), 3.9))
     axes = fig.subplots(1, len(table.metrics), squeeze=False)[0]

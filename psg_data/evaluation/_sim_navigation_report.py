@@ -89,19 +89,26 @@ def _grid(header: list[str], rows: list[list[str]]) -> list[str]:
 
 
 def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[str, tuple[str, str]],
-                   n_scenes: int, title: str | None = None) -> str:
-    """The paper-shaped text table: ours (mean ± std across scenes), the 95 % intervals, the paper's rows."""
+                   n_scenes: int, title: str | None = None, table: str | None = None) -> str:
+    """The paper-shaped text table: ours (mean ± std across scenes), the 95 % intervals, the paper's rows.
+
+    ``table``: ours as the one table renderer printed it (``format_table`` of the run's results, the
+    same cells and ± as its Markdown / LaTeX forms), shown instead of this module's own grid.
+    """
     r0 = summary.iloc[0]
     counts = {g: int(r0[c]) for g, c in _COUNT.items()}
     counts["Overall"] = int(r0["n_queries"]) - int(r0["n_unreachable"])
-    lines = [title or f"{protocol}: {int(r0['n_queries'])} queries over {n_scenes} scenes, labels {labels}", ""]
     head = ["method"] + [f"{g.split()[0]} {_HEAD[k]}" for g, ks in SIM_COLUMNS for k in ks]
     ours = []
     for _, r in summary.iterrows():
         role = roles.get(str(r["method"]), ("method", ""))[0]
         name = f"{r['method']}" + (f" [{role}]" if role != "method" else "")
         ours.append([name] + [_cell(r, k, "std") for k in _KEYS])
-    lines += _grid(head, ours)
+    if table is not None:
+        lines = table.splitlines()
+    else:
+        lines = [title or f"{protocol}: {int(r0['n_queries'])} queries over {n_scenes} scenes, labels {labels}", ""]
+        lines += _grid(head, ours)
     lines += ["", "95 % intervals over queries (whole queries resampled within each column; expanded percentile "
                   "bootstrap, jackknife-t under 10 queries; clipped to the metric's range):", ""]
     lines += _grid(head, [[row[0]] + [_cell(r, k, "ci") for k in _KEYS]
