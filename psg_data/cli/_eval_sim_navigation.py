@@ -89,6 +89,8 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     methods, settings, roles = sim_methods(specs, references)
     with Progress(f"{proto.name}: {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
             _executor(jobs) as executor:
+        prog.start()  # a scene takes tens of seconds: the clock runs from the start
+
         def progress(done: int, _total: int) -> None:
             prog.done = done
             prog.update(0)

@@ -19,6 +19,8 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
     p = Path(path)
     if p.is_file():
         return PredictiveGraph.load(p)
+    if save is not None and save.exists() and not overwrite:  # before the fit, not after it
+        raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
     if path == "demo" and not p.is_dir():
         from psg_data.datasets import demo
 
@@ -27,10 +29,26 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
         raise PsgDataError(f"{path}: expected a psg-dataset folder, 'demo' or a saved graph (.json)")
     g = PredictiveGraph.from_dataset(p, estimator, labels=labels)
     if save is not None:
-        if save.exists() and not overwrite:
-            raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
         g.save(save)
     return g
+
+
+def _refuse_fit_options_on_saved(ctx: click.Context, path: str) -> None:
+    """-e / --labels choose how a dataset is fitted: on a saved graph (already fitted) they are refused."""
+    from psg_data.errors import PsgDataError
+
+    given = [f"--{n}" for n in ("estimator", "labels")
+             if ctx.get_parameter_source(n) not in (None, click.core.ParameterSource.DEFAULT)]
+    if given and Path(path).is_file():
+        raise PsgDataError(f"{', '.join(given)}: {path} is a saved graph, fitted already (its estimator and labels "
+                           "are stored in it); give a dataset PATH to fit another")
+
+
+def _label_text(g: object) -> str:
+    """Where the graph's observations came from: its edge count depends on it (gt, privileged, ...)."""
+    info = getattr(g, "info", {}) or {}
+    scans = f" in {info['train_scans']} training scans" if "train_scans" in info else ""
+    return f"labels {info.get('labels', '?')} (an edge: an object seen on a receptacle{scans} under these labels)"
 
 
 @click.command("graph", cls=ContractCommand)
@@ -54,10 +72,12 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
               help="Save the fitted graph (load it later by giving FILE.json as PATH).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save-graph file.")
 @quiet_option
+@click.option("--verbose", "-v", is_flag=True, help="Also print the fit's INFO lines (settings decided, error rates).")
+@click.pass_context
 @handle_errors
-def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels: str, top: int | None,
-              csv_path: Path | None, png: Path | None, rerun: Path | None, save_graph: Path | None, overwrite: bool,
-              quiet: bool) -> None:
+def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, estimator: str, labels: str,
+              top: int | None, csv_path: Path | None, png: Path | None, rerun: Path | None, save_graph: Path | None,
+              overwrite: bool, quiet: bool, verbose: bool) -> None:
     """Where things are predicted at a time: the predictive graph of PATH (a dataset, demo, or a
     graph saved with --save-graph) as a table; with --object the object's receptacles ranked.
 
@@ -68,7 +88,8 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
       psg-data graph /data/lab --labels privileged --save-graph lab.json --at "2025-03-20 14:00"
       psg-data graph lab.json --at 2025-03-21T09:30+01:00 --object redmug --top 3
     """
-    setup_logging(quiet)
+    setup_logging(quiet=quiet or not verbose, verbose=verbose and not quiet)
+    _refuse_fit_options_on_saved(ctx, path)
     g = _graph(path, estimator, labels, save_graph, overwrite)
     t = float(at) if at.replace(".", "", 1).isdigit() else at
     snap = g.at(t)
@@ -80,11 +101,15 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
     from zoneinfo import ZoneInfo
 
     when = dt.datetime.fromtimestamp(snap.t_s, ZoneInfo(g.timezone)).isoformat(timespec="minutes")
-    click.echo(f"{g!r} at {when} ({g.timezone})")
+    click.echo(f"{g!r} at {when} ({g.timezone}); {_label_text(g)}")
+    if object_id is not None:
+        click.echo(f"{object_id}: its receptacles ranked by P(on it at {when})")
     click.echo(table.round({"p": 3, "x_m": 2, "y_m": 2, "z_m": 2}).to_string(index=False))
-    doors = snap.doors_to_pandas()[["door_id", "p_open", "room_a", "room_b"]]
+    doors = snap.doors_to_pandas()
     if len(doors):
-        click.echo(doors.round({"p_open": 3}).to_string(index=False))
+        doors = doors.assign(between=doors["room_a"].astype(str) + " and " + doors["room_b"].astype(str))
+        click.echo("")
+        click.echo(doors[["door_id", "p_open", "between"]].round({"p_open": 3}).to_string(index=False))
     if csv_path is not None:
         from psg_data.writers._safe_output import write_atomically
 

@@ -248,14 +248,24 @@ def escape_floors(escape: float) -> tuple[float, float]:
     return (0.0, 0.0) if e <= 0 else (e, max(ESCAPE_FIRST, e))
 
 
+def _say_once(text: str) -> None:
+    """An INFO line marked ``say_once``: the command line's log handler prints it once per command
+    (a run refits the same estimator per seed, scene and method); library logging sees every one.
+    """
+    log.info("%s", text, extra={"say_once": True})
+
+
 def log_fit_summary(name: str, summary: Mapping[str, Any]) -> None:
-    """One INFO line per decided setting and the error rates (the full summary is ``fit_summary_``)."""
+    """One INFO line per decided setting and the error rates (the full summary is ``fit_summary_``),
+    each marked ``say_once`` (:func:`_say_once`).
+    """
     for k, v in summary.get("settings", {}).items():
-        log.info("%s: %s = %s (%s)", name, k, v.get("value"), v.get("source"))
+        _say_once(f"{name}: {k} = {v.get('value')} ({v.get('source')})")
     er = summary.get("error_rates")
     if er:
-        log.info("%s: P_M = %.4f, P_F = %.4f (%s)", name, er["p_m"], er["p_f"], er["source"])
+        _say_once(f"{name}: P_M = {er['p_m']:.4f}, P_F = {er['p_f']:.4f} ({er['source']})")
     osel = summary.get("order_selection")
     if osel:
-        log.info("%s: FreMEn order rule %s, duration rule %s, median order %s over %d edges", name,
-                 osel["order_rule"], "on" if osel["duration_rule"] else "off", osel["median_order"], len(osel["edges"]))
+        _say_once(f"{name}: FreMEn order rule {osel['order_rule']}, duration rule "
+                  f"{'on' if osel['duration_rule'] else 'off'}, median order {osel['median_order']} over "
+                  f"{len(osel['edges'])} edges")
