@@ -260,17 +260,16 @@ def choose_map_query(res: Any, methods: list[str] | None = None) -> tuple[int, i
 def plot_delta_sweep(res: Any, out_path: str | Path | None = None, *,
                      roles: Mapping[str, tuple[str, str]] | None = None) -> Figure:
     """Overall SR, dynamic SR and AR against delta, one line per method (reference rows dashed), 95 % intervals."""
-    import matplotlib
     import numpy as np
     from matplotlib.figure import Figure
 
-    from psg_data.evaluation._persistence_plots import save_figure
+    from psg_data.evaluation._persistence_plots import _colours, save_figure
 
     sw = res.sweep
     fig = Figure(figsize=(13, 3.8))
     axes = fig.subplots(1, 3)
-    cmap = matplotlib.colormaps["tab10"]
     names = list(dict.fromkeys(sw["method"]))
+    colours = _colours(names)  # the same colour per method as in every other figure
     for ax, key, title in zip(axes, ("overall_sr", "dynamic_sr", "absent_ar"),
                               ("overall SR (%)", "dynamic SR (%)", "AR: correct aborts on absent targets (%)")):
         for i, n in enumerate(names):
@@ -278,7 +277,7 @@ def plot_delta_sweep(res: Any, out_path: str | Path | None = None, *,
             m = 100 * d[f"{key}_mean"].to_numpy(float)
             err = 100 * np.vstack([np.nan_to_num(d[f"{key}_mean"] - d[f"{key}_ci_low"]),
                                    np.nan_to_num(d[f"{key}_ci_high"] - d[f"{key}_mean"])])
-            ax.errorbar(d["delta"], m, yerr=err, marker="o", ms=4, capsize=2, lw=1.3, color=cmap(i % 10), label=n,
+            ax.errorbar(d["delta"], m, yerr=err, marker="o", ms=4, capsize=2, lw=1.3, color=colours[i], label=n,
                         ls="--" if n in (roles or {}) else "-")
         ax.set_xlabel("delta (abort when no receptacle has a belief >= delta)", fontsize=8)
         ax.set_title(title, fontsize=9)

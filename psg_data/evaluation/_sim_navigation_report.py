@@ -157,9 +157,10 @@ def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Ma
     import numpy as np
     from matplotlib.figure import Figure
 
-    from psg_data.evaluation._persistence_plots import save_figure
+    from psg_data.evaluation._persistence_plots import _colours, save_figure
 
     methods = list(dict.fromkeys(per_scene["method"]))
+    colours = _colours(methods)
     scenes = sorted(set(int(s) for s in per_scene["seed"]))
     fig = Figure(figsize=(max(8.0, 0.7 * len(scenes) + 4), 4.4))
     ax = fig.add_subplot(1, 1, 1)
@@ -169,6 +170,7 @@ def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Ma
         y = [100 * float(d.loc[s, "overall_sr"]) if s in d.index else np.nan for s in scenes]
         role = roles.get(m, ("method", ""))[0]
         ax.plot(range(len(scenes)), y, marker=markers[k % len(markers)], ls="-" if role == "method" else ":",
+                color=colours[k],
                 lw=1.5 if role == "method" else 1.0, label=m + ("" if role == "method" else f" ({role})"))
     ax.set_xticks(range(len(scenes)), [f"house {s}" for s in scenes], rotation=45, ha="right")
     ax.set_ylabel("overall SR per scene (%)")
