@@ -1,5 +1,6 @@
 """One colour per method in every figure of a run: beliefs (some rows skipped), bars (every row, the
-reference rows first) and horizons agree."""
+reference rows first) and horizons agree.
+"""
 
 from __future__ import annotations
 
