@@ -105,3 +105,18 @@ def test_interval_spread_is_the_half_width_in_every_format(tmp_path: Path) -> No
     assert cell.replace("±", "$\\pm$") in forms["latex"]
     row = next(csv.DictReader(io.StringIO(forms["csv"])))
     assert row["static_sr_pm"] == row["static_sr_half_width"] and row["pm"] == "half-width of the stated interval"
+
+
+def test_sim_text_table_is_the_models_text_layout() -> None:
+    """The simulation protocols print their main table with the one text renderer (group header row,
+    ``*`` marks, the ± line), not a layout of their own; the paper's rows follow it.
+    """
+    from psg_data.evaluation._sim_navigation_report import sim_table_text
+    from psg_data.evaluation._tables import format_table
+
+    res, summary = _results("std")
+    text = sim_table_text(summary, protocol="paper-sim-adaptive", labels="gt", roles={}, n_scenes=3,
+                          table=format_table(res.tables[0]))
+    model = format_table(res.tables[0])
+    assert text.startswith(model)
+    assert "The paper's rows" in text[len(model):]
