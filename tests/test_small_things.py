@@ -41,3 +41,14 @@ def test_view_help_examples_name_real_scans(tmp_path: Path) -> None:
     assert ids, help_text
     lab = build_lab(tmp_path / "lab", LabConfig(days=2, frames_per_scan=1, width=32, height=24))
     assert set(ids) <= set(open_dataset(lab).scan_ids)
+
+
+def test_readme_timings_state_the_machine_and_the_load() -> None:
+    """A time in the README's opening paragraph comes with the machine and its load (a number alone on a
+    shared machine was off by a factor of 15)."""
+    text = (ROOT / "README.md").read_text()
+    opening = text.split("```", 2)[2].split("\n\n", 2)[1]
+    assert "about 15 s" not in opening and "under a minute" not in opening
+    for m in re.finditer(r"\d+(\.\d+)? (s|min)\b", opening):
+        around = opening[max(0, m.start() - 200): m.end() + 200]
+        assert "load average" in around and "core" in around, around
