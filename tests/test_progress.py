@@ -137,8 +137,13 @@ def test_a_started_task_speaks_before_its_first_unit(term) -> None:  # type: ign
                 break
             threading.Event().wait(0.001)
         assert seen.is_set(), buf.getvalue()
+        assert "(the first scene still running)" in buf.getvalue()  # not "0.0 scenes/s"
         p(2)
     assert buf.getvalue().splitlines()[-1].startswith("navigation: 2/2 scenes, done in")
+    buf = term(False)
+    with Progress("navigation: filters and episodes", unit="runs", every_s=60.0) as q:
+        q.start()  # nothing counted: the final line gives the time only
+    assert re.fullmatch(r"navigation: filters and episodes: done in \d+\.\d s", buf.getvalue().strip())
 
 
 def test_fit_summary_lines_once_per_command(term) -> None:  # type: ignore[no-untyped-def]

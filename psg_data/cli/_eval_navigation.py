@@ -95,8 +95,10 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
     choice = _dataset(dataset, options.labels, quiet, "navigation")
     _require(specs, choice)
     info = provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path)})
-    _, results = run_navigation_job(specs, choice.path, options, out, references=references, deltas=deltas,
-                                    plots=not no_plots, info=info)
+    with Progress("navigation: filters and episodes", unit="runs", quiet=quiet) as prog:
+        prog.start()  # no count to give: the clock (a heartbeat line off a terminal) says it is working
+        _, results = run_navigation_job(specs, choice.path, options, out, references=references, deltas=deltas,
+                                        plots=not no_plots, info=info)
     if table_format == "text":
         click.echo("")
     print_results(results, fmt=table_format)

@@ -108,11 +108,15 @@ class Progress:
         dt = max(now - self.t0, 1e-9)
         mb = f", {self.bytes / dt / 1e6:.1f} MB/s" if self.bytes else ""
         more = "".join(f", {k} {v}" for k, v in self._extra.items())
-        if self.done and self.done / dt < 1.0:  # slow units: "28.1 s each", not "0.0 scenes/s"
+        if not self.done:  # a started task whose first unit is still running (start())
+            return f"the first {self.unit.rstrip('s') or self.unit} still running{mb}{more}"
+        if self.done / dt < 1.0:  # slow units: "28.1 s each", not "0.0 scenes/s"
             return f"{dt / self.done:.1f} s each{mb}{more}"
         return f"{self.done / dt:.1f} {self.unit}/s{mb}{more}"
 
     def _line(self, now: float, final: bool) -> str:
+        if final and not self.done:  # a started task that counted nothing: its time only
+            return f"{self.label}: done in {now - self.t0:.1f} s"
         total = f"/{self.total}" if self.total else ""
         when = f"done in {now - self.t0:.1f} s" if final else f"{now - self.t0:.0f} s"
         return f"{self.label}: {self.done}{total} {self.unit}, {when} ({self._rate(now)})"
