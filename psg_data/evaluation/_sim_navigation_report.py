@@ -129,7 +129,7 @@ def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[s
     if head_line:
         lines.append(head_line)
     refs = [f"{m} = {d}" for m, (role, d) in roles.items() if role != "method"]
-    if refs:
+    if refs and table is None:  # the renderer's notes name them already
         lines.append("reference rows: " + "; ".join(refs))
     return "\n".join(lines) + "\n"
 
