@@ -105,7 +105,8 @@ class ReaderGoneStdout:
     def write(self, text: str) -> int:
         if not self.reader_gone:
             try:
-                return int(self._stream.write(text))
+                n = self._stream.write(text)
+                return len(text) if n is None else int(n)
             except BrokenPipeError:
                 self._gone()
         return len(text)
