@@ -1,11 +1,11 @@
 """Plugin authors need no underscore member of the base classes: public hooks (check_fitted,
 edge_of_state, last_t_s, base_state, restore_state), documented state keys (STATE_KEYS); and a
-plugin's comparison rows include the paper's own method, Perpetua*."""
+plugin's comparison rows include the paper's own method, Perpetua*.
+"""
 
 from __future__ import annotations
 
 import ast
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +21,15 @@ OVERRIDDEN = {"_update_many", "_predict", "_parameters"}  # what a subclass impl
 
 
 def _plugin():  # type: ignore[no-untyped-def]
-    sys.path.insert(0, str(PLUGIN))
-    try:
-        import psg_example_plugin
-    finally:
-        sys.path.remove(str(PLUGIN))
-    return psg_example_plugin
+    """The example plugin's module, loaded from its file (it is not an installed distribution here)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("example_plugin_under_test",
+                                                  PLUGIN / "psg_example_plugin" / "__init__.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_the_example_plugin_uses_only_public_members() -> None:
@@ -41,6 +44,7 @@ def test_the_example_plugin_uses_only_public_members() -> None:
 
 
 def test_public_hooks_round_trip_a_filter_state() -> None:
+    """get_state has the STATE_KEYS; filter_from_state with the public hooks restores the same predictions."""
     plugin = _plugin()
     est = plugin.DecayEstimator(half_life_h=2.0)
     with pytest.raises(NotFittedError):
@@ -64,6 +68,7 @@ def test_public_hooks_round_trip_a_filter_state() -> None:
 
 
 def test_a_plugins_comparison_rows_include_perpetua_star() -> None:
+    """psg-eval -e PLUGIN scores Perpetua* (the paper's method) next to Perpetua and FreMEn."""
     rows, _ = persistence_rows([EstimatorSpec.of("example_decay")], {}, references=True)
     labels = [r.label for r in rows]
     assert labels[:4] == ["example_decay", "perpetua_star", "perpetua", "fremen"]
