@@ -37,3 +37,17 @@ def test_converted_synth_recordings_keep_name_and_hours(tmp_path: Path) -> None:
     notes = res["tables"][0]["notes"]
     assert any("labels gt" in n for n in notes), notes
     assert "canonical" not in res["tables"][0]["title"]
+
+
+def test_bad_operating_hours_in_a_site_file_is_one_line(tmp_path: Path) -> None:
+    """A site file's operating_hours that is not local hour ranges is refused, naming the file and field."""
+    import pytest
+
+    from psg_data.errors import ConversionError
+    from psg_data.loaders.raw._side import read_side_files
+
+    (tmp_path / "site.json").write_text(json.dumps({"name": "x", "timezone": "UTC", "operating_hours": "9 to 5"}))
+    with pytest.raises(ConversionError, match=r"site.json: operating_hours: expected local hour ranges"):
+        read_side_files(tmp_path)
+    (tmp_path / "site.json").write_text(json.dumps({"name": "x", "timezone": "UTC", "operating_hours": "9-12,13-17"}))
+    assert read_side_files(tmp_path).operating_hours == "9-12,13-17"
