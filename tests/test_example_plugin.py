@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -21,13 +22,22 @@ from tests.contract import assert_one_error
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _tree(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*") if "__pycache__" not in p.parts)
+
+
 @pytest.fixture(scope="module")
 def plugin_site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """examples/plugin installed (pip, as a user would) into a folder of its own."""
     site = tmp_path_factory.mktemp("plugin-site")
-    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site),
-                        str(ROOT / "examples" / "plugin")], capture_output=True, text=True)
+    src = ROOT / "examples" / "plugin"
+    before = _tree(src)
+    copy = tmp_path_factory.mktemp("plugin-src") / "plugin"  # a build may write build/, *.egg-info beside its source
+    shutil.copytree(src, copy, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(copy)],
+                       capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+    assert _tree(src) == before  # the repository's examples/plugin/ is left as it was
     assert list(site.glob("psg_example_plugin-0.1.0.dist-info/entry_points.txt"))
     return site
 

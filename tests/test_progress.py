@@ -54,7 +54,8 @@ def test_plain_lines_when_not_a_terminal(term, monkeypatch: pytest.MonkeyPatch) 
     assert "INFO: wrote something" in lines
     progress_lines = [ln for ln in lines if ln.startswith("synth: ")]
     assert 2 <= len(progress_lines) <= 6  # throttled: one line per >= 5 s of (fake) time, not per update
-    assert re.fullmatch(r"synth: 10/10 scans, done in \d+\.\d s \(\d+\.\d scans/s\)", progress_lines[-1])
+    assert re.fullmatch(r"synth: 10/10 scans, done in \d+\.\d s \((\d+\.\d scans/s|\d+\.\d s each)\)",
+                        progress_lines[-1])  # under one unit a second: seconds each
     assert all(ln.startswith(("synth: ", "INFO: ")) for ln in lines)
 
 
@@ -108,3 +109,54 @@ def test_synth_redirected_to_a_file_writes_separate_lines(tmp_path: Path) -> Non
                         "--days", "1", "--frames-per-scan", "1", "--resolution", "40x30", "--quiet"],
                        capture_output=True, text=True, check=False)
     assert q.returncode == 0 and q.stderr == "" and q.stdout.strip() == f"wrote {tmp_path / 'lab2'} (4 scans)"
+
+
+def test_slow_units_show_seconds_each_not_zero_per_second(term, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    """Two scenes in 56 s: '28.0 s each', never '0.0 scenes/s'."""
+    buf = term(False)
+    clock = iter([0.0, 28.0, 56.0, 56.0])
+    monkeypatch.setattr(_progress.time, "perf_counter", lambda: next(clock))
+    with Progress("scenes", total=2, unit="scenes", every_s=5.0) as p:
+        p(1)
+        p(1)
+    last = buf.getvalue().splitlines()[-1]
+    assert last == "scenes: 2/2 scenes, done in 56.0 s (28.0 s each)"
+
+
+def test_a_started_task_speaks_before_its_first_unit(term) -> None:  # type: ignore[no-untyped-def]
+    """start(): off a terminal, the plain line comes every every_s while the first unit is still running."""
+    import threading
+
+    buf = term(False)
+    seen = threading.Event()
+    with Progress("navigation", total=2, unit="scenes", every_s=0.01) as p:
+        p.start()
+        for _ in range(60_000):  # wait (not timed: until the line shows) for the heartbeat's line
+            if "navigation: 0/2 scenes" in buf.getvalue():
+                seen.set()
+                break
+            threading.Event().wait(0.001)
+        assert seen.is_set(), buf.getvalue()
+        assert "(the first scene still running)" in buf.getvalue()  # not "0.0 scenes/s"
+        p(2)
+    assert buf.getvalue().splitlines()[-1].startswith("navigation: 2/2 scenes, done in")
+    buf = term(False)
+    with Progress("navigation: filters and episodes", unit="runs", every_s=60.0) as q:
+        q.start()  # nothing counted: the final line gives the time only
+    assert re.fullmatch(r"navigation: filters and episodes: done in \d+\.\d s", buf.getvalue().strip())
+
+
+def test_fit_summary_lines_once_per_command(term) -> None:  # type: ignore[no-untyped-def]
+    """A run refits an estimator per seed and scene: its identical summary lines are printed once."""
+    from psg_data.estimators._common import log_fit_summary
+
+    buf = term(False)
+    setup_logging()
+    summary = {"settings": {"n_periods": {"value": 41, "source": "cadence"}},
+               "error_rates": {"p_m": 0.1, "p_f": 0.2, "source": "pooled"}}
+    for _ in range(3):
+        log_fit_summary("fremen", summary)
+    log_fit_summary("fremen", {"settings": {"n_periods": {"value": 84, "source": "cadence"}}})
+    lines = buf.getvalue().splitlines()
+    assert lines == ["INFO: fremen: n_periods = 41 (cadence)", "INFO: fremen: P_M = 0.1000, P_F = 0.2000 (pooled)",
+                     "INFO: fremen: n_periods = 84 (cadence)"]

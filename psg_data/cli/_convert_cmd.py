@@ -21,9 +21,10 @@ from psg_data.cli._errors import ContractCommand, check_jobs
 @click.option("--camera-info-topic", help="sensor_msgs/CameraInfo topic of the colour camera.")
 @click.option("--poses", help="Pose source: tf:WORLD->FRAME, odom:/TOPIC or tum:FILE.")
 @click.option("--camera-frame", help="Optical frame of the camera (default: CameraInfo header.frame_id).")
-@click.option("--split", help="Split one long recording into scans: gap:SECONDS or slot:SECONDS.")
-@click.option("--split-gap", "split_gap", type=float, default=None, metavar="SECONDS",
-              help="Split recordings (RTAB-Map: each session) at time gaps over SECONDS; same as --split gap:SECONDS.")
+@click.option("--split", help="Split recordings into scans (RTAB-Map: each session): gap:SECONDS at time gaps over "
+                              "SECONDS, or slot:SECONDS.")
+@click.option("--split-gap", "split_gap", type=float, default=None, metavar="SECONDS", hidden=True,
+              help="Former spelling of --split gap:SECONDS (kept for one release).")
 @click.option("--keyframes", help="Keep only keyframes: every:N or motion:METRES,DEGREES.")
 @click.option("--color-encoding", type=click.Choice(["auto", "png", "jpeg"]), default=None,
               help="Colour images in the dataset (auto: JPEG input is passed through as JPEG).")
@@ -72,7 +73,7 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
       psg-data convert long.bag lab/ --split gap:60 --keyframes motion:0.1,10
       psg-data convert run.mcap lab/ --poses tf:map->camera_color_optical_frame -j 2
       psg-data convert rgbd_dataset_freiburg1_xyz/ fr1/ --config tum.yaml
-      psg-data convert ~/.ros/rtabmap.db lab/ --split-gap 600
+      psg-data convert ~/.ros/rtabmap.db lab/ --split gap:600
     """
     setup_logging(quiet)
     from psg_data.convert import ConvertConfig, convert, load_config
@@ -83,6 +84,7 @@ def convert_cmd(input_path: Path, out: Path, config_file: Path | None, quiet: bo
     if split_gap is not None:
         if opts.get("split"):
             raise click.UsageError("--split-gap and --split are the same setting; give one of them")
+        click.echo("warning: --split-gap S is now --split gap:S; the old spelling goes in the next release", err=True)
         opts["split"] = f"gap:{split_gap:g}"
     cfg = cfg.merged("command line", names, **opts)
     progress = Progress("convert", unit="frames", quiet=quiet)

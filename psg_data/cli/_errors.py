@@ -12,12 +12,17 @@ code    meaning
 130     interrupted (Ctrl-C); "rerun ... to resume" is said only where a rerun resumes (convert)
 ======  ==========================================================================================
 
+A reader that leaves early (``psg-eval ... | head``, quitting ``less``) does not stop a command: the
+rest of its standard output is dropped (:class:`ReaderGoneStdout`), its work and files are finished
+and it exits with its own code, printing nothing about the closed pipe.
+
 A traceback means a bug in psg-data: anything a user or a recording can hand us ends in one line.
 """
 
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -27,7 +32,7 @@ import click
 from psg_data.errors import PsgDataError
 
 __all__ = ["EXIT_OK", "EXIT_PROBLEMS", "EXIT_USAGE", "EXIT_INTERRUPTED", "handle_errors", "OneLineErrors",
-           "ContractCommand", "ContractGroup", "check_jobs", "one_line"]
+           "ContractCommand", "ContractGroup", "check_jobs", "one_line", "ReaderGoneStdout"]
 
 EXIT_OK = 0
 EXIT_PROBLEMS = 1
@@ -73,13 +78,67 @@ def handle_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+class ReaderGoneStdout:
+    """``sys.stdout`` while a command runs: once its reader has closed the pipe (``| head``), the rest of
+    the output is dropped instead of raising :class:`BrokenPipeError` into the work.
+
+    The descriptor is then pointed at the null device, so the text still buffered in the original
+    stream (flushed at interpreter exit) goes nowhere instead of raising again. Everything else is
+    the wrapped stream's.
+    """
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+        self.reader_gone = False
+
+    def _gone(self) -> None:
+        self.reader_gone = True
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(null, self._stream.fileno())
+            finally:
+                os.close(null)
+        except (OSError, ValueError, AttributeError):  # no descriptor (a test's stream): dropping is enough
+            pass
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                n = self._stream.write(text)
+                return len(text) if n is None else int(n)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
 class OneLineErrors:
-    """click's command-line errors as one line with exit 2 (click prints a usage block otherwise)."""
+    """click's command-line errors as one line with exit 2 (click prints a usage block otherwise); a
+    closed standard output (``| head``) as nothing at all (:class:`ReaderGoneStdout`).
+    """
 
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
-        if not standalone_mode:
+        if not standalone_mode or isinstance(sys.stdout, ReaderGoneStdout):
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)  # type: ignore[misc]
+        stdout, sys.stdout = sys.stdout, ReaderGoneStdout(sys.stdout)  # type: ignore[assignment]
+        try:
+            self._main(args, prog_name, complete_var, **extra)
+        finally:
+            sys.stdout.flush()
+            sys.stdout = stdout
+
+    def _main(self, args: Any, prog_name: str | None, complete_var: str | None, **extra: Any) -> None:
         try:
             rv = super().main(args, prog_name, complete_var, False, **extra)  # type: ignore[misc]
         except click.UsageError as exc:

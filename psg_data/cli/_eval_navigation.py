@@ -7,6 +7,7 @@ from typing import Any
 
 import click
 
+from psg_data.cli._common import Progress
 from psg_data.cli._eval_provenance import provenance
 
 __all__ = ["run_navigation_task", "run_doors_task", "navigation_options", "door_task_options", "print_problems"]
@@ -94,8 +95,10 @@ def run_navigation_task(specs: list[Any], dataset: str | None, options: Any, out
     choice = _dataset(dataset, options.labels, quiet, "navigation")
     _require(specs, choice)
     info = provenance({"task": "navigation", "dataset_label": choice.label, "dataset": str(choice.path)})
-    _, results = run_navigation_job(specs, choice.path, options, out, references=references, deltas=deltas,
-                                    plots=not no_plots, info=info)
+    with Progress("navigation: filters and episodes", unit="runs", quiet=quiet) as prog:
+        prog.start()  # no count to give: the clock (a heartbeat line off a terminal) says it is working
+        _, results = run_navigation_job(specs, choice.path, options, out, references=references, deltas=deltas,
+                                        plots=not no_plots, info=info)
     if table_format == "text":
         click.echo("")
     print_results(results, fmt=table_format)
@@ -112,7 +115,16 @@ def run_doors_task(specs: list[Any], dataset: str | None, options: Any, out: Pat
     _require(specs, choice)
     info = provenance({"task": "doors", "dataset_label": choice.label, "dataset": str(choice.path),
                        "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
-    _, results = run_door_job(specs, choice.path, options, out, references=references, plots=not no_plots, info=info)
+    steps = len(options.seeds) + int(options.objects)
+    with Progress("doors: query sets and objects", total=steps, unit="steps", quiet=quiet) as prog:
+        prog.start()
+
+        def progress(done: int, _total: int) -> None:
+            prog.done = done
+            prog.update(0)
+
+        _, results = run_door_job(specs, choice.path, options, out, references=references, plots=not no_plots,
+                                  info=info, progress=progress)
     if table_format == "text":
         click.echo("")
     print_results(results, fmt=table_format)

@@ -76,7 +76,9 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     import time
 
     from psg_data.datasets import navigation_benchmark
+    from psg_data.evaluation._navigation_report import navigation_results
     from psg_data.evaluation._sim_navigation_report import plot_scene_sr, sim_summary, sim_table_text
+    from psg_data.evaluation._tables import format_table, print_results
     from psg_data.navigation._sim_benchmark import SIM_PROTOCOLS, run_sim_navigation
 
     proto = SIM_PROTOCOLS[protocol].quick() if quick else SIM_PROTOCOLS[protocol]
@@ -87,6 +89,8 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     methods, settings, roles = sim_methods(specs, references)
     with Progress(f"{proto.name}: {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
             _executor(jobs) as executor:
+        prog.start()  # a scene takes tens of seconds: the clock runs from the start
+
         def progress(done: int, _total: int) -> None:
             prog.done = done
             prog.update(0)
@@ -105,7 +109,10 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
               "settings": {k: v for k, v in outs[proto.scenes[0]]["settings"].items()}}
     info = provenance({"task": "navigation", "dataset_label": "navigation-benchmark", "dataset": str(root),
                        "seconds": seconds, "jobs": jobs})
-    text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths))
+    results = navigation_results(_result(records, per_scene, summary, config, errors), roles=roles, info=info,
+                                 spread="std")
+    text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths),
+                          table=format_table(results.tables[0]))
     _write(out, records, per_scene, summary, config, roles, info, text, errors)
     if not no_plots:
         plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
@@ -115,11 +122,7 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
         click.echo("")
         click.echo(text, nl=False)
     else:
-        from psg_data.evaluation._navigation_report import navigation_results
-        from psg_data.evaluation._tables import print_results
-
-        print_results(navigation_results(_result(records, per_scene, summary, config, errors), roles=roles,
-                                         info=info), fmt=table_format)
+        print_results(results, fmt=table_format)
     from psg_data.cli._eval_navigation import print_problems
 
     return print_problems(errors)
@@ -195,6 +198,7 @@ def _write(out: Path, records: Any, per_scene: Any, summary: Any, config: dict[s
     from psg_data.evaluation._navigation_report import write_navigation_results
     from psg_data.writers._safe_output import write_atomically
 
-    write_navigation_results(_result(records, per_scene, summary, config, errors), out, roles=roles, info=info)
+    write_navigation_results(_result(records, per_scene, summary, config, errors), out, roles=roles, info=info,
+                             spread="std")
     write_atomically(out / "sim_table.txt", lambda tmp: tmp.write_text(text))
     write_atomically(out / "sim_config.json", lambda tmp: tmp.write_text(json.dumps(config, indent=1, default=str)))

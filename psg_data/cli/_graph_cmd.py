@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -19,6 +20,8 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
     p = Path(path)
     if p.is_file():
         return PredictiveGraph.load(p)
+    if save is not None and save.exists() and not overwrite:  # before the fit, not after it
+        raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
     if path == "demo" and not p.is_dir():
         from psg_data.datasets import demo
 
@@ -27,10 +30,38 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
         raise PsgDataError(f"{path}: expected a psg-dataset folder, 'demo' or a saved graph (.json)")
     g = PredictiveGraph.from_dataset(p, estimator, labels=labels)
     if save is not None:
-        if save.exists() and not overwrite:
-            raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
         g.save(save)
     return g
+
+
+def _refuse_fit_options_on_saved(ctx: click.Context, path: str) -> None:
+    """-e / --labels choose how a dataset is fitted: on a saved graph (already fitted) they are refused."""
+    from psg_data.errors import PsgDataError
+
+    given = [f"--{n}" for n in ("estimator", "labels")
+             if ctx.get_parameter_source(n) not in (None, click.core.ParameterSource.DEFAULT)]
+    if given and Path(path).is_file():
+        raise PsgDataError(f"{', '.join(given)}: {path} is a saved graph, fitted already (its estimator and labels "
+                           "are stored in it); give a dataset PATH to fit another")
+
+
+def _label_text(g: object) -> str:
+    """Where the graph's observations came from: its edge count depends on it (gt, privileged, ...)."""
+    info = getattr(g, "info", {}) or {}
+    scans = f" in {info['train_scans']} training scans" if "train_scans" in info else ""
+    return f"labels {info.get('labels', '?')} (an edge: an object seen on a receptacle{scans} under these labels)"
+
+
+def _print_text(g: Any, snap: Any, table: Any, object_id: str | None, when: str) -> None:
+    click.echo(f"{g!r} at {when} ({g.timezone}); {_label_text(g)}")
+    if object_id is not None:
+        click.echo(f"{object_id}: its receptacles ranked by P(on it at {when})")
+    click.echo(table.round({"p": 3, "x_m": 2, "y_m": 2, "z_m": 2}).to_string(index=False))
+    doors = snap.doors_to_pandas()
+    if len(doors):
+        doors = doors.assign(between=doors["room_a"].astype(str) + " and " + doors["room_b"].astype(str))
+        click.echo("")
+        click.echo(doors[["door_id", "p_open", "between"]].round({"p_open": 3}).to_string(index=False))
 
 
 @click.command("graph", cls=ContractCommand)
@@ -43,8 +74,11 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
 @click.option("--labels", default="gt", show_default=True, metavar="SOURCE",
               help="Label source of the observations: gt, privileged, noisy:P, detections:FILE.")
 @click.option("--top", type=click.IntRange(1), default=None, help="Rows of the ranking (default: all).")
-@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also write the table as CSV.")
+@click.option("--format", "table_format", type=click.Choice(["text", "csv"]), default="text", show_default=True,
+              help="How the table is printed: text, or csv (the ranking or snapshot only; as psg-eval compare "
+                   "--format csv; redirect it to a file).")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None, hidden=True,
+              help="Former spelling of --format csv > FILE (kept for one release).")
 @click.option("--png", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also draw it on the map (rooms, receptacles coloured by P, doors by P(open)).")
 @click.option("--rerun", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.rrd",
@@ -54,10 +88,12 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
               help="Save the fitted graph (load it later by giving FILE.json as PATH).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save-graph file.")
 @quiet_option
+@click.option("--verbose", "-v", is_flag=True, help="Also print the fit's INFO lines (settings decided, error rates).")
+@click.pass_context
 @handle_errors
-def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels: str, top: int | None,
-              csv_path: Path | None, png: Path | None, rerun: Path | None, save_graph: Path | None, overwrite: bool,
-              quiet: bool) -> None:
+def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, estimator: str, labels: str,
+              top: int | None, table_format: str, csv_path: Path | None, png: Path | None, rerun: Path | None,
+              save_graph: Path | None, overwrite: bool, quiet: bool, verbose: bool) -> None:
     """Where things are predicted at a time: the predictive graph of PATH (a dataset, demo, or a
     graph saved with --save-graph) as a table; with --object the object's receptacles ranked.
 
@@ -68,7 +104,8 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
       psg-data graph /data/lab --labels privileged --save-graph lab.json --at "2025-03-20 14:00"
       psg-data graph lab.json --at 2025-03-21T09:30+01:00 --object redmug --top 3
     """
-    setup_logging(quiet)
+    setup_logging(quiet=quiet or not verbose, verbose=verbose and not quiet)
+    _refuse_fit_options_on_saved(ctx, path)
     g = _graph(path, estimator, labels, save_graph, overwrite)
     t = float(at) if at.replace(".", "", 1).isdigit() else at
     snap = g.at(t)
@@ -80,14 +117,15 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
     from zoneinfo import ZoneInfo
 
     when = dt.datetime.fromtimestamp(snap.t_s, ZoneInfo(g.timezone)).isoformat(timespec="minutes")
-    click.echo(f"{g!r} at {when} ({g.timezone})")
-    click.echo(table.round({"p": 3, "x_m": 2, "y_m": 2, "z_m": 2}).to_string(index=False))
-    doors = snap.doors_to_pandas()[["door_id", "p_open", "room_a", "room_b"]]
-    if len(doors):
-        click.echo(doors.round({"p_open": 3}).to_string(index=False))
+    if table_format == "csv":
+        click.echo(table.to_csv(index=False), nl=False)
+    else:
+        _print_text(g, snap, table, object_id, when)
     if csv_path is not None:
         from psg_data.writers._safe_output import write_atomically
 
+        click.echo("warning: --csv FILE is now --format csv > FILE; the old spelling goes in the next release",
+                   err=True)
         write_atomically(csv_path, lambda tmp: table.to_csv(tmp, index=False))
     if png is not None:
         from psg_data.navigation._plots import plot_snapshot
@@ -100,4 +138,5 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
 
         with recording(rerun, overwrite=overwrite, inputs=[g.info.get("dataset")]) as rec:
             n = log_graph(rec, g, snap.t_s + np.arange(-3.5 * 86400, 3.5 * 86400 + 1, 1800.0))
-        click.echo(f"wrote {rerun} ({n} belief series, a week around {when} every 30 min)")
+        click.echo(f"wrote {rerun} ({n} belief series, a week around {when} every 30 min)",
+                   err=table_format == "csv")  # stdout: only the CSV

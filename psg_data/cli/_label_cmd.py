@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import click
 
-from psg_data.cli._common import DATASET_HELP, Progress, dataset_path, handle_errors, quiet_option, setup_logging
+from psg_data.cli._common import (
+    DATASET_HELP,
+    Progress,
+    dataset_path,
+    from_old_spelling,
+    handle_errors,
+    old_spelling,
+    quiet_option,
+    setup_logging,
+)
 from psg_data.cli._errors import ContractCommand
 
 __all__ = ["label_cmd"]
@@ -16,7 +25,9 @@ __all__ = ["label_cmd"]
               help="gt | privileged | noisy:P[,P_F] | observed (door states read from the depth) | "
                    "detections:FILE (.parquet or .json) or detections:PATH (ConceptGraphs, Spark-DSG / Khronos or "
                    "HOV-SG scene graphs: a folder per scan named by its scan_id).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the noise (noisy sources).")
+@click.option("--label-seed", "seed", type=int, default=0, show_default=True,
+              help="Seed of the noise (noisy sources); the same option as psg-eval's --label-seed.")
+@old_spelling("--seed", "--label-seed", "old_seed", type=int)
 @click.option("--valid", "valid_file", type=click.Path(), default=None,
               help="JSON {object_id: [receptacle_id, ...]} of valid receptacles (default: the schedule's support).")
 @click.option("--observed", type=click.Choice(["matched", "visibility", "either"]), default="matched",
@@ -34,8 +45,9 @@ __all__ = ["label_cmd"]
               help="Replace labels of this source and recompute visibility (only tables psg-data wrote).")
 @quiet_option
 @handle_errors
-def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, observed: str, min_iou: float,
-              margin_m: float, doors: bool, overwrite: bool, quiet: bool, detections_format: str = "auto") -> None:
+def label_cmd(dataset: str, source: str, seed: int, old_seed: int | None, valid_file: str | None, observed: str,
+              min_iou: float, margin_m: float, doors: bool, overwrite: bool, quiet: bool,
+              detections_format: str = "auto") -> None:
     """Label a dataset: write tables/labels.parquet (and tables/visibility.parquet).
 
     Codes per (scan, object, receptacle): 1 present, 0 absent, -1 not observed, -2 receptacle not
@@ -46,7 +58,7 @@ def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, obse
     \b
     Examples:
       psg-data label /tmp/lab --source privileged
-      psg-data label /tmp/lab --source noisy:0.1 --seed 3
+      psg-data label /tmp/lab --source noisy:0.1 --label-seed 3
       psg-data label /tmp/lab --source observed
       psg-data label /tmp/lab --source detections:/tmp/lab_detections.parquet
       psg-data label /tmp/lab --source detections:/tmp/cg_sessions    # ConceptGraphs sg_cache per scan
@@ -62,7 +74,9 @@ def label_cmd(dataset: str, source: str, seed: int, valid_file: str | None, obse
     from psg_data.loaders import open_dataset
     from psg_data.writers._safe_output import check_not_input
 
-    check_settings({"seed": Integral(0, INT64_MAX)}, {"seed": seed}, "command line", LabelingError, {"seed": "--seed"})
+    flag = "--seed" if old_seed is not None else "--label-seed"
+    seed = from_old_spelling(old_seed, seed, old="--seed", new="--label-seed", new_param="seed")
+    check_settings({"seed": Integral(0, INT64_MAX)}, {"seed": seed}, "command line", LabelingError, {"seed": flag})
     parse_source(source)
     assoc = AssociationParams(min_iou=min_iou, margin_m=margin_m, observed=observed)  # checked before any work
     path = dataset_path(dataset, command="psg-data label", quiet=quiet)

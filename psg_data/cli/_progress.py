@@ -5,12 +5,17 @@
 - stderr is a file or a pipe (``psg-data synth OUT > log.txt 2>&1``, CI): no bar and no carriage
   returns; one plain line every ``every_s`` seconds (default 5) and a final line per task.
 - ``--quiet``: neither progress nor INFO lines (warnings and errors still print).
+
+A task whose first unit may take long (a scene, a seed) calls :meth:`Progress.start`: the bar shows at
+once (its clock runs) or, off a terminal, the plain line is printed every ``every_s`` seconds until
+the task ends, so no task is silent. A rate under one unit a second is shown as seconds per unit.
 """
 
 from __future__ import annotations
 
 import atexit
 import logging
+import threading
 import time
 from typing import Any
 
@@ -30,11 +35,22 @@ def console() -> Console:
 
 
 class _ConsoleHandler(logging.Handler):
-    """Writes log records through :func:`console`: above a live bar, never into it."""
+    """Writes log records through :func:`console`: above a live bar, never into it. A record marked
+    ``say_once`` (an estimator's fit summary, repeated by every refit) is printed once per command.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._said: set[str] = set()
 
     def emit(self, record: logging.LogRecord) -> None:
         try:
-            console().print(self.format(record), markup=False, highlight=False, emoji=False)
+            text = self.format(record)
+            if getattr(record, "say_once", False):
+                if text in self._said:
+                    return
+                self._said.add(text)
+            console().print(text, markup=False, highlight=False, emoji=False)
         except Exception:  # noqa: BLE001 - logging must not raise
             self.handleError(record)
 
@@ -74,6 +90,7 @@ class Progress:
         self._extra: dict[str, Any] = {}
         self._bar: Any = None
         self._started = self._closed = False
+        self._heartbeat: threading.Event | None = None
 
     def _start_bar(self) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -91,9 +108,15 @@ class Progress:
         dt = max(now - self.t0, 1e-9)
         mb = f", {self.bytes / dt / 1e6:.1f} MB/s" if self.bytes else ""
         more = "".join(f", {k} {v}" for k, v in self._extra.items())
+        if not self.done:  # a started task whose first unit is still running (start())
+            return f"the first {self.unit.rstrip('s') or self.unit} still running{mb}{more}"
+        if self.done / dt < 1.0:  # slow units: "28.1 s each", not "0.0 scenes/s"
+            return f"{dt / self.done:.1f} s each{mb}{more}"
         return f"{self.done / dt:.1f} {self.unit}/s{mb}{more}"
 
     def _line(self, now: float, final: bool) -> str:
+        if final and not self.done:  # a started task that counted nothing: its time only
+            return f"{self.label}: done in {now - self.t0:.1f} s"
         total = f"/{self.total}" if self.total else ""
         when = f"done in {now - self.t0:.1f} s" if final else f"{now - self.t0:.0f} s"
         return f"{self.label}: {self.done}{total} {self.unit}, {when} ({self._rate(now)})"
@@ -117,6 +140,26 @@ class Progress:
 
     __call__ = update
 
+    def start(self) -> Progress:
+        """Show the task now, before its first unit is done (module docstring); returns ``self``."""
+        if self.quiet or self._started or self._closed:
+            return self
+        self._started = True
+        if console().is_terminal:
+            self._start_bar()
+            return self
+        self._heartbeat = stop = threading.Event()
+
+        def beat() -> None:
+            while not stop.wait(self.every_s):
+                now = time.perf_counter()
+                if now - self._last >= self.every_s * 0.99:
+                    self._last = now
+                    console().print(self._line(now, final=False), markup=False)
+
+        threading.Thread(target=beat, name=f"progress: {self.label}", daemon=True).start()
+        return self
+
     def close(self) -> None:
         """Stop the bar (it stays on screen) or print the final line; idempotent. Prints nothing
         if no progress was ever reported.
@@ -124,6 +167,8 @@ class Progress:
         if self.quiet or self._closed or not self._started:
             return
         self._closed = True
+        if self._heartbeat is not None:
+            self._heartbeat.set()
         now = time.perf_counter()
         if self._bar is not None:
             self._bar.update(self._task, completed=self.done, rate=f"({self._rate(now)})")

@@ -99,9 +99,9 @@ def _synth(out: Path, fmt: str, config: Any, overwrite: bool, quiet: bool) -> No
 
     stage = make_staging(out.with_name(out.name + ".partial"))  # beside OUT: the final move is a rename
     try:
-        build_lab(stage / "canonical", config, progress=prog, lab=lab)
+        build_lab(stage / out.name, config, progress=prog, lab=lab)  # the lab's name: OUT's, not a staging one
         prog.close()
-        export_raw(stage / "canonical", stage / "recordings", fmt)
+        export_raw(stage / out.name, stage / "recordings", fmt)
         commit_tree(stage / "recordings", out, kind="recordings")
     finally:
         shutil.rmtree(stage, ignore_errors=True)

@@ -46,7 +46,7 @@ def view_cmd(dataset: str, scans: tuple[str, ...], save: Path | None, web: bool,
       psg-data view /tmp/lab                          # opens the Rerun viewer
       psg-data view demo --web                        # the built-in lab in the browser: open the printed URL
       psg-data view demo --save lab.rrd               # saved; then: rerun lab.rrd
-      psg-data view /tmp/lab --scan 2024-03-04T09 --scan 2024-03-04T11 --save two.rrd
+      psg-data view demo --scan scan_000_09 --scan scan_000_11 --save two.rrd   # two scans of the built-in lab
     """
     setup_logging(quiet)
     from psg_data.errors import PsgDataError

@@ -99,9 +99,9 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
 @click.option("--estimator", "-e", "estimators", multiple=True, metavar="NAME[:key=value,...]",
               help=f"Estimator to score (repeatable; default {DEFAULT_ESTIMATOR}). Settings after ':'.")
 @click.option("--references/--no-references", default=True, show_default=True,
-              help="Also score the paper's comparison methods (perpetua, fremen) and the reference rows: the ceiling "
-                   "(process_oracle where the dataset stores its generator model, else the ground truth), baselines "
-                   "and chance. --no-references scores only the -e estimators.")
+              help="Also score the paper's methods (perpetua_star, perpetua, fremen) and the reference rows: the "
+                   "ceiling (process_oracle where the dataset stores its generator model, else the ground truth), "
+                   "baselines and chance. --no-references scores only the -e estimators.")
 @click.option("--task", type=click.Choice(["persistence", "navigation", "doors"]), default="persistence",
               show_default=True, help="doors: planning around predicted closed doors on the dataset's own map.")
 @click.option("--setting", type=click.Choice(["predictive", "adaptive"]), default="adaptive", show_default=True,

@@ -332,7 +332,8 @@ def _convert(input_path: str | Path, out: str | Path, config: ConvertConfig | No
     state = {"input": str(src.resolve()), "config": cfg.to_dict(), "color_encoding": color_encoding}
     resume = _can_resume(tmp, state)
     writer = _open_writer(out, cfg.name or side.name or (src.stem if src.is_file() else src.name),
-                          cfg.timezone or side.timezone or "UTC", color_encoding, overwrite, resume, cfg, inputs)
+                          cfg.timezone or side.timezone or "UTC", color_encoding, overwrite, resume, cfg, inputs,
+                          {"operating_hours": side.operating_hours} if side.operating_hours else None)
     report = ConversionReport(output=str(out))
     try:
         (tmp / STATE_DIR).mkdir(exist_ok=True)
@@ -400,13 +401,15 @@ def _can_resume(tmp: Path, state: dict[str, Any]) -> bool:
 
 
 def _open_writer(out: Path, name: str, timezone: str, color_encoding: str, overwrite: bool, resume: bool,
-                 cfg: ConvertConfig, inputs: list[Path]) -> DatasetWriter:
-    """The writer of the whole dataset (its scans are written by the tasks' writers and adopted)."""
+                 cfg: ConvertConfig, inputs: list[Path], extra: dict[str, Any] | None = None) -> DatasetWriter:
+    """The writer of the whole dataset (its scans are written by the tasks' writers and adopted); ``extra``:
+    the manifest's (the site's operating hours).
+    """
     from psg_data.writers import DatasetWriter
 
     try:
         return DatasetWriter(out, name=name, timezone=timezone, color_encoding=color_encoding, overwrite=overwrite,
-                             resume=resume, threads=0, image_layout=cfg.image_layout, inputs=inputs)
+                             resume=resume, threads=0, image_layout=cfg.image_layout, inputs=inputs, extra=extra)
     except PsgDataError:
         raise
     except Exception as exc:

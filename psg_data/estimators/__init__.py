@@ -10,9 +10,11 @@ and may declare their settings (``_parameters = {"alpha": Real(0, 1)}``, see :cl
 that ``set_params`` and ``psg-eval -e NAME:alpha=...`` check them before any work.
 
 Writing a plugin: subclass :class:`BaseEstimator` (settings, ``get_params`` / ``set_params`` /
-``clone``, the fitted check) and :class:`BaseFilter` (time checks; implement ``_update_many``,
-``_predict`` and ``get_state``); ``examples/plugin/`` in the repository is a complete installable
-package, and :func:`check_estimator` names every member that is missing or wrong.
+``clone``; ``check_fitted()`` and ``edge_of_state(state)``) and :class:`BaseFilter` (time checks and
+``last_t_s``; implement ``_update_many``, ``_predict`` and ``get_state``, which starts from
+``base_state(name)``: the keys of :data:`STATE_KEYS`; ``restore_state(state)`` takes the time back);
+``examples/plugin/`` in the repository is a complete installable package, and
+:func:`check_estimator` names every member that is missing or wrong.
 
 Example::
 
@@ -26,7 +28,7 @@ Example::
 from psg_data.estimators._base import EdgeFilter, EdgeKey, EdgeStream, PersistenceEstimator
 from psg_data.estimators._cadence import PAPER_SETTINGS, Cadence, training_cadence
 from psg_data.estimators._check import check_estimator, conformance_streams
-from psg_data.estimators._common import BaseEstimator, BaseFilter
+from psg_data.estimators._common import STATE_KEYS, BaseEstimator, BaseFilter
 from psg_data.estimators._fremen import FremenComponents, FremenModel, LocalClock, fourier_sums
 from psg_data.estimators._fremen_estimator import FremenEstimator
 from psg_data.estimators._hmm import HmmFit, fit_error_hmm
@@ -76,6 +78,7 @@ __all__ = [
     "PersistenceEstimator",
     "BaseEstimator",
     "BaseFilter",
+    "STATE_KEYS",
     "get_estimator",
     "get_factory",
     "Param",

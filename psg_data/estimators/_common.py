@@ -17,8 +17,8 @@ from psg_data.estimators._mixture import ESCAPE_FIRST
 from psg_data.estimators._params import Integral, Options, Param, Real, check_params
 from psg_data.estimators._survival_training import SEGMENTATIONS, fit_edge_survivals, training_runs
 
-__all__ = ["BaseEstimator", "BaseFilter", "TRAINING_PARAMETERS", "edge_to_json", "edge_from_json", "fit_training",
-           "streams_by_edge", "escape_floors", "log_fit_summary"]
+__all__ = ["BaseEstimator", "BaseFilter", "STATE_KEYS", "TRAINING_PARAMETERS", "edge_to_json", "edge_from_json",
+           "fit_training", "streams_by_edge", "escape_floors", "log_fit_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -47,8 +47,9 @@ class BaseEstimator:
 
     A subclass sets ``name``, takes its settings as keyword-only ``__init__`` arguments stored under
     the same names, and implements ``fit`` (set ``self.fitted_ = True``, return self),
-    ``make_filter(edge)`` (call ``self._check_fitted()`` first) and ``filter_from_state(state)``
-    (``self._check_state(state)`` returns the edge).
+    ``make_filter(edge)`` (call :meth:`check_fitted` first) and ``filter_from_state(state)``
+    (:meth:`edge_of_state` checks the state and returns its edge; a :class:`BaseFilter` then takes
+    its time back with :meth:`BaseFilter.restore_state`).
 
     Subclasses declare their settings in ``_parameters`` (name -> :class:`~psg_data.estimators._params.Param`);
     :meth:`set_params` and :meth:`validate_params` check values against them, and ``psg-eval``
@@ -117,17 +118,39 @@ class BaseEstimator:
         args = ", ".join(f"{k}={v!r}" for k, v in changed.items())
         return f"{type(self).__name__}({args})"
 
-    def _check_fitted(self) -> None:
+    def check_fitted(self) -> None:
+        """Raise :class:`~psg_data.errors.NotFittedError` unless :meth:`fit` has run (``fitted_`` is set):
+        the first line of a plugin's ``make_filter``.
+        """
         if not getattr(self, "fitted_", False):
             raise NotFittedError(f"{type(self).__name__} ({self.name}) is not fitted; call fit(train_streams) first")
 
-    def _check_state(self, state: dict[str, Any]) -> EdgeKey:
-        """The state's edge, checked to be this estimator's. No fit is required: a built-in filter's
-        state holds what it learned (a saved PredictiveGraph is loaded onto a fresh estimator).
+    def edge_of_state(self, state: Mapping[str, Any]) -> EdgeKey:
+        """The edge of a filter state (:data:`STATE_KEYS`), checked to be this estimator's: the first line
+        of a plugin's ``filter_from_state``. No fit is required: a built-in filter's state holds what it
+        learned (a saved PredictiveGraph is loaded onto a fresh estimator).
+
+        Raises:
+            EstimatorError: the state is another estimator's, or has no edge.
         """
         if state.get("estimator") != self.name:
             raise EstimatorError(f"filter state is for estimator {state.get('estimator')!r}, not {self.name!r}")
+        if "edge" not in state:
+            raise EstimatorError(f"filter state of {self.name!r}: no 'edge' key; expected [object_id, receptacle_id]")
         return edge_from_json(state["edge"])
+
+    _check_fitted = check_fitted  # the former private names (plugins written before the public hooks)
+    _check_state = edge_of_state
+
+
+STATE_KEYS: dict[str, str] = {
+    "estimator": "the estimator's registry name (``filter_from_state`` refuses another's state)",
+    "edge": "[object_id, receptacle_id]",
+    "last_t_s": "time (Unix s) of the last observation applied, or null before the first",
+}
+"""The keys every filter state (``EdgeFilter.get_state()``) has, and what they hold; a filter adds its own
+(what it learned and its running belief). :meth:`BaseFilter.base_state` writes them,
+:meth:`BaseEstimator.edge_of_state` and :meth:`BaseFilter.restore_state` read them back."""
 
 
 class BaseFilter:
@@ -135,11 +158,11 @@ class BaseFilter:
 
     Subclasses implement ``_update_many(t, y)`` (observations already validated: finite times in
     seconds, non-decreasing and not before the last one, values 0/1 as int8), ``_predict(t)`` (a
-    1-D array of times already clamped to >= the last observation time; return P(present) in
-    [0, 1]: a built-in's NaN is read as 0.5 and values are clipped; a plugin's values are returned
-    unrepaired, and the tasks report NaN or a value out of range as its error) and ``get_state()``
-    (a JSON-serialisable dict, restored by the estimator's ``filter_from_state``; include
-    ``last_t_s`` and restore it into ``_last_t``).
+    1-D array of times already clamped to >= :attr:`last_t_s`; return P(present) in [0, 1]: a
+    built-in's NaN is read as 0.5 and values are clipped; a plugin's values are returned unrepaired,
+    and the tasks report NaN or a value out of range as its error) and ``get_state()`` (a
+    JSON-serialisable dict: :meth:`base_state` plus the filter's own keys; the estimator's
+    ``filter_from_state`` rebuilds the filter and calls :meth:`restore_state`).
     """
 
     _repairs_predictions: ClassVar[bool] = True
@@ -158,6 +181,23 @@ class BaseFilter:
     def last_t_s(self) -> float | None:
         """Time (s) of the last observation applied, None before the first."""
         return self._last_t
+
+    def base_state(self, estimator: str) -> dict[str, Any]:
+        """The keys of :data:`STATE_KEYS` for this filter of ``estimator`` (its registry name): the start
+        of a ``get_state()``.
+        """
+        return {"estimator": estimator, "edge": list(self.edge), "last_t_s": self._last_t}
+
+    def restore_state(self, state: Mapping[str, Any]) -> None:
+        """Take back the time of a state (``last_t_s``) into a filter rebuilt by ``filter_from_state``.
+
+        Raises:
+            EstimatorError: ``last_t_s`` is neither null nor a finite number.
+        """
+        t = state.get("last_t_s")
+        if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float)) or not np.isfinite(t)):
+            raise EstimatorError(f"edge {self.edge}: filter state last_t_s {t!r}: expected a finite time in s or null")
+        self._last_t = None if t is None else float(t)
 
     def update(self, t_s: float, y: int) -> None:
         """Apply one observation ``y`` (1 seen present, 0 seen absent) at ``t_s`` (s)."""
@@ -260,14 +300,24 @@ def escape_floors(escape: float) -> tuple[float, float]:
     return (0.0, 0.0) if e <= 0 else (e, max(ESCAPE_FIRST, e))
 
 
+def _say_once(text: str) -> None:
+    """An INFO line marked ``say_once``: the command line's log handler prints it once per command
+    (a run refits the same estimator per seed, scene and method); library logging sees every one.
+    """
+    log.info("%s", text, extra={"say_once": True})
+
+
 def log_fit_summary(name: str, summary: Mapping[str, Any]) -> None:
-    """One INFO line per decided setting and the error rates (the full summary is ``fit_summary_``)."""
+    """One INFO line per decided setting and the error rates (the full summary is ``fit_summary_``),
+    each marked ``say_once`` (:func:`_say_once`).
+    """
     for k, v in summary.get("settings", {}).items():
-        log.info("%s: %s = %s (%s)", name, k, v.get("value"), v.get("source"))
+        _say_once(f"{name}: {k} = {v.get('value')} ({v.get('source')})")
     er = summary.get("error_rates")
     if er:
-        log.info("%s: P_M = %.4f, P_F = %.4f (%s)", name, er["p_m"], er["p_f"], er["source"])
+        _say_once(f"{name}: P_M = {er['p_m']:.4f}, P_F = {er['p_f']:.4f} ({er['source']})")
     osel = summary.get("order_selection")
     if osel:
-        log.info("%s: FreMEn order rule %s, duration rule %s, median order %s over %d edges", name,
-                 osel["order_rule"], "on" if osel["duration_rule"] else "off", osel["median_order"], len(osel["edges"]))
+        _say_once(f"{name}: FreMEn order rule {osel['order_rule']}, duration rule "
+                  f"{'on' if osel['duration_rule'] else 'off'}, median order {osel['median_order']} over "
+                  f"{len(osel['edges'])} edges")

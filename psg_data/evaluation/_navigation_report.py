@@ -90,7 +90,11 @@ _KINDS = {
 }
 
 
-def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
+def _per_set_unit(cfg: Mapping[str, Any]) -> str:
+    return "scenes" if cfg.get("env") == "navigation-benchmark" else "query sets"
+
+
+def _notes(rows: list[ResultRow], metrics: list[str], res: Any, spread: str = "interval") -> list[str]:
     cfg = res.config
     chance = next((r for r in rows if r.role == "chance"), None)
     out = []
@@ -121,6 +125,10 @@ def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
     if s is None:
         out.append("±: -")
         return out
+    if spread == "std":
+        out.append(f"±: standard deviation across the {n_sets} {_per_set_unit(cfg)} (ddof 1; the paper's ±), not an "
+                   "interval; the 95 % intervals over queries are ci_low / ci_high in results.json and summary.csv")
+        return out
     groups = {"static": "static_sr", "dynamic": "dynamic_sr", "absent": "absent_ar", "overall": "overall_sr"}
     counts = {g: v.n for g, key in groups.items() if (v := rows[0].values.get(key)) is not None}
     what = ", ".join(f"{k} {n}" for k, n in counts.items())
@@ -130,7 +138,7 @@ def _notes(rows: list[ResultRow], metrics: list[str], res: Any) -> list[str]:
     return out
 
 
-def _main_table(res: Any, roles: Mapping[str, tuple[str, str]], layout: str) -> ResultTable:
+def _main_table(res: Any, roles: Mapping[str, tuple[str, str]], layout: str, spread: str) -> ResultTable:
     if layout == "auto":
         layout = "real" if str(res.config.get("protocol", "")).startswith("paper-real") else "sim"
     groups = _groups(layout, res.summary, res.config)
@@ -151,8 +159,8 @@ def _main_table(res: Any, roles: Mapping[str, tuple[str, str]], layout: str) -> 
     title = (f"Object navigation on {res.config.get('env')} ({n} queries x {len(res.config.get('seeds') or [])} query "
              f"sets, protocol {res.config.get('protocol')}, {res.config.get('setting')}, delta "
              f"{res.config.get('delta')})")
-    return ResultTable("navigation", title, infos, rows, _notes(rows, metrics, res), groups,
-                       ["queries", "query sets"], primary)
+    return ResultTable("navigation", title, infos, rows, _notes(rows, metrics, res, spread), groups,
+                       ["queries", "query sets"], primary, spread)
 
 
 def _sweep_table(res: Any, roles: Mapping[str, tuple[str, str]]) -> ResultTable | None:
@@ -175,10 +183,13 @@ def _sweep_table(res: Any, roles: Mapping[str, tuple[str, str]]) -> ResultTable 
 
 
 def navigation_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None = None, layout: str = "auto",
-                       info: Mapping[str, Any] | None = None) -> EvalResults:
-    """The results-schema form of a navigation run (module docstring)."""
+                       info: Mapping[str, Any] | None = None, spread: str = "interval") -> EvalResults:
+    """The results-schema form of a navigation run (module docstring); ``spread``: what the main table's
+    ± is (``interval``: the 95 % interval's half-width; ``std``: the standard deviation across the
+    query sets, the paper's ± of its simulation tables).
+    """
     roles = dict(roles or {})
-    tables = [_main_table(res, roles, layout)]
+    tables = [_main_table(res, roles, layout, spread)]
     label = (info or {}).get("dataset_label")
     if label:
         tables[0].title = tables[0].title.replace(f"on {res.config.get('env')} ", f"on {label} ", 1)
@@ -194,9 +205,10 @@ def navigation_results(res: Any, *, roles: Mapping[str, tuple[str, str]] | None 
 
 
 def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[str, tuple[str, str]] | None = None,
-                             info: Mapping[str, Any] | None = None) -> dict[str, Path]:
+                             info: Mapping[str, Any] | None = None, spread: str = "interval") -> dict[str, Path]:
     """Write the results schema (results.json, summary.csv, table.txt), records.parquet, per_seed.csv,
-    results.csv (one row per method, every column of the summary) and sweep.csv (with a sweep).
+    results.csv (one row per method, every column of the summary) and sweep.csv (with a sweep);
+    ``spread`` as for :func:`navigation_results`.
 
     Replaces each of these files in ``out_dir`` atomically (an interrupted call leaves the previous
     file as it was; other files are left alone); never inside the input dataset (``res.env``'s).
@@ -209,7 +221,7 @@ def write_navigation_results(res: Any, out_dir: str | Path, *, roles: Mapping[st
     from psg_data.writers._safe_output import write_atomically
 
     out, inputs = Path(out_dir), [input_dataset(getattr(res, "env", None))]
-    paths = save_results(navigation_results(res, roles=roles, info=info), out, inputs=inputs)
+    paths = save_results(navigation_results(res, roles=roles, info=info, spread=spread), out, inputs=inputs)
     extra = {"records": out / "records.parquet", "per_seed": out / "per_seed.csv", "csv": out / "results.csv"}
     write_atomically(extra["records"], partial(res.records.to_parquet, index=False), inputs=inputs)
     write_atomically(extra["per_seed"], partial(res.per_seed.to_csv, index=False), inputs=inputs)
@@ -249,17 +261,16 @@ def choose_map_query(res: Any, methods: list[str] | None = None) -> tuple[int, i
 def plot_delta_sweep(res: Any, out_path: str | Path | None = None, *,
                      roles: Mapping[str, tuple[str, str]] | None = None) -> Figure:
     """Overall SR, dynamic SR and AR against delta, one line per method (reference rows dashed), 95 % intervals."""
-    import matplotlib
     import numpy as np
     from matplotlib.figure import Figure
 
-    from psg_data.evaluation._persistence_plots import save_figure
+    from psg_data.evaluation._persistence_plots import _colours, save_figure
 
     sw = res.sweep
     fig = Figure(figsize=(13, 3.8))
     axes = fig.subplots(1, 3)
-    cmap = matplotlib.colormaps["tab10"]
     names = list(dict.fromkeys(sw["method"]))
+    colours = _colours(names)  # the same colour per method as in every other figure
     for ax, key, title in zip(axes, ("overall_sr", "dynamic_sr", "absent_ar"),
                               ("overall SR (%)", "dynamic SR (%)", "AR: correct aborts on absent targets (%)")):
         for i, n in enumerate(names):
@@ -267,7 +278,7 @@ def plot_delta_sweep(res: Any, out_path: str | Path | None = None, *,
             m = 100 * d[f"{key}_mean"].to_numpy(float)
             err = 100 * np.vstack([np.nan_to_num(d[f"{key}_mean"] - d[f"{key}_ci_low"]),
                                    np.nan_to_num(d[f"{key}_ci_high"] - d[f"{key}_mean"])])
-            ax.errorbar(d["delta"], m, yerr=err, marker="o", ms=4, capsize=2, lw=1.3, color=cmap(i % 10), label=n,
+            ax.errorbar(d["delta"], m, yerr=err, marker="o", ms=4, capsize=2, lw=1.3, color=colours[i], label=n,
                         ls="--" if n in (roles or {}) else "-")
         ax.set_xlabel("delta (abort when no receptacle has a belief >= delta)", fontsize=8)
         ax.set_title(title, fontsize=9)

@@ -92,12 +92,33 @@ def _tick_starts(t_s: NDArray[np.float64], cuts: Sequence[int], timezone: str) -
     return [0, *(np.flatnonzero(change) + 1).tolist()]
 
 
-def _colours(names: Sequence[Any]) -> list[Any]:
-    """One distinct colour per row: tab10 up to ten rows, tab20 beyond."""
+_FIXED_COLOURS = ("perpetua_star", "fremen", "perpetua", "process_oracle", "time_of_week_frequency", "last_seen",
+                  "always_present", "always_absent", "persistence_filter", "perpetua_star_oracle",
+                  "perpetua_star_schedule", "perpetua_star_annealed", "oracle", "last_seen_map", "random_receptacle")
+"""Built-in methods and reference rows with a colour of their own (strong tab20 tones first)."""
+
+
+def _palette() -> list[Any]:
     import matplotlib
 
-    cmap = matplotlib.colormaps["tab10" if len(names) <= 10 else "tab20"]
-    return [cmap(i % cmap.N) for i in range(len(names))]
+    cmap = matplotlib.colormaps["tab20"]
+    return [cmap(i) for i in range(0, 20, 2)] + [cmap(i) for i in range(1, 20, 2)]
+
+
+def _colours(names: Sequence[Any]) -> list[Any]:
+    """The colour of each row (a row or a method name), the same in every figure of a run (beliefs, bars,
+    horizons): built-ins and reference rows have fixed ones (:data:`_FIXED_COLOURS`); other labels (a
+    plugin, a variant with settings), in name order, the free colours, then any this figure does not use.
+    """
+    palette = _palette()
+    labels = [str(getattr(n, "method", n)) for n in names]
+    out: dict[str, Any] = {n: palette[_FIXED_COLOURS.index(n)] for n in labels if n in _FIXED_COLOURS}
+    used = {_FIXED_COLOURS.index(n) for n in out}
+    free = [k for k in range(len(_FIXED_COLOURS), len(palette))] + [k for k in range(len(_FIXED_COLOURS))
+                                                                     if k not in used]
+    for k, n in enumerate(sorted({n for n in labels if n not in out})):
+        out[n] = palette[free[k % len(free)]]
+    return [out[n] for n in labels]
 
 
 def _draw_order(traces: Sequence[PredictionTrace]) -> list[PredictionTrace]:
@@ -219,7 +240,7 @@ def plot_metric_bars(results: Any, out_path: str | Path | None = None) -> Figure
     from psg_data.evaluation._tables import ordered_rows
 
     table = type(table)(table.name, table.title, table.metrics, ordered_rows(table.rows), table.notes, table.groups,
-                        table.count_columns, table.primary)
+                        table.count_columns, table.primary, table.spread)
     colours = _colours(table.rows)
     fig = Figure(figsize=(4.2 * len(table.metrics), 3.9))
     axes = fig.subplots(1, len(table.metrics), squeeze=False)[0]

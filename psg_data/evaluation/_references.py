@@ -29,8 +29,8 @@ from psg_data.evaluation._hints import EstimatorSpec
 __all__ = ["Reference", "PAPER_METHODS", "persistence_references", "navigation_references", "door_references",
            "describe_method"]
 
-PAPER_METHODS = ("perpetua", "fremen")
-"""The paper's comparison methods, scored next to the user's estimators by default."""
+PAPER_METHODS = ("perpetua_star", "perpetua", "fremen")
+"""The paper's methods (its own, Perpetua*, and its comparisons), scored next to the user's estimators by default."""
 
 
 @dataclass(frozen=True)

@@ -105,7 +105,8 @@ def _setting_note(cfg: dict[str, Any]) -> str:
         weight = f"time integrals inside the scoring windows {w.get('text')} ({w.get('source')}); gaps get no weight"
     else:
         weight = "plain trapezoid over the whole span (the reference's weighting)"
-    return f"setting: {text}; {weight}"
+    labels = f"; labels {cfg['labels']} (what the estimators are fitted and updated with)" if cfg.get("labels") else ""
+    return f"setting: {text}; {weight}{labels}"
 
 
 def _interval_note(rows: list[ResultRow], result: PersistenceResult) -> str:

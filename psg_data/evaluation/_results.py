@@ -7,7 +7,7 @@ one file a notebook can load without psg-data internals, one loader that knows i
      "tables": [{"name": "persistence", "title": "...",
                  "metrics": [{"key": "mae", "label": "MAE", "better": "lower", "scale": 1.0,
                               "digits": 3, "description": "...", "chance": 0.32}, ...],
-                 "groups": [], "count_columns": ["edges"], "primary": "balanced_accuracy",
+                 "groups": [], "count_columns": ["edges"], "primary": "balanced_accuracy", "spread": "interval",
                  "rows": [{"method": "process_oracle", "role": "ceiling", "description": "...",
                            "values": {"mae": {"mean": ..., "std": ..., "ci_low": ..., "ci_high": ...,
                                               "n": 21, "method": "bootstrap", "unit": "objects"}, ...},
@@ -59,7 +59,7 @@ _ROW = {"method": ("str", True), "role": ("str", False), "description": ("str", 
         "values": (("map", _SUMMARY), False), "pct_of_ceiling": ("num", False), "counts": ("obj", False)}
 _TABLE = {"name": ("str", True), "title": ("str", False), "metrics": (("list", _METRIC), True),
           "groups": (("list", "list"), False), "count_columns": (("list", "str"), False), "primary": ("str", False),
-          "rows": (("list", _ROW), True), "notes": (("list", "str"), False)}
+          "rows": (("list", _ROW), True), "notes": (("list", "str"), False), "spread": ("str", False)}
 _RESULTS = {"task": ("str", True), "tables": (("list", _TABLE), True), "config": ("obj", False),
             "info": ("obj", False), "interval": ("obj", False), "breakdowns": ("obj", False),
             "errors": ("list", False)}
@@ -163,6 +163,9 @@ class ResultTable:
     count_columns: list[str] = field(default_factory=list)
     primary: str | None = None
     """the metric the ``% of ceiling`` column is computed on (None: no such column)"""
+    spread: str = "interval"
+    """what a cell's ``±`` is, in every format: ``interval`` (half-width of the stated interval) or ``std``
+    (standard deviation across the interval's units, ddof 1: the paper's ± of the simulation tables)"""
 
     def row(self, method: str) -> ResultRow:
         """The row of ``method``; :class:`EvaluationError` if there is none."""
@@ -180,7 +183,8 @@ class ResultTable:
         """A JSON-serialisable dict (:meth:`from_dict` restores it)."""
         return clean_json({"name": self.name, "title": self.title, "metrics": [m.to_dict() for m in self.metrics],
                            "groups": [[g, list(ks)] for g, ks in self.groups], "count_columns": self.count_columns,
-                           "primary": self.primary, "rows": [r.to_dict() for r in self.rows], "notes": self.notes})
+                           "primary": self.primary, "rows": [r.to_dict() for r in self.rows], "notes": self.notes,
+                           "spread": self.spread})
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> ResultTable:
@@ -188,7 +192,7 @@ class ResultTable:
         return ResultTable(str(d["name"]), str(d.get("title", "")), [MetricInfo.from_dict(m) for m in d["metrics"]],
                            [ResultRow.from_dict(r) for r in d["rows"]], list(d.get("notes") or []),
                            [(str(g), list(ks)) for g, ks in d.get("groups") or []], list(d.get("count_columns") or []),
-                           d.get("primary"))
+                           d.get("primary"), "std" if d.get("spread") == "std" else "interval")
 
 
 @dataclass

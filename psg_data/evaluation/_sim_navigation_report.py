@@ -89,19 +89,26 @@ def _grid(header: list[str], rows: list[list[str]]) -> list[str]:
 
 
 def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[str, tuple[str, str]],
-                   n_scenes: int, title: str | None = None) -> str:
-    """The paper-shaped text table: ours (mean ± std across scenes), the 95 % intervals, the paper's rows."""
+                   n_scenes: int, title: str | None = None, table: str | None = None) -> str:
+    """The paper-shaped text table: ours (mean ± std across scenes), the 95 % intervals, the paper's rows.
+
+    ``table``: ours as the one table renderer printed it (``format_table`` of the run's results, the
+    same cells and ± as its Markdown / LaTeX forms), shown instead of this module's own grid.
+    """
     r0 = summary.iloc[0]
     counts = {g: int(r0[c]) for g, c in _COUNT.items()}
     counts["Overall"] = int(r0["n_queries"]) - int(r0["n_unreachable"])
-    lines = [title or f"{protocol}: {int(r0['n_queries'])} queries over {n_scenes} scenes, labels {labels}", ""]
     head = ["method"] + [f"{g.split()[0]} {_HEAD[k]}" for g, ks in SIM_COLUMNS for k in ks]
     ours = []
     for _, r in summary.iterrows():
         role = roles.get(str(r["method"]), ("method", ""))[0]
         name = f"{r['method']}" + (f" [{role}]" if role != "method" else "")
         ours.append([name] + [_cell(r, k, "std") for k in _KEYS])
-    lines += _grid(head, ours)
+    if table is not None:
+        lines = table.splitlines()
+    else:
+        lines = [title or f"{protocol}: {int(r0['n_queries'])} queries over {n_scenes} scenes, labels {labels}", ""]
+        lines += _grid(head, ours)
     lines += ["", "95 % intervals over queries (whole queries resampled within each column; expanded percentile "
                   "bootstrap, jackknife-t under 10 queries; clipped to the metric's range):", ""]
     lines += _grid(head, [[row[0]] + [_cell(r, k, "ci") for k in _KEYS]
@@ -122,7 +129,7 @@ def sim_table_text(summary: Any, *, protocol: str, labels: str, roles: Mapping[s
     if head_line:
         lines.append(head_line)
     refs = [f"{m} = {d}" for m, (role, d) in roles.items() if role != "method"]
-    if refs:
+    if refs and table is None:  # the renderer's notes name them already
         lines.append("reference rows: " + "; ".join(refs))
     return "\n".join(lines) + "\n"
 
@@ -150,9 +157,10 @@ def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Ma
     import numpy as np
     from matplotlib.figure import Figure
 
-    from psg_data.evaluation._persistence_plots import save_figure
+    from psg_data.evaluation._persistence_plots import _colours, save_figure
 
     methods = list(dict.fromkeys(per_scene["method"]))
+    colours = _colours(methods)
     scenes = sorted(set(int(s) for s in per_scene["seed"]))
     fig = Figure(figsize=(max(8.0, 0.7 * len(scenes) + 4), 4.4))
     ax = fig.add_subplot(1, 1, 1)
@@ -162,6 +170,7 @@ def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Ma
         y = [100 * float(d.loc[s, "overall_sr"]) if s in d.index else np.nan for s in scenes]
         role = roles.get(m, ("method", ""))[0]
         ax.plot(range(len(scenes)), y, marker=markers[k % len(markers)], ls="-" if role == "method" else ":",
+                color=colours[k],
                 lw=1.5 if role == "method" else 1.0, label=m + ("" if role == "method" else f" ({role})"))
     ax.set_xticks(range(len(scenes)), [f"house {s}" for s in scenes], rotation=45, ha="right")
     ax.set_ylabel("overall SR per scene (%)")

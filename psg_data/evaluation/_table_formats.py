@@ -3,7 +3,9 @@ r"""Results tables as Markdown and LaTeX (booktabs), ready for a paper; and the 
 
 The cells and marks are those of the text renderer (:mod:`psg_data.evaluation._tables`): a cell is
 ``estimate ± half-width`` of its stated interval; the best row of a column that is not a ceiling is
-marked (bold here, ``*`` in text); reference rows (ceiling, baselines, chance) come first, name
+marked (bold here, ``*`` in text); grouped columns (navigation: Static / Dynamic / Absence / Overall) keep
+their group above them (LaTeX: a spanning row over a ``\cmidrule``; Markdown, which has one header
+row: the group named in each of its columns' headers); reference rows (ceiling, baselines, chance) come first, name
 their role in the ``ref`` column and are set off by a rule (LaTeX ``\midrule``); the lines under the
 table (what each column measures, the chance level, what ``±`` is) follow it (LaTeX: the ``±``
 line in the caption, every line as a comment).
@@ -14,12 +16,12 @@ from __future__ import annotations
 import math
 import unicodedata
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from psg_data.errors import EvaluationError
 from psg_data.evaluation._results import ResultRow, ResultTable
 
-__all__ = ["TABLE_FORMATS", "Grid", "table_grid", "markdown_table", "latex_table", "select_table"]
+__all__ = ["TABLE_FORMATS", "Grid", "table_grid", "markdown_table", "latex_table", "select_table", "grouped_header"]
 
 TABLE_FORMATS = ("text", "markdown", "latex")
 """What ``psg-eval --format`` prints."""
@@ -39,6 +41,7 @@ class Grid:
         rules: indices of the rows after which a rule goes (the last reference row).
         notes: the lines under the table.
         legend: what the rules and marks mean (the LaTeX caption says it after the title).
+        groups: column groups as (name, first column index, number of columns), left to right.
     """
 
     title: str
@@ -48,6 +51,7 @@ class Grid:
     rules: list[int]
     notes: list[str]
     legend: str = ""
+    groups: list[tuple[str, int, int]] = field(default_factory=list)
 
 
 def select_table(table: ResultTable, *, metrics: Sequence[str] | None = None, references: bool = True) -> ResultTable:
@@ -99,7 +103,8 @@ def table_grid(table: ResultTable, *, lead: Sequence[tuple[str, Sequence[str]]] 
     for i, r in enumerate(rows):
         cells = [(str(values[i]), False) for _, values in lead]
         cells += [(r.method, False), ("" if r.role == "method" else r.role, False)]
-        cells += [(cell_text(r.values.get(m.key), m.scale, m.digits), marks[i][k]) for k, m in enumerate(table.metrics)]
+        cells += [(cell_text(r.values.get(m.key), m.scale, m.digits, table.spread), marks[i][k])
+                  for k, m in enumerate(table.metrics)]
         if table.primary is not None:
             cells.append(("-" if r.pct_of_ceiling is None or not math.isfinite(r.pct_of_ceiling)
                           else f"{r.pct_of_ceiling:.0f} %", False))
@@ -109,7 +114,34 @@ def table_grid(table: ResultTable, *, lead: Sequence[tuple[str, Sequence[str]]] 
     legend = "; ".join(p for p in (
         "reference rows (ref: ceiling, baseline, chance) above the rule" if any(r.role != "method" for r in rows)
         else "", "bold: the best row of a column that is not a ceiling" if mark_best else "") if p)
-    return Grid(table.title, header, numeric, out, _rules(rows), list(table.notes), legend)
+    return Grid(table.title, header, numeric, out, _rules(rows), list(table.notes), legend,
+                _group_spans(table, len(lead) + 2))
+
+
+def _group_spans(table: ResultTable, first: int) -> list[tuple[str, int, int]]:
+    """(group, first column, width) of each run of adjacent metric columns in one group of ``table``."""
+    group_of = {k: g for g, ks in table.groups for k in ks}
+    spans: list[tuple[str, int, int]] = []
+    for k, m in enumerate(table.metrics):
+        g = group_of.get(m.key)
+        if g is None:
+            continue
+        if spans and spans[-1][0] == g and spans[-1][1] + spans[-1][2] == first + k:
+            spans[-1] = (g, spans[-1][1], spans[-1][2] + 1)
+        else:
+            spans.append((g, first + k, 1))
+    return spans
+
+
+def grouped_header(grid: Grid) -> list[str]:
+    """The header with each grouped column's group before its name (``Static presence (157) SR % ↑``):
+    one header row that still says which group a column belongs to.
+    """
+    header = list(grid.header)
+    for g, start, width in grid.groups:
+        for c in range(start, start + width):
+            header[c] = f"{g} {header[c]}"
+    return header
 
 
 def _rules(rows: Sequence[ResultRow]) -> list[int]:
@@ -122,8 +154,10 @@ def _md(text: str) -> str:
 
 
 def markdown_table(grid: Grid) -> str:
-    """A GitHub / pandoc pipe table: the title in bold above it, best cells in bold, the notes below."""
-    lines = [f"**{_md(grid.title)}**", "", "| " + " | ".join(_md(h) for h in grid.header) + " |",
+    """A GitHub / pandoc pipe table: the title in bold above it, each grouped column's group in its
+    header, best cells in bold, the notes below.
+    """
+    lines = [f"**{_md(grid.title)}**", "", "| " + " | ".join(_md(h) for h in grouped_header(grid)) + " |",
              "|" + "|".join("---:" if n else "---" for n in grid.numeric) + "|"]
     for cells in grid.rows:
         lines.append("| " + " | ".join(f"**{_md(t)}**" if best and t else _md(t) for t, best in cells) + " |")
@@ -163,6 +197,21 @@ def _tex_cell(text: str, best: bool) -> str:
     return rf"{v} $\pm$ {tex_escape(half)}" if pm else v
 
 
+def _tex_group_rows(grid: Grid) -> list[str]:
+    r"""The group row (``\multicolumn`` over each group's columns) and its ``\cmidrule`` s; none without groups."""
+    if not grid.groups:
+        return []
+    cells: list[str] = []
+    col = 0
+    for g, start, width in grid.groups:
+        cells += [""] * (start - col)
+        cells.append(rf"\multicolumn{{{width}}}{{c}}{{{tex_escape(g)}}}")
+        col = start + width
+    cells += [""] * (len(grid.header) - col)
+    rules = " ".join(rf"\cmidrule(lr){{{start + 1}-{start + width}}}" for _, start, width in grid.groups)
+    return [" & ".join(cells) + r" \\", rules]
+
+
 def latex_table(grid: Grid, *, label: str | None = None) -> str:
     r"""A ``table`` float with a booktabs ``tabular`` (``\usepackage{booktabs}``), the rows and
     rules of the text table, best cells in bold; the caption names the title, the marks and ``±``.
@@ -175,7 +224,7 @@ def latex_table(grid: Grid, *, label: str | None = None) -> str:
              r"\begin{table}[t]", r"\centering", r"\small", rf"\caption{{{caption}}}"]
     if label:
         lines.append(rf"\label{{{tex_escape(label)}}}")
-    lines += [rf"\begin{{tabular}}{{{spec}}}", r"\toprule",
+    lines += [rf"\begin{{tabular}}{{{spec}}}", r"\toprule", *_tex_group_rows(grid),
               " & ".join(tex_escape(h) for h in grid.header) + r" \\", r"\midrule"]
     for i, cells in enumerate(grid.rows):
         lines.append(" & ".join(_tex_cell(t, b) if grid.numeric[k] else tex_escape(t)

@@ -1,6 +1,8 @@
 """The one table renderer of every task (rich), used the same way by the CLI, ``compare`` and ``table.txt``.
 
-A cell is ``estimate ± half-width`` of its stated interval (just the estimate when there is none);
+A cell is ``estimate ± half-width`` of its stated interval (just the estimate when there is none), or
+``estimate ± standard deviation`` for a table whose ``spread`` is ``std``; every format (text, CSV,
+JSON, Markdown, LaTeX) shows the same number and the line under the table says which it is;
 ``*`` marks the best row of a column among the rows that are not a ceiling; reference rows
 (ceiling, baselines, chance) come first, above a rule; the lines under the table say what every
 column measures, the chance level, where the ceiling stands and what ``±`` is.
@@ -18,16 +20,25 @@ from psg_data.errors import EvaluationError
 from psg_data.evaluation._results import ROLES, EvalResults, ResultRow, ResultTable
 
 __all__ = ["render_table", "format_table", "format_results", "print_results", "format_compare", "cell_text",
-           "best_marks", "ordered_rows", "format_as", "COMPARE_FORMATS"]
+           "best_marks", "ordered_rows", "format_as", "COMPARE_FORMATS", "plus_minus"]
 
 _ARROW = {"lower": "↓", "higher": "↑"}
 
 
-def cell_text(s: Any, scale: float, digits: int) -> str:
-    """``0.185 ± 0.012``; ``-`` for no value."""
+def plus_minus(s: Any, spread: str = "interval") -> float:
+    """The number a cell shows after ``±``: the interval's half-width, or with ``spread="std"`` the
+    standard deviation across the units (NaN: none).
+    """
+    if spread == "std":
+        return float(s.std) if math.isfinite(s.std) else float("nan")
+    return float(s.half_width)
+
+
+def cell_text(s: Any, scale: float, digits: int, spread: str = "interval") -> str:
+    """``0.185 ± 0.012`` (± per :func:`plus_minus`); ``-`` for no value."""
     if s is None or not math.isfinite(s.mean):
         return "-"
-    hw = s.half_width
+    hw = plus_minus(s, spread)
     v = f"{scale * s.mean:.{digits}f}"
     return v if not math.isfinite(hw) else f"{v} ± {scale * hw:.{digits}f}"
 
@@ -100,7 +111,8 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
         cells = [] if run is None else [run]
         cells += [r.method, "" if r.role == "method" else r.role]
         for k, m in enumerate(table.metrics):
-            cells.append(cell_text(r.values.get(m.key), m.scale, m.digits) + ("*" if marks[i][k] else " "))
+            cell = cell_text(r.values.get(m.key), m.scale, m.digits, table.spread)
+            cells.append(cell + ("*" if marks[i][k] else " "))
         if table.primary is not None:
             cells.append("-" if r.pct_of_ceiling is None or not math.isfinite(r.pct_of_ceiling)
                          else f"{r.pct_of_ceiling:.0f} %")
@@ -208,11 +220,15 @@ def format_compare(items: Sequence[tuple[str, EvalResults]], *, width: int | Non
 
 
 _Runs = list[tuple[str, ResultTable, EvalResults]]
+_PM_MEANING = {"interval": "half-width of the stated interval", "std": "standard deviation across query sets"}
+"""What ``<metric>_pm`` (the number after a cell's ±) is, per table ``spread``."""
 
 
-def _interval_text(r: ResultRow) -> str:
+def _interval_text(r: ResultRow, spread: str = "interval") -> str:
     iv = next((s for s in r.values.values()), None)
-    return f"{iv.method} over {iv.n} {iv.unit}" if iv is not None and iv.method != "none" else "-"
+    if iv is None or (iv.method == "none" and spread != "std"):
+        return "-"
+    return "standard deviation across query sets" if spread == "std" else f"{iv.method} over {iv.n} {iv.unit}"
 
 
 def _compare_text(task: str, runs: _Runs, width: int | None) -> str:
@@ -230,7 +246,8 @@ def _compare_text(task: str, runs: _Runs, width: int | None) -> str:
     for run, table, res in runs:
         for r in ordered_rows(table.rows):
             cells = [run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
-                     *[cell_text(r.values.get(m.key), m.scale, m.digits) for m in table.metrics], _interval_text(r)]
+                     *[cell_text(r.values.get(m.key), m.scale, m.digits, table.spread) for m in table.metrics],
+                     _interval_text(r, table.spread)]
             grid.add_row(*(Text(c) for c in cells))
     buf = io.StringIO()
     _console(buf, width, True).print(grid)
@@ -247,11 +264,13 @@ def _compare_paper(task: str, runs: _Runs, fmt: str) -> str:
         n = len(rows)
         setting = str(res.config.get("setting_text", "-"))
         blocks.append(table_grid(table, lead=[("run", [run] * n), ("setting", [setting] * n)],
-                                 tail=[("±", [_interval_text(r) for r in rows])], mark_best=False))
+                                 tail=[("±", [_interval_text(r, table.spread) for r in rows])], mark_best=False))
     grid = blocks[0]
     grid.title = f"[{task}] {grid.title}"
     grid.rules = []
     for b in blocks[1:]:
+        if b.groups != grid.groups:
+            grid.groups = []
         grid.rules.append(len(grid.rows) - 1)
         grid.rows += b.rows
     grid.notes = [n for n in grid.notes if n.startswith("±")] if len(runs) == 1 else \
@@ -269,13 +288,16 @@ def _compare_records(groups: dict[tuple[str, str], _Runs], fmt: str) -> str:
         for run, table, res in runs:
             for r in ordered_rows(table.rows):
                 values = {m.key: {"mean": s.mean, "ci_low": s.ci_low, "ci_high": s.ci_high, "half_width": s.half_width,
-                                  "n": s.n, "interval": s.method, "unit": s.unit}
+                                  "n": s.n, "interval": s.method, "unit": s.unit, "pm": plus_minus(s, table.spread)}
                           for m in table.metrics if (s := r.values.get(m.key)) is not None}
                 rows.append({"run": run, "method": r.method, "role": r.role,
                              "setting": res.config.get("setting_text"), "values": values,
+                             "pm": _PM_MEANING[table.spread],
                              "pct_of_ceiling": r.pct_of_ceiling if table.primary is not None else None})
+        group_of = {k: g for g, ks in runs[0][1].groups for k in ks}
         tables.append({"task": task, "table": name, "title": runs[0][1].title,
-                       "metrics": [m.to_dict() for m in runs[0][1].metrics], "rows": rows})
+                       "metrics": [{**m.to_dict(), "group": group_of.get(m.key)} for m in runs[0][1].metrics],
+                       "rows": rows})
     if fmt == "json":
         import json
 
@@ -285,7 +307,7 @@ def _compare_records(groups: dict[tuple[str, str], _Runs], fmt: str) -> str:
     import csv
 
     buf = io.StringIO()
-    fields: list[str] = ["task", "table", "run", "method", "role", "setting"]
+    fields: list[str] = ["task", "table", "run", "method", "role", "setting", "pm"]
     recs: list[dict[str, Any]] = []
     for t in tables:
         for row in t["rows"]:
@@ -293,7 +315,7 @@ def _compare_records(groups: dict[tuple[str, str], _Runs], fmt: str) -> str:
             for key, v in row["values"].items():
                 rec.update({f"{key}{suffix}": v[part] for suffix, part in
                             (("", "mean"), ("_ci_low", "ci_low"), ("_ci_high", "ci_high"),
-                             ("_half_width", "half_width"))})
+                             ("_half_width", "half_width"), ("_pm", "pm"))})
                 rec.setdefault("interval", f"{v['interval']} over {v['n']} {v['unit']}")
             recs.append(rec)
     for rec in recs:

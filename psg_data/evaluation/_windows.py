@@ -8,6 +8,8 @@ Where they come from (:func:`dataset_windows`, unless ``--windows`` / ``windows=
 
 - a synthetic lab (``psg-data synth``): its bi-hourly steps, from the first scan hour to the end of
   the last step (the default lab: 9:00-17:00 local);
+- a dataset whose manifest ``extra`` states ``operating_hours`` (``09:00-17:00``; ``convert`` stores
+  the ``operating_hours`` of a site file, which ``psg-data synth --format ros1|...`` writes): those;
 - any other dataset: the local hours its scans cover, from the earliest scan start (rounded down
   to the hour) to the latest scan end (rounded up).
 
@@ -22,7 +24,7 @@ import datetime as dt
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -177,6 +179,9 @@ def dataset_windows(ds: Any) -> DailyWindows:
     synth = _synth_hours(dict(ds.info.extra))
     if synth is not None:
         return DailyWindows((synth,), tz, source="the lab's scan steps")
+    stated = ds.info.extra.get("operating_hours")
+    if isinstance(stated, str) and stated:
+        return replace(parse_windows(stated, tz), source="the dataset's operating hours")
     start, end = _scan_local_hours(ds)
     lo = float((start.dt.hour + start.dt.minute / 60.0).min())
     hi = float((end.dt.hour + end.dt.minute / 60.0 + end.dt.second / 3600.0).max())

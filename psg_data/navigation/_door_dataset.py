@@ -191,7 +191,8 @@ class DoorTaskResult:
 
 def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: DoorTaskOptions | None = None, *,
                   settings: Mapping[str, Mapping[str, Any]] | None = None,
-                  objects_for: list[str] | None = None) -> DoorTaskResult:
+                  objects_for: list[str] | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> DoorTaskResult:
     """The door task on a dataset: door queries per seed, and objects behind predicted-closed doors.
 
     Args:
@@ -200,6 +201,7 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
         options: settings (default :class:`DoorTaskOptions`).
         settings: label -> estimator settings.
         objects_for: labels whose object runs are made (default: every estimator).
+        progress: called as ``progress(done, total)`` after each seed and after the object runs.
     """
     import pandas as pd
 
@@ -218,7 +220,9 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
         world.hours = parse_windows(o.windows, world.timezone).hours[0]
     tables, records, first = [], [], None
     errors: list[dict[str, Any]] = []
-    for seed in o.seeds:
+    obj_est = [e for e in estimators if objects_for is None or e[0] in objects_for]
+    steps = len(o.seeds) + int(bool(o.objects and obj_est))
+    for k, seed in enumerate(o.seeds):
         res = run_door_navigation(world, estimators, n_queries=o.n_queries, seed=seed, threshold=o.threshold,
                                   settings=settings, no_path=o.no_path, rules=o.rules)
         errors += [e for e in res.errors if e not in errors]
@@ -226,14 +230,18 @@ def run_door_task(dataset: Any, estimators: list[tuple[str, Any]], options: Door
         records.append(res.records.assign(seed=seed))
         if first is None:
             first = res
+        if progress:
+            progress(k + 1, steps)
     per_seed = pd.concat(tables, ignore_index=True)
     recs = pd.concat(records, ignore_index=True)
     summary = _door_summary(per_seed, recs, len(o.seeds))
     failed = {e["estimator"] for e in errors}
-    obj_est = [e for e in estimators if (objects_for is None or e[0] in objects_for) and e[0] not in failed]
+    obj_est = [e for e in obj_est if e[0] not in failed]
     objects = _objects_behind_doors(dataset, obj_est, o, settings) if o.objects and obj_est else None
     if objects is not None:
         errors += [e for e in objects.errors if e not in errors]
+        if progress:
+            progress(steps, steps)
     return DoorTaskResult(summary, per_seed, recs, world, first, objects, o, errors)
 
 

@@ -4,7 +4,7 @@ reference rows), the run, the results schema, the files and the figures.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -129,8 +129,11 @@ def _door_figures(res: Any, label: str, spec: EstimatorSpec, out: Path) -> None:
 
 
 def run_door_job(specs: Sequence[EstimatorSpec], dataset: Path, options: Any, out: Path, *, references: bool = True,
-                 plots: bool = True, info: dict[str, Any] | None = None) -> tuple[Any, Any]:
-    """Run the door task, write the results schema and CSV files, draw the figures of the first estimator."""
+                 plots: bool = True, info: dict[str, Any] | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> tuple[Any, Any]:
+    """Run the door task, write the results schema and CSV files, draw the figures of the first estimator
+    (``progress(done, total)``: after each seed and the object runs).
+    """
     import time
 
     from psg_data.evaluation._door_report import write_door_results
@@ -141,7 +144,8 @@ def run_door_job(specs: Sequence[EstimatorSpec], dataset: Path, options: Any, ou
     hints = dataset_hints(open_dataset(dataset))
     estimators, settings, roles, objects_for = door_methods(specs, hints, references=references)
     t0 = time.perf_counter()
-    res = run_door_task(dataset, estimators, options, settings=settings or None, objects_for=objects_for)
+    res = run_door_task(dataset, estimators, options, settings=settings or None, objects_for=objects_for,
+                        progress=progress)
     full = {**(info or {}), **options.to_dict(), "world": res.world.info, "seconds": round(time.perf_counter() - t0, 2)}
     results = write_door_results(res, out, roles=roles, info=full)
     if plots and specs and specs[0].label not in {e["estimator"] for e in res.errors}:

@@ -207,6 +207,19 @@ class _BagWriter:
         self.w.close()
 
 
+def _operating_hours(extra: dict[str, Any]) -> dict[str, str]:
+    """``{"operating_hours": "09:00-17:00"}`` of a synthetic lab (its first scan hour to the end of its last
+    step, as it is scored), so that the dataset converted from its recordings is scored on the same hours;
+    ``{}`` for other datasets.
+    """
+    if extra.get("generator") != "psg_data.synth":
+        return {}
+    hours = sorted(float(h) for h in (extra.get("scan_hours") or [9, 11, 13, 15]))
+    step = float(np.median(np.diff(hours))) if len(hours) > 1 else 2.0
+    hhmm = lambda h: f"{int(h):02d}:{int(round(60 * (h - int(h)))):02d}"  # noqa: E731
+    return {"operating_hours": f"{hhmm(hours[0])}-{hhmm(min(24.0, hours[-1] + step))}"}
+
+
 def _write_side_files(ds: Any, out: Path, recordings: dict[str, str], optical: dict[str, str]) -> None:
     def rows(name: str) -> list[dict[str, Any]]:
         return ds.table(name).to_pylist() if ds.has_table(name) else []
@@ -214,6 +227,7 @@ def _write_side_files(ds: Any, out: Path, recordings: dict[str, str], optical: d
     site = {
         "name": ds.info.name,
         "timezone": ds.info.timezone,
+        **_operating_hours(dict(ds.info.extra)),
         "cameras": [{"camera_id": cid, "frame_id": fid} for cid, fid in sorted(optical.items())],
         "rooms": rows("rooms"),
         "receptacles": rows("receptacles"),

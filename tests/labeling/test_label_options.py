@@ -26,7 +26,7 @@ from tests.contract import assert_one_error, snapshot
 @pytest.mark.parametrize(("opts", "match"), [
     (["--margin", "inf"], "--margin (margin_m): expected a finite number in [0, 10], got inf"),
     (["--min-iou", "nan"], "--min-iou (min_iou): expected a finite number in [0, 1], got nan"),
-    (["--seed", "-1"], "--seed (seed): expected an integer in [0, 9223372036854775807], got -1"),
+    (["--label-seed", "-1"], "--label-seed (seed): expected an integer in [0, 9223372036854775807], got -1"),
     (["--source", "noisy:nan"], "expected noisy:P or noisy:P_M,P_F"),
 ])
 def test_bad_label_options(tmp_path: Path, opts: list[str], match: str) -> None:
@@ -58,7 +58,7 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @settings(max_examples=25, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-@given(flag=st.sampled_from(["--min-iou", "--margin", "--seed", "--source"]), value=VALUES.map(_as_text))
+@given(flag=st.sampled_from(["--min-iou", "--margin", "--label-seed", "--source"]), value=VALUES.map(_as_text))
 def test_any_label_option(tiny: Path, flag: str, value: str) -> None:
     if "\0" in value:
         return

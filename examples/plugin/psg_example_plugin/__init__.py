@@ -3,7 +3,8 @@
 ``example_decay``: after an observation y at t0, P(present at t) = w y + (1 - w) p, with
 w = 0.5 ** ((t - t0) / half_life) and p the edge's share of present training observations (the
 pooled share for an edge without training data). ``BaseEstimator`` gives it scikit-learn's
-settings handling, ``BaseFilter`` the time checks; ``check_estimator`` passes.
+settings handling and the fitted / state checks, ``BaseFilter`` the time checks and the state's common
+keys (``psg_data.estimators.STATE_KEYS``); only public members are used; ``check_estimator`` passes.
 """
 
 from __future__ import annotations
@@ -31,15 +32,16 @@ class DecayFilter(BaseFilter):
         self.last_y = int(y[-1])
 
     def _predict(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self.last_y is None or self._last_t is None:
+        if self.last_y is None or self.last_t_s is None:
             return np.full(t.shape, self.prior)
-        w = 0.5 ** ((t - self._last_t) / self.half_life_s)
+        w = 0.5 ** ((t - self.last_t_s) / self.half_life_s)
         return w * self.last_y + (1.0 - w) * self.prior
 
     def get_state(self) -> dict[str, Any]:
-        """JSON-serialisable state (``DecayEstimator.filter_from_state`` restores it)."""
-        return {"estimator": self._name, "edge": list(self.edge), "last_t_s": self._last_t, "last_y": self.last_y,
-                "prior": self.prior}
+        """JSON-serialisable state: the common keys (estimator, edge, last_t_s) and this filter's own
+        (``DecayEstimator.filter_from_state`` restores it).
+        """
+        return {**self.base_state(self._name), "last_y": self.last_y, "prior": self.prior}
 
 
 class DecayEstimator(BaseEstimator):
@@ -69,12 +71,13 @@ class DecayEstimator(BaseEstimator):
 
     def make_filter(self, edge: EdgeKey) -> DecayFilter:
         """A fresh filter for ``edge``."""
-        self._check_fitted()
+        self.check_fitted()
         return DecayFilter(edge, self.priors_.get(edge, self.default_prior_), 3600.0 * self.half_life_h, self.name)
 
     def filter_from_state(self, state: dict[str, Any]) -> DecayFilter:
         """The filter ``DecayFilter.get_state`` described."""
-        edge = self._check_state(state)
+        edge = self.edge_of_state(state)
         f = DecayFilter(edge, state["prior"], 3600.0 * self.half_life_h, self.name)
-        f.last_y, f._last_t = state["last_y"], state["last_t_s"]
+        f.last_y = state["last_y"]
+        f.restore_state(state)
         return f

@@ -5,7 +5,8 @@ Layout (see docs/RAW_FORMATS.md)::
 
     recordings/
       site.json             # or site.yaml: name, timezone, cameras, rooms, receptacles, doors, objects
-                            #   (and optionally openings: doorless passages, boxes like doors)
+                            #   (and optionally openings: doorless passages, boxes like doors; and
+                            #   operating_hours: "09:00-17:00", the daily hours the dataset is scored in)
       door_states.csv       # scan_id,door_id,state           (or .json / .yaml: a list of rows)
       schedule.csv          # scan_id,object_id,receptacle_id (empty receptacle_id = absent)
       scans.csv             # scan_id,recording,split         (optional)
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,6 +44,8 @@ class SideData:
 
     name: str | None = None
     timezone: str | None = None
+    operating_hours: str | None = None
+    """Daily local hours the site is scored in (``09:00-17:00``; stored in the manifest's ``extra``)."""
     cameras: dict[str, str] = field(default_factory=dict)
     """Optical frame id in the recordings -> camera_id."""
     tables: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
@@ -116,6 +120,18 @@ def _read_table_file(path: Path) -> list[dict[str, Any]]:
     return [dict(r) for r in data]
 
 
+_HOURS = re.compile(r"^\d{1,2}(:\d{2})?-\d{1,2}(:\d{2})?(,\d{1,2}(:\d{2})?-\d{1,2}(:\d{2})?)*$")
+
+
+def _hours_text(value: Any, path: Path) -> str | None:
+    if value is None:
+        return None
+    if not isinstance(value, str) or not _HOURS.match(value.replace(" ", "")):
+        raise ConversionError(f"{path}: operating_hours: expected local hour ranges like \"09:00-17:00\", got "
+                              f"{value!r}")
+    return value.replace(" ", "")
+
+
 def read_side_files(directory: str | Path | None) -> SideData:
     """Read the side files in ``directory`` (missing files mean empty tables).
 
@@ -142,6 +158,7 @@ def read_side_files(directory: str | Path | None) -> SideData:
                        str(path), ConversionError)
         side.name = site.get("name")
         side.timezone = site.get("timezone")
+        side.operating_hours = _hours_text(site.get("operating_hours"), path)
         for cam in site.get("cameras") or []:
             if not isinstance(cam, dict) or "camera_id" not in cam or "frame_id" not in cam:
                 raise ConversionError(f"{path}: cameras: expected objects with camera_id and frame_id")
