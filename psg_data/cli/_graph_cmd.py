@@ -12,7 +12,42 @@ from psg_data.cli._errors import ContractCommand
 __all__ = ["graph_cmd"]
 
 
-def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite: bool):  # type: ignore[no-untyped-def]
+def _inputs(path: str, labels: str) -> list[Path]:
+    """What ``psg-data graph`` reads: PATH (the demo: the dataset cache) and a detections file."""
+    p = Path(path)
+    inputs = [p]
+    if path == "demo" and not p.exists():
+        from psg_data.datasets import cache_dir
+
+        inputs = [cache_dir()]
+    if labels.startswith("detections:"):
+        inputs.append(Path(labels.split(":", 1)[1]))
+    return inputs
+
+
+def _check_outputs(path: str, labels: str, outputs: dict[str, tuple[Path | None, str]], overwrite: bool) -> None:
+    """Every output through the safe-output rule (never an input or inside one, replaced only with
+    --overwrite and only if psg-data wrote it), checked before any work.
+    """
+    from psg_data.writers._safe_output import check_file_output
+
+    given = {opt: (out, kind) for opt, (out, kind) in outputs.items() if out is not None}
+    png = given.get("--png")
+    if png is not None and png[0].suffix.lower() != ".png":
+        raise click.BadParameter(f"{png[0]}: expected a file name ending in .png", param_hint="--png")
+    if "--save-graph" in given and Path(path).is_file():
+        raise click.UsageError(f"--save-graph: {path} is a saved graph already (it is fitted from a dataset, "
+                                "not re-saved); give a dataset folder or demo as PATH")
+    seen: dict[Path, str] = {}
+    for opt, (out, kind) in given.items():
+        key = Path(out).expanduser().resolve()
+        if key in seen:
+            raise click.UsageError(f"{opt} {out}: the same file as {seen[key]}; expected one file per output")
+        seen[key] = opt
+        check_file_output(out, overwrite=overwrite, kind=kind, inputs=_inputs(path, labels))
+
+
+def _graph(path: str, estimator: str, labels: str, save: Path | None):  # type: ignore[no-untyped-def]
     from psg_data.errors import PsgDataError
     from psg_data.graph import PredictiveGraph
 
@@ -27,8 +62,6 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
         raise PsgDataError(f"{path}: expected a psg-dataset folder, 'demo' or a saved graph (.json)")
     g = PredictiveGraph.from_dataset(p, estimator, labels=labels)
     if save is not None:
-        if save.exists() and not overwrite:
-            raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
         g.save(save)
     return g
 
@@ -52,7 +85,8 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
                    "(needs psg-data[viewer]).")
 @click.option("--save-graph", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.json",
               help="Save the fitted graph (load it later by giving FILE.json as PATH).")
-@click.option("--overwrite", is_flag=True, help="Replace an existing --save-graph file.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace existing output files (--csv, --png, --rerun, --save-graph), only ones psg-data wrote.")
 @quiet_option
 @handle_errors
 def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels: str, top: int | None,
@@ -69,7 +103,9 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
       psg-data graph lab.json --at 2025-03-21T09:30+01:00 --object redmug --top 3
     """
     setup_logging(quiet)
-    g = _graph(path, estimator, labels, save_graph, overwrite)
+    _check_outputs(path, labels, {"--csv": (csv_path, "graph-csv"), "--png": (png, "png"), "--rerun": (rerun, "rrd"),
+                                  "--save-graph": (save_graph, "graph")}, overwrite)
+    g = _graph(path, estimator, labels, save_graph)
     t = float(at) if at.replace(".", "", 1).isdigit() else at
     snap = g.at(t)
     if object_id is not None:
@@ -88,7 +124,7 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
     if csv_path is not None:
         from psg_data.writers._safe_output import write_atomically
 
-        write_atomically(csv_path, lambda tmp: table.to_csv(tmp, index=False))
+        write_atomically(csv_path, lambda tmp: table.to_csv(tmp, index=False), inputs=_inputs(path, labels))
     if png is not None:
         from psg_data.navigation._plots import plot_snapshot
 
@@ -98,6 +134,6 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
 
         from psg_data.viewer import log_graph, recording
 
-        with recording(rerun, overwrite=overwrite, inputs=[g.info.get("dataset")]) as rec:
+        with recording(rerun, overwrite=overwrite, inputs=[*_inputs(path, labels), g.info.get("dataset")]) as rec:
             n = log_graph(rec, g, snap.t_s + np.arange(-3.5 * 86400, 3.5 * 86400 + 1, 1800.0))
         click.echo(f"wrote {rerun} ({n} belief series, a week around {when} every 30 min)")
