@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import click
@@ -10,6 +11,9 @@ from psg_data.cli._common import handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractCommand
 
 __all__ = ["graph_cmd"]
+
+_NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
+"""``--at`` given as Unix seconds."""
 
 
 def _inputs(path: str, labels: str) -> list[Path]:
@@ -106,7 +110,7 @@ def graph_cmd(path: str, at: str, object_id: str | None, estimator: str, labels:
     _check_outputs(path, labels, {"--csv": (csv_path, "graph-csv"), "--png": (png, "png"), "--rerun": (rerun, "rrd"),
                                   "--save-graph": (save_graph, "graph")}, overwrite)
     g = _graph(path, estimator, labels, save_graph)
-    t = float(at) if at.replace(".", "", 1).isdigit() else at
+    t = float(at) if _NUMBER.fullmatch(at.strip()) else at  # bounded by the graph (years 1 to 9999)
     snap = g.at(t)
     if object_id is not None:
         table = g.locate(object_id, t, top=top).to_pandas()
