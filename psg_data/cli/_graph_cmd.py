@@ -9,6 +9,7 @@ import click
 
 from psg_data.cli._common import handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractCommand
+from psg_data.cli._label_source import LabelSourceType
 
 __all__ = ["graph_cmd"]
 
@@ -77,7 +78,7 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None):  # type: 
 @click.option("--object", "object_id", default=None, metavar="NAME", help="Rank this object's receptacles instead.")
 @click.option("-e", "--estimator", default="perpetua_star", show_default=True, metavar="NAME",
               help="Estimator fitted on the training scans (a dataset PATH only).")
-@click.option("--labels", default="gt", show_default=True, metavar="SOURCE",
+@click.option("--labels", type=LabelSourceType(), default="gt", show_default=True, metavar="SOURCE",
               help="Label source of the observations: gt, privileged, noisy:P, detections:FILE.")
 @click.option("--top", type=click.IntRange(1), default=None, help="Rows of the ranking (default: all).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
