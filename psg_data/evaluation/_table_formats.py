@@ -212,15 +212,15 @@ def plain_text(text: str) -> str:
     return _CONTROL.sub(_visible, str(text))
 
 
-_MD_CHARS = {"\\": "\\\\", "`": "\\`", "*": "\\*", "_": "\\_", "|": "\\|", "[": "\\[", "]": "\\]",
-             "~": "\\~", "<": "&lt;", ">": "&gt;", "&": "&amp;"}
+_MD_CHARS = {"\\": "\\\\", "`": "\\`", "*": "\\*", "_": "\\_", "|": "\\|", "~": "\\~", "<": "&lt;", ">": "&gt;",
+             "&": "&amp;"}
 
 
 def md_escape(text: str) -> str:
     """``text`` as literal Markdown (GitHub, pandoc): on one line, no emphasis, code, link, table cell
     break or HTML (``<`` ``>`` ``&`` as entities).
     """
-    return "".join(_MD_CHARS.get(ch, ch) for ch in plain_text(text))
+    return "".join(_MD_CHARS.get(ch, ch) for ch in plain_text(text)).replace("](", "]\\(")  # no inline link
 
 
 def tex_comment(text: str) -> str:
