@@ -205,9 +205,9 @@ def _visible(m: re.Match[str]) -> str:
 
 
 def plain_text(text: str) -> str:
-    """``text`` on one line with nothing a terminal acts on: line breaks and tabs become spaces, every
+    r"""``text`` on one line with nothing a terminal acts on: line breaks and tabs become spaces, every
     other control character (the ESC of escape sequences, bidirectional overrides) shows as
-    ``\\xNN`` / ``\\uNNNN``. The text renderer and both paper formats apply it first.
+    ``\xNN`` / ``\uNNNN``. The text renderer and both paper formats apply it first.
     """
     return _CONTROL.sub(_visible, str(text))
 

@@ -28,8 +28,9 @@ import numpy as np
 
 from psg_data.errors import GraphError
 
-__all__ = ["GRAPH_FORMAT", "GRAPH_VERSION", "MAX_GRAPH_BYTES", "MAX_DEPTH", "MAX_ITEMS", "MAX_GRID_CELLS", "MAX_GRID_TOTAL_CELLS", "MAX_NUM_STEPS", "MAX_FREMEN_K",
-           "STATE_RULES", "read_graph_file", "check_graph_dict", "unpack_mask", "zone_problem"]
+__all__ = ["GRAPH_FORMAT", "GRAPH_VERSION", "MAX_GRAPH_BYTES", "MAX_DEPTH", "MAX_ITEMS", "MAX_GRID_CELLS",
+           "MAX_GRID_TOTAL_CELLS", "MAX_NUM_STEPS", "MAX_FREMEN_K", "STATE_RULES", "read_graph_file",
+           "check_graph_dict", "unpack_mask", "zone_problem"]
 
 GRAPH_FORMAT = "psg-predictive-graph"
 GRAPH_VERSION = 1
@@ -171,8 +172,8 @@ def read_graph_file(path: Path) -> dict[str, Any]:
         raise GraphError(f"{path}: format: expected {GRAPH_FORMAT!r}, got {str(got)[:40]!r}")
     v = d.get("version")
     if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= GRAPH_VERSION:
-        raise GraphError(f"{path}: version: {v if isinstance(v, int) else str(v)[:40]!r}, this psg-data reads versions 1 to {GRAPH_VERSION}; "
-                         "upgrade psg-data for a newer file")
+        raise GraphError(f"{path}: version: {v if isinstance(v, int) else str(v)[:40]!r}, this psg-data reads "
+                         f"versions 1 to {GRAPH_VERSION}; upgrade psg-data for a newer file")
     try:
         check_graph_dict(d)
     except GraphError as exc:

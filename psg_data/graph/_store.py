@@ -188,11 +188,11 @@ def _grid(d: dict[str, Any]) -> Any:
 
     shape = (int(a["shape"][0]), int(a["shape"][1]))
     w = "grid.arrays."
+    doors = {k: unpack_mask(v, shape, f"{w}door_cells.{k}") for k, v in a["door_cells"].items()}
+    recs = {k: unpack_mask(v, shape, f"{w}receptacle_cells.{k}") for k, v in a["receptacle_cells"].items()}
     return OccupancyGrid(unpack_mask(a["static_obstacle"], shape, w + "static_obstacle"),
                          np.asarray(a["origin_m"], np.float64), float(a["resolution_m"]), float(a["robot_radius_m"]),
-                         {k: unpack_mask(v, shape, f"{w}door_cells.{k}") for k, v in a["door_cells"].items()},
-                         {k: unpack_mask(v, shape, f"{w}receptacle_cells.{k}") for k, v in a["receptacle_cells"].items()},
-                         str(a["source"]))
+                         doors, recs, str(a["source"]))
 
 
 _PROBE_ERRORS = (PsgDataError, KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError,

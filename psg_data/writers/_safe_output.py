@@ -197,8 +197,8 @@ such starts), what it is)."""
 
 def check_file_output(out: str | Path, *, overwrite: bool, kind: str, inputs: Iterable[str | Path | None] = ()) -> None:
     """The rule for a single-file output (``psg-data view --save``, ``psg-eval --rerun``, ``psg-data graph
-    --csv / --png / --rerun / --save-graph``): never an input or inside one; ``overwrite`` replaces only a file of that kind (its signature), and
-    ``OUT.partial``, the file written first, must not exist.
+    --csv / --png / --rerun / --save-graph``): never an input or inside one; ``overwrite`` replaces only
+    a file of that kind (its signature), and ``OUT.partial``, the file written first, must not exist.
 
     Raises:
         UnsafeOutputError, DatasetExistsError: as :func:`check_output`.
