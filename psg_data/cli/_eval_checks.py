@@ -8,8 +8,11 @@ from typing import Any
 from psg_data.errors import EvaluationError
 from psg_data.evaluation._hints import EstimatorSpec
 
-__all__ = ["parse_deltas", "persistence_options", "check_lab_seeds", "check_task_estimators", "check_builtin_task"]
+__all__ = ["parse_deltas", "persistence_options", "check_lab_seeds", "check_task_estimators", "check_builtin_task",
+           "check_protocol", "NAVIGATION_PROTOCOLS"]
 
+NAVIGATION_PROTOCOLS = ("sim", "paper-real", "paper-sim-predictive", "paper-sim-adaptive")
+"""``--protocol`` values that choose navigation queries (they mean nothing to the persistence and door tasks)."""
 _TASK_ONLY = {"perpetua_star_oracle": ("persistence", "the training ground truth of the persistence task's streams "
                                                       "(navigation and door maps carry none)")}
 
@@ -97,3 +100,12 @@ def check_task_estimators(specs: list[EstimatorSpec], task: str) -> None:
         need = _TASK_ONLY.get(s.name)
         if need is not None and task != need[0] and not dict(s.settings).get("prior"):
             raise EvaluationError(f"--estimator {s.label!r}: {s.name} needs {need[1]}; use it with --task {need[0]}")
+
+
+def check_protocol(task: str, protocol: str, *, given: bool) -> None:
+    """Refuse a navigation protocol given with a task that has no navigation queries (persistence, doors);
+    other values are left to the task that takes them.
+    """
+    if given and task in ("persistence", "doors") and protocol in NAVIGATION_PROTOCOLS:
+        raise EvaluationError(f"--protocol {protocol}: a navigation protocol (--task navigation); --task {task} "
+                              "does not use it")

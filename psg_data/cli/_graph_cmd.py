@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -9,19 +10,56 @@ import click
 
 from psg_data.cli._common import handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractCommand
+from psg_data.cli._label_source import LabelSourceType
 
 __all__ = ["graph_cmd"]
 
+_NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
+"""``--at`` given as Unix seconds."""
 
-def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite: bool):  # type: ignore[no-untyped-def]
+
+def _inputs(path: str, labels: str) -> list[Path]:
+    """What ``psg-data graph`` reads: PATH (the demo: the dataset cache) and a detections file."""
+    p = Path(path)
+    inputs = [p]
+    if path == "demo" and not p.exists():
+        from psg_data.datasets import cache_dir
+
+        inputs = [cache_dir()]
+    if labels.startswith("detections:"):
+        inputs.append(Path(labels.split(":", 1)[1]))
+    return inputs
+
+
+def _check_outputs(path: str, labels: str, outputs: dict[str, tuple[Path | None, str]], overwrite: bool) -> None:
+    """Every output through the safe-output rule (never an input or inside one, replaced only with
+    --overwrite and only if psg-data wrote it), checked before any work.
+    """
+    from psg_data.writers._safe_output import check_file_output
+
+    given = {opt: (out, kind) for opt, (out, kind) in outputs.items() if out is not None}
+    png = given.get("--png")
+    if png is not None and png[0].suffix.lower() != ".png":
+        raise click.BadParameter(f"{png[0]}: expected a file name ending in .png", param_hint="--png")
+    if "--save-graph" in given and Path(path).is_file():
+        raise click.UsageError(f"--save-graph: {path} is a saved graph already (it is fitted from a dataset, "
+                                "not re-saved); give a dataset folder or demo as PATH")
+    seen: dict[Path, str] = {}
+    for opt, (out, kind) in given.items():
+        key = Path(out).expanduser().resolve()
+        if key in seen:
+            raise click.UsageError(f"{opt} {out}: the same file as {seen[key]}; expected one file per output")
+        seen[key] = opt
+        check_file_output(out, overwrite=overwrite, kind=kind, inputs=_inputs(path, labels))
+
+
+def _graph(path: str, estimator: str, labels: str, save: Path | None):  # type: ignore[no-untyped-def]
     from psg_data.errors import PsgDataError
     from psg_data.graph import PredictiveGraph
 
     p = Path(path)
     if p.is_file():
         return PredictiveGraph.load(p)
-    if save is not None and save.exists() and not overwrite:  # before the fit, not after it
-        raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
     if path == "demo" and not p.is_dir():
         from psg_data.datasets import demo
 
@@ -71,7 +109,7 @@ def _print_text(g: Any, snap: Any, table: Any, object_id: str | None, when: str)
 @click.option("--object", "object_id", default=None, metavar="NAME", help="Rank this object's receptacles instead.")
 @click.option("-e", "--estimator", default="perpetua_star", show_default=True, metavar="NAME",
               help="Estimator fitted on the training scans (a dataset PATH only).")
-@click.option("--labels", default="gt", show_default=True, metavar="SOURCE",
+@click.option("--labels", type=LabelSourceType(), default="gt", show_default=True, metavar="SOURCE",
               help="Label source of the observations: gt, privileged, noisy:P, detections:FILE.")
 @click.option("--top", type=click.IntRange(1), default=None, help="Rows of the ranking (default: all).")
 @click.option("--format", "table_format", type=click.Choice(["text", "csv"]), default="text", show_default=True,
@@ -86,7 +124,8 @@ def _print_text(g: Any, snap: Any, table: Any, object_id: str | None, when: str)
                    "(needs psg-data[viewer]).")
 @click.option("--save-graph", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.json",
               help="Save the fitted graph (load it later by giving FILE.json as PATH).")
-@click.option("--overwrite", is_flag=True, help="Replace an existing --save-graph file.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace existing output files (--csv, --png, --rerun, --save-graph), only ones psg-data wrote.")
 @quiet_option
 @click.option("--verbose", "-v", is_flag=True, help="Also print the fit's INFO lines (settings decided, error rates).")
 @click.pass_context
@@ -106,8 +145,10 @@ def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, est
     """
     setup_logging(quiet=quiet or not verbose, verbose=verbose and not quiet)
     _refuse_fit_options_on_saved(ctx, path)
-    g = _graph(path, estimator, labels, save_graph, overwrite)
-    t = float(at) if at.replace(".", "", 1).isdigit() else at
+    _check_outputs(path, labels, {"--csv": (csv_path, "graph-csv"), "--png": (png, "png"), "--rerun": (rerun, "rrd"),
+                                  "--save-graph": (save_graph, "graph")}, overwrite)
+    g = _graph(path, estimator, labels, save_graph)
+    t = float(at) if _NUMBER.fullmatch(at.strip()) else at  # bounded by the graph (years 1 to 9999)
     snap = g.at(t)
     if object_id is not None:
         table = g.locate(object_id, t, top=top).to_pandas()
@@ -126,7 +167,7 @@ def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, est
 
         click.echo("warning: --csv FILE is now --format csv > FILE; the old spelling goes in the next release",
                    err=True)
-        write_atomically(csv_path, lambda tmp: table.to_csv(tmp, index=False))
+        write_atomically(csv_path, lambda tmp: table.to_csv(tmp, index=False), inputs=_inputs(path, labels))
     if png is not None:
         from psg_data.navigation._plots import plot_snapshot
 
@@ -136,7 +177,7 @@ def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, est
 
         from psg_data.viewer import log_graph, recording
 
-        with recording(rerun, overwrite=overwrite, inputs=[g.info.get("dataset")]) as rec:
+        with recording(rerun, overwrite=overwrite, inputs=[*_inputs(path, labels), g.info.get("dataset")]) as rec:
             n = log_graph(rec, g, snap.t_s + np.arange(-3.5 * 86400, 3.5 * 86400 + 1, 1800.0))
         click.echo(f"wrote {rerun} ({n} belief series, a week around {when} every 30 min)",
                    err=table_format == "csv")  # stdout: only the CSV

@@ -6,10 +6,12 @@ from typing import Any
 
 import click
 
-__all__ = ["SeedsType", "parse_seeds", "MAX_SEEDS"]
+__all__ = ["SeedsType", "parse_seeds", "MAX_SEEDS", "MAX_SEED"]
 
 MAX_SEEDS = 100
 """At most this many seeds in one run."""
+MAX_SEED = 2**32 - 1
+"""Largest seed (numpy's legacy generators take seeds below 2^32)."""
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
@@ -17,11 +19,12 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     (``0,3,5``, ``3-7``, ``0,10-12``; one seed alone: ``3-3``) names them, in the order given.
 
     Raises:
-        ValueError: anything else, a repeated seed, or more than :data:`MAX_SEEDS` seeds.
+        ValueError: anything else, a repeated seed, a seed above :data:`MAX_SEED` or more than
+            :data:`MAX_SEEDS` seeds (counted before any list is built).
     """
     s = str(text).strip()
     if s.isdigit():
-        n = int(s)
+        n = _seed(s)
         if not 1 <= n <= MAX_SEEDS:
             raise ValueError(f"a count of seeds must be in 1..{MAX_SEEDS}")
         return tuple(range(n))
@@ -30,15 +33,23 @@ def parse_seeds(text: str) -> tuple[int, ...]:
         lo, dash, hi = part.partition("-")
         if not lo.strip().isdigit() or (dash and not hi.strip().isdigit()):
             raise ValueError("expected a count (3), a list (0,3,5) or a range (3-7) of seeds >= 0")
-        a, b = int(lo), int(hi) if dash else int(lo)
+        a, b = _seed(lo), _seed(hi) if dash else _seed(lo)
         if b < a:
             raise ValueError(f"range {part}: the end is below the start")
-        seeds += range(a, b + 1)
-        if len(seeds) > MAX_SEEDS:
+        if len(seeds) + (b - a + 1) > MAX_SEEDS:  # counted before any list is built
             raise ValueError(f"at most {MAX_SEEDS} seeds")
+        seeds += range(a, b + 1)
     if len(set(seeds)) != len(seeds):
         raise ValueError("a seed is named twice")
     return tuple(seeds)
+
+
+def _seed(digits: str) -> int:
+    """A seed (or a count) of at most :data:`MAX_SEED` written as decimal ``digits``."""
+    d = digits.strip().lstrip("0") or "0"
+    if len(d) > len(str(MAX_SEED)) or int(d) > MAX_SEED:
+        raise ValueError(f"a seed is at most {MAX_SEED} (2^32 - 1)")
+    return int(d)
 
 
 class SeedsType(click.ParamType):
@@ -53,4 +64,4 @@ class SeedsType(click.ParamType):
         try:
             return parse_seeds(value)
         except ValueError as exc:
-            self.fail(f"{value!r}: {exc}", param, ctx)
+            self.fail(f"{str(value)[:40]!r}: {exc}", param, ctx)

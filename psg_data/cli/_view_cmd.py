@@ -94,6 +94,7 @@ def _serve(ds: Any, ids: list[str], port: int, bind: str, frame_stride: int, qui
     import tempfile
 
     from psg_data.viewer import WebViewer
+    from psg_data.viewer._web import url_host
 
     with tempfile.TemporaryDirectory(prefix="psg-view-") as tmp:
         server = WebViewer(port=port, bind=bind, log=Path(tmp) / "rerun.log")
@@ -101,7 +102,7 @@ def _serve(ds: Any, ids: list[str], port: int, bind: str, frame_stride: int, qui
         try:
             click.echo(f"web viewer: {server.url}")
             counts = _log(ds, ids, None, server, frame_stride, False, quiet)
-            click.echo(f"sent to the web viewer ({_what(counts)}); serving on {bind}:{port} until Ctrl-C")
+            click.echo(f"sent to the web viewer ({_what(counts)}); serving on {url_host(bind)}:{port} until Ctrl-C")
             server.wait()
         except KeyboardInterrupt:
             click.echo("stopped")

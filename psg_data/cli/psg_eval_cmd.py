@@ -19,6 +19,7 @@ from psg_data import __version__
 from psg_data._executors import SCHEDULER_HELP, check_scheduler
 from psg_data.cli._common import EXIT_PROBLEMS, handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractGroup, check_jobs
+from psg_data.cli._label_source import LabelSourceType
 from psg_data.cli._seeds import SeedsType
 
 __all__ = ["main"]
@@ -118,6 +119,7 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
               help="windows: integrals bounded by the scoring windows; reference: the plain trapezoid over the whole "
                    "span (the Perpetua reference). auto: reference for the persistence benchmark, windows otherwise.")
 @click.option("--labels", default="gt", show_default=True, metavar="gt|privileged|noisy:P|detections:FILE|observed",
+              type=LabelSourceType(),
               help="Observation source: gt (the schedule); noisy:P[,P_F]: the schedule at every scan with each "
                    "observation flipped (seeded; the paper's noised ground truth, the same in every task); "
                    "privileged, detections:FILE, observed (door states read from the depth; doors only) from the "
@@ -220,6 +222,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     from psg_data.cli._eval_checks import (
         check_builtin_task,
         check_lab_seeds,
+        check_protocol,
         check_task_estimators,
         parse_deltas,
         persistence_options,
@@ -235,6 +238,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     specs = [parse_estimator_spec(e) for e in (estimators or (DEFAULT_ESTIMATOR,))]
     check_estimators(specs)
     check_task_estimators(specs, task)
+    check_protocol(task, protocol, given=ctx.get_parameter_source("protocol") != click.core.ParameterSource.DEFAULT)
     check_scheduler(scheduler)
     from psg_data.cli._eval_state import check_state_options, is_state_benchmark
 

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +39,7 @@ from psg_data.evaluation._aggregate import Summary
 from psg_data.evaluation._persistence_types import clean_json
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "MetricInfo", "ResultRow", "ResultTable", "EvalResults", "save_results",
-           "load_results", "results_frame", "ROLES", "MAX_RESULTS_BYTES"]
+           "load_results", "results_frame", "ROLES", "MAX_RESULTS_BYTES", "MAX_DIGITS"]
 
 SCHEMA = "psg-eval-results"
 SCHEMA_VERSION = 1
@@ -68,6 +70,25 @@ _JSON_NAMES = {"str": "a string", "num": "a number or null", "int": "an integer"
                "list": "an array"}
 
 
+MAX_DIGITS = 15
+"""Most decimals a metric column shows (``digits``): a double holds 15 to 17 significant digits."""
+_RANGES = {"digits": (0, MAX_DIGITS)}
+"""Metric fields bounded to a closed range (an unbounded ``digits`` formats numbers for minutes)."""
+
+
+def _finite_or_nan(v: int | float) -> bool:
+    """A JSON number the readers can turn into a float: finite (or NaN); no integer beyond a double's range."""
+    try:
+        return not math.isinf(float(v))
+    except OverflowError:
+        return False
+
+
+def _check_range(value: Any, bounds: Any, where: str) -> None:
+    if bounds and not bounds[0] <= value <= bounds[1]:
+        raise EvaluationError(f"{where}: expected an integer in {bounds[0]}..{bounds[1]}, got {str(value)[:40]!r}")
+
+
 def _check_shape(value: Any, spec: Any = None, where: str = "") -> None:
     """``value`` (parsed ``results.json``) has the shape the readers rely on.
 
@@ -77,7 +98,9 @@ def _check_shape(value: Any, spec: Any = None, where: str = "") -> None:
     spec = _RESULTS if spec is None else spec
     if isinstance(spec, str):
         ok = isinstance(value, _JSON_TYPES[spec]) and not isinstance(value, bool) or (spec == "num" and value is None)
-        if spec == "num" and isinstance(value, float) and math.isinf(value):
+        if spec == "num" and isinstance(value, (int, float)) and not _finite_or_nan(value):
+            ok = False
+        if spec == "int" and isinstance(value, int) and abs(value) >= 1 << 63:
             ok = False
         if not ok:
             raise EvaluationError(f"{where}: expected {_JSON_NAMES[spec]}, got {type(value).__name__} "
@@ -96,6 +119,7 @@ def _check_shape(value: Any, spec: Any = None, where: str = "") -> None:
     for key, (item, required) in spec.items():
         if key in value and not (value[key] is None and not required):
             _check_shape(value[key], item, f"{where}.{key}".lstrip("."))
+            _check_range(value[key], spec is _METRIC and _RANGES.get(key), f"{where}.{key}".lstrip("."))
         elif required:
             raise EvaluationError(f"{where}.{key}".lstrip(".") + ": missing, expected by results schema "
                                   f"{SCHEMA_VERSION}")
@@ -294,12 +318,13 @@ def load_results(path: str | Path) -> EvalResults:
     if p.is_dir() or p.suffix != ".json":
         p = p / "results.json"
     try:
-        with open(p, "rb") as fh:
-            raw = fh.read(MAX_RESULTS_BYTES + 1)
+        raw = _read_regular(p)
         if len(raw) > MAX_RESULTS_BYTES:
             raise EvaluationError(f"{p}: larger than {MAX_RESULTS_BYTES} bytes, expected a psg-eval results.json "
                                   "(runs write tens of kilobytes)")
         data = json.loads(raw.decode("utf-8"))
+    except EvaluationError:
+        raise
     except FileNotFoundError:
         raise EvaluationError(f"{p}: missing; expected a psg-eval output folder or its results.json") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -308,9 +333,22 @@ def load_results(path: str | Path) -> EvalResults:
         raise EvaluationError(f"{p}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
     except RecursionError:
         raise EvaluationError(f"{p}: not a psg-eval results file (JSON nested too deeply)") from None
+    except ValueError as exc:  # an integer of more digits than Python converts
+        raise EvaluationError(f"{p}: not a psg-eval results file ({str(exc)[:80]})") from None
     if not isinstance(data, dict):
         raise EvaluationError(f"{p}: not a psg-eval results file (expected a JSON object)")
     return EvalResults.from_dict(data, str(p))
+
+
+def _read_regular(p: Path) -> bytes:
+    """At most ``MAX_RESULTS_BYTES + 1`` bytes of ``p``, a regular file (a FIFO or a device is refused
+    without waiting on it: opened non-blocking, checked with ``fstat`` before any read).
+    """
+    fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise EvaluationError(f"{p}: not a regular file; expected a psg-eval results.json")
+        return fh.read(MAX_RESULTS_BYTES + 1)
 
 
 def results_frame(results: EvalResults) -> Any:

@@ -14,6 +14,7 @@ line in the caption, every line as a comment).
 from __future__ import annotations
 
 import math
+import re
 import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -21,7 +22,8 @@ from dataclasses import dataclass, field, replace
 from psg_data.errors import EvaluationError
 from psg_data.evaluation._results import ResultRow, ResultTable
 
-__all__ = ["TABLE_FORMATS", "Grid", "table_grid", "markdown_table", "latex_table", "select_table", "grouped_header"]
+__all__ = ["TABLE_FORMATS", "Grid", "table_grid", "markdown_table", "latex_table", "select_table", "grouped_header",
+           "plain_text", "md_escape", "tex_escape", "tex_comment"]
 
 TABLE_FORMATS = ("text", "markdown", "latex")
 """What ``psg-eval --format`` prints."""
@@ -150,7 +152,7 @@ def _rules(rows: Sequence[ResultRow]) -> list[int]:
 
 # -- Markdown ------------------------------------------------------------------------------------
 def _md(text: str) -> str:
-    return text.replace("|", "\\|")
+    return md_escape(text)
 
 
 def markdown_table(grid: Grid) -> str:
@@ -178,9 +180,12 @@ _TEX_CHARS = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#"
 
 
 def tex_escape(text: str) -> str:
-    """``text`` as LaTeX that pdflatex sets without extra packages (other non-ASCII letters lose their accents)."""
+    """``text`` as LaTeX that pdflatex sets without extra packages (other non-ASCII letters lose their accents);
+    every character TeX treats specially is escaped and line breaks and control characters are
+    neutralised first (:func:`plain_text`), so no text of a results file is ever live LaTeX.
+    """
     out = []
-    for ch in text:
+    for ch in plain_text(text):
         if ch in _TEX_CHARS:
             out.append(_TEX_CHARS[ch])
         elif ord(ch) < 128:
@@ -220,7 +225,7 @@ def latex_table(grid: Grid, *, label: str | None = None) -> str:
     said = "; ".join(p for p in (grid.legend, pm) if p)
     caption = tex_escape(grid.title + (f". {said[:1].upper()}{said[1:]}" if said else "") + ".")
     spec = "".join("r" if n else "l" for n in grid.numeric)
-    lines = ["% psg-eval table; needs \\usepackage{booktabs}", *(f"% {n}" for n in grid.notes),
+    lines = ["% psg-eval table; needs \\usepackage{booktabs}", *(f"% {tex_comment(n)}" for n in grid.notes),
              r"\begin{table}[t]", r"\centering", r"\small", rf"\caption{{{caption}}}"]
     if label:
         lines.append(rf"\label{{{tex_escape(label)}}}")
@@ -234,3 +239,39 @@ def latex_table(grid: Grid, *, label: str | None = None) -> str:
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
     return "\n".join(lines)
 
+
+
+# -- escaping per output format (every text of a results file is untrusted, docs/SECURITY.md) -----
+_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+_BREAKS = "\t\n\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+
+
+def _visible(m: re.Match[str]) -> str:
+    ch = m.group()
+    if ch in _BREAKS:
+        return " "
+    return f"\\x{ord(ch):02x}" if ord(ch) < 256 else f"\\u{ord(ch):04x}"
+
+
+def plain_text(text: str) -> str:
+    r"""``text`` on one line with nothing a terminal acts on: line breaks and tabs become spaces, every
+    other control character (the ESC of escape sequences, bidirectional overrides) shows as
+    ``\xNN`` / ``\uNNNN``. The text renderer and both paper formats apply it first.
+    """
+    return _CONTROL.sub(_visible, str(text))
+
+
+_MD_CHARS = {"\\": "\\\\", "`": "\\`", "*": "\\*", "_": "\\_", "|": "\\|", "~": "\\~", "<": "&lt;", ">": "&gt;",
+             "&": "&amp;"}
+
+
+def md_escape(text: str) -> str:
+    """``text`` as literal Markdown (GitHub, pandoc): on one line, no emphasis, code, link, table cell
+    break or HTML (``<`` ``>`` ``&`` as entities).
+    """
+    return "".join(_MD_CHARS.get(ch, ch) for ch in plain_text(text)).replace("](", "]\\(")  # no inline link
+
+
+def tex_comment(text: str) -> str:
+    """``text`` for a LaTeX ``%`` comment line: on one line (a line break would end the comment)."""
+    return plain_text(text)

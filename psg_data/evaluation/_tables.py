@@ -18,6 +18,7 @@ from typing import Any
 
 from psg_data.errors import EvaluationError
 from psg_data.evaluation._results import ROLES, EvalResults, ResultRow, ResultTable
+from psg_data.evaluation._table_formats import plain_text
 
 __all__ = ["render_table", "format_table", "format_results", "print_results", "format_compare", "cell_text",
            "best_marks", "ordered_rows", "format_as", "COMPARE_FORMATS", "plus_minus"]
@@ -58,9 +59,9 @@ def _headers(table: ResultTable) -> list[str]:
     first = {ks[0] for _, ks in table.groups if ks}
     out = []
     for m in table.metrics:
-        label = f"{m.label} {_ARROW.get(m.better, '')}".strip()
+        label = plain_text(f"{m.label} {_ARROW.get(m.better, '')}".strip())
         if m.key in group_of:
-            label = (f"{group_of[m.key]}\n" if m.key in first else "\n") + label
+            label = (f"{plain_text(group_of[m.key])}\n" if m.key in first else "\n") + label
         out.append(label)
     return out
 
@@ -93,7 +94,7 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
     from rich.table import Table
     from rich.text import Text
 
-    t = Table(title=Text(table.title) if show_title else None, box=box.SIMPLE_HEAD, title_justify="left",
+    t = Table(title=Text(plain_text(table.title)) if show_title else None, box=box.SIMPLE_HEAD, title_justify="left",
               show_edge=False, pad_edge=False)
     if run is not None:
         t.add_column("run")
@@ -102,9 +103,9 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
     for h in _headers(table):
         t.add_column(Text(h), justify="right", no_wrap=True)
     if table.primary is not None:
-        t.add_column(f"% of ceiling\n({table.metric(table.primary).label})", justify="right")
+        t.add_column(Text(f"% of ceiling\n({plain_text(table.metric(table.primary).label)})"), justify="right")
     for c in table.count_columns:
-        t.add_column(c, justify="right")
+        t.add_column(Text(plain_text(c)), justify="right")
     rows = ordered_rows(table.rows)
     marks = best_marks(table, rows)
     for i, r in enumerate(rows):
@@ -118,7 +119,7 @@ def render_table(table: ResultTable, *, run: str | None = None, show_title: bool
                          else f"{r.pct_of_ceiling:.0f} %")
         cells += [str(r.counts.get(c, "-")) for c in table.count_columns]
         last_ref = r.role != "method" and (i + 1 == len(rows) or rows[i + 1].role == "method")
-        t.add_row(*(Text(c) for c in cells), end_section=last_ref)
+        t.add_row(*(Text(plain_text(c)) for c in cells), end_section=last_ref)
     return t
 
 
@@ -139,9 +140,9 @@ def format_table(table: ResultTable, *, width: int | None = WIDE, notes: bool = 
     con = _console(buf, width, True)
     con.print(render_table(table, show_title=False))
     text = buf.getvalue().rstrip("\n")
-    lines = [table.title, *(ln.rstrip() for ln in text.splitlines())]
+    lines = [plain_text(table.title), *(ln.rstrip() for ln in text.splitlines())]
     if notes:
-        lines += table.notes
+        lines += [plain_text(n) for n in table.notes]
     return "\n".join(lines)
 
 
@@ -164,10 +165,10 @@ def print_results(results: EvalResults, *, file: Any = None, fmt: str = "text") 
     for k, t in enumerate(results.tables):
         if k:
             con.print()
-        con.print(t.title, markup=False, style="bold" if is_tty else None, overflow="ignore", crop=False)
+        con.print(plain_text(t.title), markup=False, style="bold" if is_tty else None, overflow="ignore", crop=False)
         con.print(render_table(t, show_title=False))
         for line in t.notes:
-            con.print(line, markup=False, style="dim" if is_tty else None, overflow="ignore", crop=False)
+            con.print(plain_text(line), markup=False, style="dim" if is_tty else None, overflow="ignore", crop=False)
 
 
 def format_as(tables: Sequence[ResultTable], fmt: str) -> str:
@@ -248,10 +249,10 @@ def _compare_text(task: str, runs: _Runs, width: int | None) -> str:
             cells = [run, r.method, "" if r.role == "method" else r.role, str(res.config.get("setting_text", "-")),
                      *[cell_text(r.values.get(m.key), m.scale, m.digits, table.spread) for m in table.metrics],
                      _interval_text(r, table.spread)]
-            grid.add_row(*(Text(c) for c in cells))
+            grid.add_row(*(Text(plain_text(c)) for c in cells))
     buf = io.StringIO()
     _console(buf, width, True).print(grid)
-    return "\n".join([merged.title, *(ln.rstrip() for ln in buf.getvalue().rstrip("\n").splitlines())])
+    return "\n".join([plain_text(merged.title), *(ln.rstrip() for ln in buf.getvalue().rstrip("\n").splitlines())])
 
 
 def _compare_paper(task: str, runs: _Runs, fmt: str) -> str:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import zlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,6 +32,7 @@ import numpy as np
 
 from psg_data.errors import GraphError, PsgDataError
 from psg_data.graph._fit import fresh_estimator
+from psg_data.graph._graph_check import GRAPH_FORMAT, GRAPH_VERSION, read_graph_file, unpack_mask
 from psg_data.graph._layout import SceneLayout
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -38,8 +40,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["GRAPH_FORMAT", "GRAPH_VERSION", "save_graph", "load_graph"]
 
-GRAPH_FORMAT = "psg-predictive-graph"
-GRAPH_VERSION = 1
 _NEW_EDGE = ("\x00new-object", "\x00new-receptacle")
 _CHECK_AFTER_S = (0.0, 3600.0, 7 * 86400.0)
 """Times after each filter's last observation at which a restored filter must predict identically."""
@@ -94,9 +94,6 @@ def _pack(mask: Any) -> str:
     return base64.b64encode(zlib.compress(np.packbits(np.asarray(mask, bool).ravel()).tobytes())).decode("ascii")
 
 
-def _unpack(text: str, shape: tuple[int, int]) -> Any:
-    bits = np.frombuffer(zlib.decompress(base64.b64decode(text)), np.uint8)
-    return np.unpackbits(bits)[: shape[0] * shape[1]].reshape(shape).astype(bool)
 
 
 def _grid_dict(g: PredictiveGraph) -> dict[str, Any]:
@@ -190,10 +187,28 @@ def _grid(d: dict[str, Any]) -> Any:
     from psg_data.maps._grid import OccupancyGrid
 
     shape = (int(a["shape"][0]), int(a["shape"][1]))
-    return OccupancyGrid(_unpack(a["static_obstacle"], shape), np.asarray(a["origin_m"], np.float64),
-                         float(a["resolution_m"]), float(a["robot_radius_m"]),
-                         {k: _unpack(v, shape) for k, v in a["door_cells"].items()},
-                         {k: _unpack(v, shape) for k, v in a["receptacle_cells"].items()}, str(a["source"]))
+    w = "grid.arrays."
+    doors = {k: unpack_mask(v, shape, f"{w}door_cells.{k}") for k, v in a["door_cells"].items()}
+    recs = {k: unpack_mask(v, shape, f"{w}receptacle_cells.{k}") for k, v in a["receptacle_cells"].items()}
+    return OccupancyGrid(unpack_mask(a["static_obstacle"], shape, w + "static_obstacle"),
+                         np.asarray(a["origin_m"], np.float64), float(a["resolution_m"]), float(a["robot_radius_m"]),
+                         doors, recs, str(a["source"]))
+
+
+_PROBE_ERRORS = (PsgDataError, KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError,
+                 ZeroDivisionError, FloatingPointError)
+
+
+def _probe(f: Any, what: str) -> Any:
+    """``f`` after one prediction at its last time and a week later (a state it cannot predict from is refused now)."""
+    last = f.last_t_s if f.last_t_s is not None and math.isfinite(f.last_t_s) else 0.0
+    try:
+        v = np.asarray(f.predict(np.asarray([last, last + _CHECK_AFTER_S[-1]], np.float64)), np.float64)
+    except _PROBE_ERRORS as exc:
+        raise GraphError(f"{what}: the restored filter cannot predict ({type(exc).__name__}: {exc})") from None
+    if v.shape != (2,):
+        raise GraphError(f"{what}: the restored filter predicts shape {v.shape} for 2 times")
+    return f
 
 
 def load_graph(path: str | Path, *, estimator: Any = None, door_estimator: Any = None) -> PredictiveGraph:
@@ -207,21 +222,13 @@ def load_graph(path: str | Path, *, estimator: Any = None, door_estimator: Any =
     from psg_data.graph._graph import PredictiveGraph
 
     path = Path(path)
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise GraphError(f"{path}: cannot read a predictive graph ({type(exc).__name__}: {exc})") from None
-    if not isinstance(d, dict) or d.get("format") != GRAPH_FORMAT:
-        got = d.get("format") if isinstance(d, dict) else type(d).__name__
-        raise GraphError(f"{path}: format: expected {GRAPH_FORMAT!r}, got {got!r}")
-    if not isinstance(d.get("version"), int) or d["version"] > GRAPH_VERSION:
-        raise GraphError(f"{path}: version: {d.get('version')!r}, this psg-data reads up to {GRAPH_VERSION}; "
-                         "upgrade psg-data")
+    d = read_graph_file(path)
     try:
         layout = SceneLayout.from_dict(d["layout"])
         est = _estimator(d["estimator"], estimator, path, "estimator")
         dest = _estimator(d["door_estimator"], door_estimator, path, "door estimator")
-        filters = {(e[0], e[1]): est.filter_from_state(s) for e, s in zip(d["edges"], d["filters"])}
+        filters = {(e[0], e[1]): _probe(est.filter_from_state(s), f"filters[{i}]")
+                   for i, (e, s) in enumerate(zip(d["edges"], d["filters"]))}
         door_filters, kinds = {}, {}
         for door, v in d["doors"].items():
             if v["kind"] == "prior":
@@ -230,12 +237,13 @@ def load_graph(path: str | Path, *, estimator: Any = None, door_estimator: Any =
                     f._last_t = float(v["last_t_s"])
                 door_filters[door], kinds[door] = f, "prior"
             else:
-                door_filters[door], kinds[door] = dest.filter_from_state(v["state"]), "estimator"
+                door_filters[door] = _probe(dest.filter_from_state(v["state"]), f"doors.{door}.state")
+                kinds[door] = "estimator"
         g = PredictiveGraph(layout, filters, door_filters, estimator=est, door_estimator=dest, door_kinds=kinds,
                             grid=_grid(d["grid"]), grid_options=d["grid"].get("options"), info=d.get("info") or {})
-    except GraphError:
-        raise
-    except (PsgDataError, KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except GraphError as exc:
+        raise GraphError(f"{path}: malformed predictive graph: {exc}") from None
+    except _PROBE_ERRORS as exc:
         raise GraphError(f"{path}: malformed predictive graph ({type(exc).__name__}: {exc})") from None
     g.new_edge_state = d.get("new_edge")
     return g

@@ -10,7 +10,13 @@ import numpy as np
 
 from psg_data.errors import GraphError
 
-__all__ = ["TimeLike", "to_seconds"]
+__all__ = ["TimeLike", "to_seconds", "FIRST_S", "LAST_S"]
+
+_UTC = dt.timezone.utc
+FIRST_S = dt.datetime(1, 1, 2, tzinfo=_UTC).timestamp()
+"""Earliest time a graph is asked about (0001-01-02 UTC): every local time of it is a valid ``datetime``."""
+LAST_S = dt.datetime(9999, 12, 30, tzinfo=_UTC).timestamp()
+"""Latest time a graph is asked about (9999-12-30 UTC), likewise."""
 
 TimeLike = Any
 """Unix seconds (UTC, int or float), a ``datetime`` with a zone (``pandas.Timestamp`` too), a
@@ -22,8 +28,22 @@ def to_seconds(t: TimeLike, timezone: str) -> float:
     """Unix seconds (UTC) of ``t`` (see :data:`TimeLike`); ``timezone`` (IANA) reads strings without an offset.
 
     Raises:
-        GraphError: a naive ``datetime``, an unreadable string, a non-finite number or another type.
+        GraphError: a naive ``datetime``, an unreadable string, a non-finite number, a time outside
+            :data:`FIRST_S` .. :data:`LAST_S` (years 1 to 9999) or another type.
     """
+    try:
+        v = _seconds(t, timezone)
+    except (OverflowError, ValueError) as exc:
+        if isinstance(exc, GraphError):
+            raise
+        v = math.inf
+    if not FIRST_S <= v <= LAST_S:
+        raise GraphError(f"time {str(t)[:40]!r}: outside the years 1 to 9999; expected a time from "
+                         "0001-01-02 to 9999-12-30 (UTC)")
+    return v
+
+
+def _seconds(t: TimeLike, timezone: str) -> float:
     if isinstance(t, (bool, np.bool_)):
         raise GraphError(f"time {t!r}: expected seconds, a datetime with a zone or an ISO 8601 string")
     if isinstance(t, (int, float, np.integer, np.floating)):
@@ -32,7 +52,10 @@ def to_seconds(t: TimeLike, timezone: str) -> float:
             raise GraphError(f"time {t!r}: expected a finite number of seconds since the epoch (UTC)")
         return v
     if isinstance(t, np.datetime64):
-        return float(t.astype("datetime64[ns]").astype(np.int64)) / 1e9
+        if np.isnat(t):
+            raise GraphError(f"time {t!r}: expected a date and time, got NaT")
+        d = t.astype("datetime64[us]").astype(object)  # a datetime for years 1 to 9999, else an int
+        return d.replace(tzinfo=_UTC).timestamp() if isinstance(d, dt.datetime) else math.inf
     if isinstance(t, str):
         return _from_string(t, timezone)
     if isinstance(t, dt.datetime):

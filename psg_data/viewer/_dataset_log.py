@@ -154,8 +154,10 @@ def _door_colours(states: dict[str, str]) -> Any:
 
 
 def _ground_truth(ds: Any) -> Any:
-    """The schedule's ground-truth label grid, or None for a dataset without a schedule."""
-    if not ds.has_table("schedule"):
+    """The schedule's ground-truth label grid, or None for a dataset without a schedule (no table, or no
+    rows: every converted recording), objects or receptacles.
+    """
+    if not all(ds.has_table(t) for t in ("schedule", "objects", "receptacles")) or not ds.table("schedule").num_rows:
         return None
     from psg_data.labeling import ground_truth
 

@@ -20,7 +20,7 @@ from urllib.parse import quote
 
 from psg_data.errors import PsgDataError
 
-__all__ = ["WebViewer", "DEFAULT_WEB_PORT", "DEFAULT_BIND"]
+__all__ = ["WebViewer", "DEFAULT_WEB_PORT", "DEFAULT_BIND", "url_host"]
 
 DEFAULT_WEB_PORT = 9090
 """Port of the web viewer (Rerun's default)."""
@@ -45,6 +45,11 @@ def _check_port(bind: str, port: int, option: str) -> None:
                                f"port with {option}") from None
 
 
+def url_host(host: str) -> str:
+    """``host`` as the host part of a URL (RFC 3986): an IPv6 address in brackets, anything else as it is."""
+    return f"[{host.replace('%', '%25')}]" if ":" in host and not host.startswith("[") else host
+
+
 class WebViewer:
     """A Rerun web viewer (HTTP) and gRPC server on ``bind``, as a child process.
 
@@ -61,18 +66,23 @@ class WebViewer:
 
     @property
     def host(self) -> str:
-        """The address a browser on this machine uses."""
-        return "127.0.0.1" if self.bind in ("0.0.0.0", "::", "") else self.bind
+        """The address a browser on this machine uses (every interface: the loopback address of that family)."""
+        return {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(self.bind, self.bind)
+
+    @property
+    def url_host(self) -> str:
+        """:attr:`host` as a URL writes it: an IPv6 address in brackets (``[::1]``)."""
+        return url_host(self.host)
 
     @property
     def grpc_url(self) -> str:
         """What the recording connects to."""
-        return f"rerun+http://{self.host}:{self.grpc_port}/proxy"
+        return f"rerun+http://{self.url_host}:{self.grpc_port}/proxy"
 
     @property
     def url(self) -> str:
         """What to open in a browser: the viewer, connected to this server's recording."""
-        return f"http://{self.host}:{self.port}/?url={quote(self.grpc_url, safe='')}"
+        return f"http://{self.url_host}:{self.port}/?url={quote(self.grpc_url, safe='')}"
 
     def start(self, timeout_s: float = 30.0) -> None:
         """Start the server and wait until both ports accept connections.

@@ -185,20 +185,27 @@ def check_output(out: str | Path, *, overwrite: bool, kind: str = "dataset",
                                 f"folder; choose another output path (or move it away yourself)")
 
 
-FILE_SIGNATURES = {"rrd": (b"RRF", "a Rerun recording (.rrd)")}
-"""Single-file outputs: kind -> (leading bytes of every file of that kind psg-data writes, what it is)."""
+FILE_SIGNATURES: dict[str, tuple[bytes | tuple[bytes, ...], str]] = {
+    "rrd": (b"RRF", "a Rerun recording (.rrd)"),
+    "png": (b"\x89PNG\r\n\x1a\n", "a PNG image"),
+    "graph": (b'{"format": "psg-predictive-graph"', "a predictive graph saved by psg-data (.json)"),
+    "graph-csv": ((b"object_id,receptacle_id,", b"rank,receptacle_id,"), "a table written by psg-data graph --csv"),
+}
+"""Single-file outputs: kind -> (leading bytes of every file of that kind psg-data writes (or a tuple of
+such starts), what it is)."""
 
 
 def check_file_output(out: str | Path, *, overwrite: bool, kind: str, inputs: Iterable[str | Path | None] = ()) -> None:
-    """The rule for a single-file output (``psg-data view --save``, ``psg-eval --rerun``): never an
-    input or inside one; ``overwrite`` replaces only a file of that kind (its signature), and
-    ``OUT.partial``, the file written first, must not exist.
+    """The rule for a single-file output (``psg-data view --save``, ``psg-eval --rerun``, ``psg-data graph
+    --csv / --png / --rerun / --save-graph``): never an input or inside one; ``overwrite`` replaces only
+    a file of that kind (its signature), and ``OUT.partial``, the file written first, must not exist.
 
     Raises:
         UnsafeOutputError, DatasetExistsError: as :func:`check_output`.
     """
     out = Path(out)
     magic, what = FILE_SIGNATURES[kind]
+    magics = magic if isinstance(magic, tuple) else (magic,)
     inputs = list(inputs)
     check_not_input(out, inputs)
     partial = out.with_name(out.name + ".partial")
@@ -211,9 +218,9 @@ def check_file_output(out: str | Path, *, overwrite: bool, kind: str, inputs: It
     if out.is_symlink() or not out.is_file():
         raise UnsafeOutputError(f"{out}: is not a file; --overwrite replaces only {what}")
     with open(out, "rb") as fh:
-        head = fh.read(len(magic))
-    if head != magic:
-        raise UnsafeOutputError(f"{out}: is not {what} (it starts with {head.hex() or 'nothing'}); --overwrite "
+        head = fh.read(max(len(m) for m in magics))
+    if not any(head.startswith(m) for m in magics):
+        raise UnsafeOutputError(f"{out}: is not {what} (it starts with {head[:8].hex() or 'nothing'}); --overwrite "
                                 f"replaces only {what}; choose another path (or move it away yourself)")
 
 

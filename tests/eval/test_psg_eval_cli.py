@@ -276,5 +276,5 @@ def test_doors_task_rejects_other_inputs(tmp_path: Path) -> None:
     res = run("--task", "doors", "--dataset", "persistence-benchmark", "--out", str(tmp_path / "y"), "--quiet")
     assert res.exit_code == 1 and "needs a dataset" in res.stderr
     res = run("--task", "doors", "--labels", "psychic", "--out", str(tmp_path / "z"), "--quiet")
-    assert res.exit_code == 1 and "psychic" in res.stderr
+    assert res.exit_code == 2 and "psychic" in res.stderr  # a malformed label source is a usage error
     assert not any((tmp_path / d).exists() for d in "xyz")
