@@ -25,7 +25,9 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None, overwrite:
         p = demo()
     if not p.is_dir():
         raise PsgDataError(f"{path}: expected a psg-dataset folder, 'demo' or a saved graph (.json)")
-    g = PredictiveGraph.from_dataset(p, estimator, labels=labels)
+    from psg_data.cli._graph_cache import cached_fit
+
+    g = cached_fit(p, estimator, labels)  # a second call with the same inputs loads the fit
     if save is not None:
         if save.exists() and not overwrite:
             raise PsgDataError(f"{save}: exists; pass --overwrite to replace it")
