@@ -498,8 +498,8 @@ def fit_interval_mixtures(problems: Sequence[tuple[ArrayLike, ArrayLike, ArrayLi
         inits = [p.starts(family, k, n_restarts) for p in todo]
         owner = np.repeat(np.arange(len(todo)), [len(x) for x in inits])
         runs = [todo[i] for i in owner.tolist()]
-        rows = _Rows(*(np.concatenate([getattr(p, f) for p in runs]) for f in ("lo", "hi", "w")),
-                     np.array([p.lo.size for p in runs], dtype=np.intp))
+        rows = _Rows(np.concatenate([p.lo for p in runs]), np.concatenate([p.hi for p in runs]),
+                     np.concatenate([p.w for p in runs]), np.array([p.lo.size for p in runs], dtype=np.intp))
         corr = np.array([p.corr for p in runs])
         pi0, p10, p20 = (np.stack([x[i] for run in inits for x in run]) for i in range(3))
         pis, p1s, p2s, traces = _em_batch(family, rows, corr, pi0, p10, p20, sigma_min, max_iter, tol)
