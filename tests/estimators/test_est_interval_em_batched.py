@@ -49,7 +49,7 @@ def problems(draw: Callable[..., Any]) -> list[tuple[np.ndarray, np.ndarray, np.
     return [_problem(draw) for _ in range(draw(st.integers(1, 4)))]
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(probs=problems(), family=st.sampled_from(["lognormal", "lognormal", "exponential", "weibull"]),
        seed=st.integers(0, 50))
 def test_batched_fits_equal_the_reference_fits_one_by_one(probs: list[Any], family: str, seed: int) -> None:
