@@ -2,10 +2,12 @@
 
 Each ``bench/bench_*.py`` script is run in its own process with the same flags; their tables are
 printed in turn. Record notable results in BENCHMARKS.md with the machine and date.
+``--help`` prints this and runs nothing.
 """
 
 from __future__ import annotations
 
+import argparse
 import platform
 import subprocess
 import sys
@@ -15,7 +17,12 @@ from pathlib import Path
 
 def main() -> int:
     here = Path(__file__).resolve().parent
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="every script's quick form")
+    _, rest = ap.parse_known_args()  # other --flags go to every script as they are
     flags = [a for a in sys.argv[1:] if a.startswith("--")]
+    if rest != [a for a in rest if a.startswith("--")]:
+        ap.error(f"unexpected arguments: {' '.join(a for a in rest if not a.startswith('--'))}")
     print(f"# psg-data benchmarks, {time.strftime('%Y-%m-%d %H:%M')} on {platform.node()} "
           f"({platform.machine()}, {platform.processor() or 'cpu'}, Python {platform.python_version()})")
     failed = 0

@@ -4,7 +4,9 @@
 every queued task to run to the end (a Ctrl-C of ``psg-eval -j -1`` took 17-23 s), and each worker
 gets the terminal's SIGINT too and prints its own traceback. Here the workers ignore SIGINT (the
 parent handles it), and when the ``with`` body raises, queued tasks are cancelled and the workers
-terminated before the exception goes on.
+terminated before the exception goes on. Multiprocessing's resource tracker (a process started with
+the first pool, which otherwise ends only after the command has exited, left behind in its process
+group) is stopped and reaped at exit, after the queues' semaphores are released.
 """
 
 from __future__ import annotations
@@ -34,6 +36,30 @@ def _init(initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> 
 
 def _noop() -> None:
     return None
+
+
+def _stop_resource_tracker() -> None:
+    from multiprocessing import resource_tracker
+
+    stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # Python >= 3.8 (private)
+    if stop is not None:
+        stop()
+
+
+_TRACKER_STOP: list[Any] = []
+
+
+def _stop_tracker_at_exit() -> None:
+    """Stop and reap the resource tracker when the command exits, after multiprocessing's finalizers.
+
+    A finalizer of negative priority runs in multiprocessing's exit handler after those of priority
+    0 (the semaphores' unlink and unregister, which need the tracker) and after the children are
+    joined; without it the tracker exits only once the parent is gone and is left to the init process.
+    """
+    if not _TRACKER_STOP:
+        from multiprocessing import util
+
+        _TRACKER_STOP.append(util.Finalize(None, _stop_resource_tracker, exitpriority=-100))
 
 
 def _start_all(pool: ProcessPoolExecutor, n: int) -> None:
@@ -70,6 +96,7 @@ def process_pool(max_workers: int, initializer: Callable[..., Any] | None = None
         initializer: run once in each worker (after SIGINT is set to be ignored there).
         initargs: arguments of ``initializer``.
     """
+    _stop_tracker_at_exit()
     pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init, initargs=(initializer, tuple(initargs)))
     try:

@@ -66,7 +66,9 @@ def _graph(path: str, estimator: str, labels: str, save: Path | None):  # type: 
         p = demo()
     if not p.is_dir():
         raise PsgDataError(f"{path}: expected a psg-dataset folder, 'demo' or a saved graph (.json)")
-    g = PredictiveGraph.from_dataset(p, estimator, labels=labels)
+    from psg_data.cli._graph_cache import cached_fit
+
+    g = cached_fit(p, estimator, labels)  # a second call with the same inputs loads the fit
     if save is not None:
         g.save(save)
     return g

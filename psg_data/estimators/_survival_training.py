@@ -12,6 +12,7 @@
    T in (t_last - a, t_next - a]; the last run of a stream is right-censored, T > t_last - a.
    Intervals span whatever gap lies between t_last and t_next (nights, unobserved stretches).
 3. **Mixtures**: per edge and state, :func:`~psg_data.estimators._interval_em.fit_interval_mixture`
+   (all of a training's fits batched by :func:`~psg_data.estimators._interval_em.fit_interval_mixtures`)
    on the edge's own intervals (weight 1 each) plus a pool with ``pool_weight`` in all: the same
    state's intervals of the object's other edges when they hold at least ``MIN_POOL_ROWS``
    completed runs, else of every edge. An edge with many runs is barely moved by the pool; one
@@ -26,8 +27,9 @@ estimator's ``fit_summary_``.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from psg_data.errors import EstimatorError
 from psg_data.estimators._base import EdgeKey, EdgeStream
 from psg_data.estimators._hmm import HmmFit, fit_error_hmm
-from psg_data.estimators._interval_em import fit_interval_mixture
+from psg_data.estimators._interval_em import fit_interval_mixtures
 from psg_data.estimators._segmentation import segment_labels, segment_reference, segment_stream
 from psg_data.estimators._survival import SurvivalMixture
 
@@ -226,19 +228,31 @@ def _cat_pool(parts: list[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> _
 
 
 class _Fitter:
+    """Collects the mixture fits of a training and runs them as one batched EM (:func:`fit_interval_mixtures`).
+
+    :meth:`fit` and :meth:`pool_fit` return a thunk; after :meth:`run` it gives the fitted mixture.
+    """
+
     def __init__(self, family: str, max_components: int, sigma_min: float, seed: int) -> None:
         self.family, self.max_components, self.sigma_min, self.seed = family, max_components, sigma_min, seed
+        self._jobs: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int]] = []
+        self._fits: list[SurvivalMixture] = []
 
     def fit(self, lo: NDArray[np.float64], hi: NDArray[np.float64], w: NDArray[np.float64],
-            k_max: int) -> SurvivalMixture:
-        return fit_interval_mixture(lo, hi, family=self.family, weights=w, max_components=max(1, k_max),
-                                    sigma_min=self.sigma_min, random_state=self.seed).mixture
+            k_max: int) -> Callable[[], SurvivalMixture]:
+        i = len(self._jobs)
+        self._jobs.append((lo, hi, w, max(1, k_max)))
+        return lambda: self._fits[i]
 
-    def pool_fit(self, pool: _Pool) -> SurvivalMixture | None:
+    def pool_fit(self, pool: _Pool) -> Callable[[], SurvivalMixture] | None:
         if pool.n_complete == 0:
             return None
         k = min(self.max_components, max(1, math.ceil(pool.lo.size / 3)))
         return self.fit(pool.lo, pool.hi, np.ones(pool.lo.size), k)
+
+    def run(self) -> None:
+        fits = fit_interval_mixtures(self._jobs, family=self.family, sigma_min=self.sigma_min, random_state=self.seed)
+        self._fits = [f.mixture for f in fits]
 
 
 def _fixed_long(longest_s: float, family: str) -> SurvivalMixture:
@@ -250,59 +264,89 @@ def _fixed_long(longest_s: float, family: str) -> SurvivalMixture:
     return SurvivalMixture.lognormal_median(median, 1.0)
 
 
+Thunk = Callable[[], SurvivalMixture]
+
+
+def _either(first: Thunk | None, second: Thunk) -> SurvivalMixture:
+    return first() if first is not None else second()
+
+
+def _value(m: SurvivalMixture) -> SurvivalMixture:
+    return m
+
+
+class _Plan:
+    """The pools and pool fits of a training, and the fit (a thunk) chosen for each edge and state."""
+
+    def __init__(self, data: TrainingRuns, fitter: _Fitter, family: str, max_components: int,
+                 pool_weight: float) -> None:
+        self.fitter, self.family, self.max_components, self.pool_weight = fitter, family, max_components, pool_weight
+        states = ("present", "absent")
+        self.glob = {st: _cat_pool([getattr(r, st) for r in data.runs.values()]) for st in states}
+        by_obj: dict[str, list[EdgeRuns]] = {}
+        for r in data.runs.values():
+            by_obj.setdefault(str(r.edge[0]), []).append(r)
+        self.obj_pool = {(o, st): _cat_pool([getattr(r, st) for r in rs]) for o, rs in by_obj.items() for st in states}
+        default = functools.partial(SurvivalMixture.lognormal_median, _DEFAULT_MEDIAN_S)
+        self.fallback = {st: functools.partial(_either, fitter.pool_fit(self.glob[st]), default) for st in states}
+        self.obj_fit: dict[tuple[str, str], Thunk | None] = {}
+
+    def state_fit(self, e: EdgeKey, st: str, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> tuple[Thunk, str]:
+        """The fit of edge ``e``'s runs in state ``st`` (module docstring, step 3) and where it comes from."""
+        op = self.obj_pool[(str(e[0]), st)]
+        pool, pool_name = (op, "object") if op.n_complete >= MIN_POOL_ROWS else (self.glob[st], "all edges")
+        if lo.size == 0:
+            got = None
+            if pool_name == "object":
+                key = (str(e[0]), st)
+                if key not in self.obj_fit:
+                    self.obj_fit[key] = self.fitter.pool_fit(op)
+                got = self.obj_fit[key]
+            return functools.partial(_either, got, self.fallback[st]), f"state never entered: {pool_name} pool"
+        if not np.any(np.isfinite(hi)):
+            return (functools.partial(_value, _fixed_long(float(np.max(lo)), self.family)),
+                    "state never ended: fixed long prior (median 4 x longest run, >= 1 day)")
+        w = np.ones(lo.size)
+        k_max = min(self.max_components, max(1, math.ceil(lo.size / 3)))
+        if pool.lo.size and self.pool_weight > 0:
+            lo = np.concatenate([lo, pool.lo])
+            hi = np.concatenate([hi, pool.hi])
+            w = np.concatenate([w, np.full(pool.lo.size, self.pool_weight / pool.lo.size)])
+        return self.fitter.fit(lo, hi, w, k_max), f"own runs + {pool_name} pool (weight {self.pool_weight:g})"
+
+
 def fit_edge_survivals(data: TrainingRuns, *, family: str = "lognormal", max_components: int = 5,
                        pool_weight: float = 2.0, sigma_min: float = 0.05, seed: int = 0
                        ) -> tuple[dict[EdgeKey, tuple[SurvivalMixture, SurvivalMixture]],
                                   tuple[SurvivalMixture, SurvivalMixture], dict[EdgeKey, dict[str, Any]]]:
-    """Per-edge (persistence, emergence) mixtures, defaults for unseen edges and a per-edge report."""
+    """Per-edge (persistence, emergence) mixtures, defaults for unseen edges and a per-edge report.
+
+    Every mixture of the training is fitted in one batched EM: the edges are walked once to choose
+    each fit (a thunk), then the batch runs, then the thunks are read.
+    """
     fitter = _Fitter(family, int(max_components), float(sigma_min), int(seed))
-    states = ("present", "absent")
-    glob = {st: _cat_pool([getattr(r, st) for r in data.runs.values()]) for st in states}
-    by_obj: dict[str, list[EdgeRuns]] = {}
-    for r in data.runs.values():
-        by_obj.setdefault(str(r.edge[0]), []).append(r)
-    obj_pool = {(o, st): _cat_pool([getattr(r, st) for r in rs]) for o, rs in by_obj.items() for st in states}
-    glob_fit = {st: fitter.pool_fit(glob[st]) for st in states}
-    fallback = {st: glob_fit[st] or SurvivalMixture.lognormal_median(_DEFAULT_MEDIAN_S) for st in states}
-    obj_fit: dict[tuple[str, str], SurvivalMixture | None] = {}
-    out: dict[EdgeKey, tuple[SurvivalMixture, SurvivalMixture]] = {}
-    report: dict[EdgeKey, dict[str, Any]] = {}
+    plan = _Plan(data, fitter, family, int(max_components), float(pool_weight))
+    pending: dict[EdgeKey, tuple[dict[str, Any], list[dict[str, Any]], list[Thunk]]] = {}
     for e, r in data.runs.items():
         info: dict[str, Any] = {"n_obs": r.n_obs, "span_h": round(r.span_s / 3600.0, 3),
                                 "frac_present": round(r.frac_present, 4)}
-        pair = []
+        parts, pair = [], []
         for st, tag in (("present", "per"), ("absent", "emg")):
             lo, hi = getattr(r, st)
             complete = int(np.sum(np.isfinite(hi)))
-            info[f"{st}_runs"] = int(lo.size)
-            info[f"{st}_censored"] = int(lo.size - complete)
-            op = obj_pool[(str(e[0]), st)]
-            pool, pool_name = (op, "object") if op.n_complete >= MIN_POOL_ROWS else (glob[st], "all edges")
-            if lo.size == 0:
-                key = (str(e[0]), st)
-                if pool_name == "object":
-                    if key not in obj_fit:
-                        obj_fit[key] = fitter.pool_fit(op)
-                    mix = obj_fit[key] or fallback[st]
-                else:
-                    mix = fallback[st]
-                source = f"state never entered: {pool_name} pool"
-            elif complete == 0:
-                mix = _fixed_long(float(np.max(lo)), family)
-                source = "state never ended: fixed long prior (median 4 x longest run, >= 1 day)"
-            else:
-                w = np.ones(lo.size)
-                if pool.lo.size and pool_weight > 0:
-                    lo = np.concatenate([lo, pool.lo])
-                    hi = np.concatenate([hi, pool.hi])
-                    w = np.concatenate([w, np.full(pool.lo.size, pool_weight / pool.lo.size)])
-                k_max = min(int(max_components), max(1, math.ceil(info[f"{st}_runs"] / 3)))
-                mix = fitter.fit(lo, hi, w, k_max)
-                source = f"own runs + {pool_name} pool (weight {pool_weight:g})"
-            info[f"{tag}_source"] = source
-            info[f"{tag}_k"] = mix.n_components
-            info[f"{tag}_median_h"] = round(mixture_median_s(mix) / 3600.0, 3)
+            mix, source = plan.state_fit(e, st, lo, hi)
+            parts.append({f"{st}_runs": int(lo.size), f"{st}_censored": int(lo.size - complete),
+                          f"{tag}_source": source})
             pair.append(mix)
-        out[e] = (pair[0], pair[1])
+        pending[e] = (info, parts, pair)
+    fitter.run()
+    out: dict[EdgeKey, tuple[SurvivalMixture, SurvivalMixture]] = {}
+    report: dict[EdgeKey, dict[str, Any]] = {}
+    for e, (info, parts, pair) in pending.items():
+        out[e] = (pair[0](), pair[1]())
+        for tag, part, m in zip(("per", "emg"), parts, out[e]):
+            info.update(part)
+            info[f"{tag}_k"] = m.n_components
+            info[f"{tag}_median_h"] = round(mixture_median_s(m) / 3600.0, 3)
         report[e] = info
-    return out, (fallback["present"], fallback["absent"]), report
+    return out, (plan.fallback["present"](), plan.fallback["absent"]()), report

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
+import pytest
 from click.testing import CliRunner
 
 from psg_data.cli.psg_data_cmd import main
@@ -12,6 +13,11 @@ from psg_data.graph import PredictiveGraph
 from tests.graph.conftest import T0_S
 
 AT = "2023-11-16 07:00"  # site time (UTC), after the training scans of the test dataset
+
+
+@pytest.fixture(autouse=True)
+def _own_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PSG_DATA_CACHE", str(tmp_path / "cache"))  # the command caches its fits there
 
 
 def test_ranking_table_csv_png_and_a_saved_graph(graph_dataset: Path, tmp_path: Path) -> None:
