@@ -238,7 +238,6 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     specs = [parse_estimator_spec(e) for e in (estimators or (DEFAULT_ESTIMATOR,))]
     check_estimators(specs)
     check_task_estimators(specs, task)
-    check_protocol(task, protocol, given=ctx.get_parameter_source("protocol") != click.core.ParameterSource.DEFAULT)
     check_scheduler(scheduler)
     from psg_data.cli._eval_state import check_state_options, is_state_benchmark
 
@@ -256,6 +255,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
 
         raise EvaluationError(f"--protocol {protocol}: a protocol of the real benchmarks (--dataset door-benchmark or "
                               "room-presence-benchmark)")
+    check_protocol(task, protocol, given=ctx.get_parameter_source("protocol") != click.core.ParameterSource.DEFAULT)
     protocol = protocol or "sim"
     _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
     deltas = parse_deltas(delta, task)

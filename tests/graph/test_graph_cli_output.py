@@ -6,21 +6,31 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from psg_data.cli.psg_data_cmd import main
 from tests.graph.test_graph_cli import AT
 
 
+@pytest.fixture(autouse=True)
+def _own_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PSG_DATA_CACHE", str(tmp_path / "cache"))  # the command caches its fits there
+
+
 def _graph(*args: str):  # type: ignore[no-untyped-def]
     return CliRunner().invoke(main, ["graph", *args])
 
 
-def test_quiet_by_default_fit_lines_with_verbose(graph_dataset: Path) -> None:
-    """The fit's INFO lines (settings decided, error rates) only with -v."""
+def test_quiet_by_default_fit_lines_with_verbose(graph_dataset: Path, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """The fit's INFO lines (settings decided, error rates) only with -v (each call in its own cache: a second
+    call on the same inputs would answer from the graph-fit cache without fitting)."""
+    monkeypatch.setenv("PSG_DATA_CACHE", str(tmp_path / "a"))
     r = _graph(str(graph_dataset), "--at", AT, "-e", "fremen")
     assert r.exit_code == 0, r.output
     assert "INFO:" not in r.stderr
+    monkeypatch.setenv("PSG_DATA_CACHE", str(tmp_path / "b"))
     v = _graph(str(graph_dataset), "--at", AT, "-e", "fremen", "-v")
     assert v.exit_code == 0 and "INFO: fremen: n_periods" in v.stderr, v.output
 
