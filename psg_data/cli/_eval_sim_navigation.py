@@ -177,8 +177,7 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     """
     import time
 
-    from psg_data.evaluation._sim_navigation_report import (elapsed_text, plot_scene_sr, readings_text, sim_summary,
-                                                            sim_table_text)
+    from psg_data.evaluation import _sim_navigation_report as rep
 
     proto = sim_protocol(protocol, quick, readings)
     t0 = time.perf_counter()
@@ -186,7 +185,7 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
     records, allrec, outs, root = _all_records(proto, methods, settings, labels, label_seed, jobs, quiet)
     paths = [root / f"scene_{k:02d}" for k in proto.scenes]
     names = list(methods)
-    per_scene, summary = sim_summary(records, names)
+    per_scene, summary = rep.sim_summary(records, names)
     seconds = round(time.perf_counter() - t0, 2)
     config = {"protocol": proto.name, **proto.to_dict(), "labels": labels, "label_seed": label_seed,
               "methods": names, "setting": "adaptive" if proto.adaptive else "predictive",
@@ -195,18 +194,18 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
               "settings": {k: v for k, v in outs[proto.scenes[0]]["settings"].items()}}
     info = provenance({"task": "navigation", "dataset_label": "navigation-benchmark", "dataset": str(root),
                        "seconds": seconds, "jobs": jobs})
-    text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths))
-    text += "\n" + elapsed_text(records, names, roles)
+    text = rep.sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths))
+    text += "\n" + rep.elapsed_text(records, names, roles)
     if proto.adaptive:
         shifts = list(dict.fromkeys(allrec["shift"]))
-        text += "\n" + readings_text(allrec, names, roles, proto.readings(), proto.reading, shifts)
+        text += "\n" + rep.readings_text(allrec, names, roles, proto.readings(), proto.reading, shifts)
     _write(out, records, per_scene, summary, config, roles, info, text)
     if proto.adaptive:
         from psg_data.writers._safe_output import write_atomically
 
         write_atomically(out / "readings.parquet", lambda tmp: allrec.to_parquet(tmp, index=False))
     if not no_plots:
-        plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
+        rep.plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
                       title=f"{proto.name}, labels {labels}: overall SR per scene (scene = house seed)")
         _maps(out, paths[0], proto, outs[proto.scenes[0]], records, names, roles, labels, label_seed)
     if table_format == "text":

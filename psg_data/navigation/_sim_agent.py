@@ -161,7 +161,9 @@ class _Walker:
 
 def _next_target(bel: Mapping[str, float], config: AgentConfig, inspected: Sequence[str], blocked: set[str],
                  cache: PlanningCache, w: _Walker, memory: str, absence: str) -> tuple[str | None, str]:
-    """(the best reachable candidate, "") or (None, the outcome that ends the episode): step 1 of the module docstring."""
+    """(the best reachable candidate, "") or (None, the outcome that ends the episode): step 1 of the module
+    docstring.
+    """
     above = ranked_candidates(bel, config.delta)
     if not above:
         return None, "abort"

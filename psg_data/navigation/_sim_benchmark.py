@@ -80,8 +80,8 @@ from psg_data.navigation._queries import Query, make_queries
 from psg_data.navigation._runner import BUILTIN_METHODS
 from psg_data.navigation._sim_agent import ABSENCE_RULES, AGENT_MEMORIES
 
-__all__ = ["SimProtocol", "SIM_PROTOCOLS", "LAST_MAPS", "run_sim_scene", "run_sim_navigation", "scene_split_ids", "method_filters",
-           "scene_settings"]
+__all__ = ["SimProtocol", "SIM_PROTOCOLS", "LAST_MAPS", "run_sim_scene", "run_sim_navigation", "scene_split_ids",
+           "method_filters", "scene_settings"]
 
 log = logging.getLogger(__name__)
 
@@ -264,7 +264,8 @@ def scene_settings(dataset: Any, name: str, settings: Mapping[str, Any] | None) 
 
 def _fed_filters(graph: Any, q: Query, t_m: float, test: Mapping[EdgeKey, EdgeStream]) -> dict[str, EdgeFilter]:
     """Copies of the object's filters fed the test week up to ``t_m`` (none at the end of the validation week)."""
-    fs: dict[str, EdgeFilter] = copy.deepcopy(graph.filters_of(q.object_id))  # one deepcopy: a shared tracker stays shared
+    fs: dict[str, EdgeFilter] = copy.deepcopy(graph.filters_of(q.object_id))  # one deepcopy: a shared tracker
+    # stays shared
     for r, f in fs.items():
         s = test.get((q.object_id, r))
         if s is not None:
@@ -299,7 +300,9 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
         label_seed: seed of noisy sources and sightings.
         keep: query ids whose trails and beliefs are returned (figures; the protocol's reading).
         all_readings: run every reading of :meth:`SimProtocol.readings` on the same draws (records carry
-            ``last_map``, ``agent_memory``, ``absence``), not only the protocol's.
+            ``last_map``, ``agent_memory``, ``absence``; ``lab`` for the predictive protocol's agent, which
+            skips the receptacles it tried and declares absence when none above delta is left), not only the
+            protocol's.
 
     Returns:
         ``{"records": [...], "queries": [...], "trails": {(label, qid): cells}, "beliefs": {...}}``.
@@ -355,7 +358,8 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
                     ep, method=label, seed=scene, delta=protocol.delta, t_s=q.t_s, t_map_s=t_m,
                     start_x_m=q.start_xy[0], start_y_m=q.start_xy[1], gt_receptacle=q.gt_receptacle,
                     map_receptacle=q.map_receptacle, n_switches=switches, last_map=reading[0],
-                    agent_memory=reading[1] if protocol.adaptive else "lab", absence=reading[2]))
+                    agent_memory=reading[1] if protocol.adaptive else "lab",
+                    absence=reading[2] if protocol.adaptive else "lab"))
                 if q.query_id in keep and reading == protocol.reading:
                     out["trails"][(label, q.query_id)] = ep.trail
                     out["beliefs"][(label, q.query_id)] = ep.beliefs

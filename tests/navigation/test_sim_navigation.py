@@ -369,12 +369,62 @@ def test_cli_refuses_sim_protocols_elsewhere_and_quick_alone() -> None:
     r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
                                   "paper-sim-predictive", "--queries", "10", "--delta", "0.3", "-e", "fremen"])
     assert r.exit_code == 1 and "--queries, --delta with --protocol paper-sim-predictive" in r.output
+    r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
+                                  "paper-sim-predictive", "--agent-memory", "estimator", "-e", "fremen"])
+    assert r.exit_code == 1 and r.output.startswith("error: --agent-memory: only with --task navigation")
+    r = CliRunner().invoke(main, ["--absence", "delta", "--queries-per-scene", "5", "-e", "fremen"])
+    assert r.exit_code == 1 and "--absence, --queries-per-scene: only with" in r.output
+    r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
+                                  "paper-sim-adaptive", "--last-map", "yesterday", "-e", "fremen"])
+    assert r.exit_code == 2 and "yesterday" in r.output
+
+
+def test_sim_protocol_takes_the_reading_options() -> None:
+    from psg_data.cli._eval_sim_navigation import sim_protocol
+
+    p = sim_protocol("paper-sim-adaptive", True, {"agent_memory": "estimator", "absence": None,
+                                                  "last_map": "test-week", "queries_per_scene": 40})
+    assert p.reading == ("test-week", "estimator", "delta") and p.queries_per_scene == 40 and p.scenes == (10, 11)
+    assert sim_protocol("paper-sim-adaptive", False, {}).reading == ("end-of-validation", "visits", "delta")
+
+
+def test_paired_gap_and_the_readings_grid_score_like_the_table() -> None:
+    """Overall SR per query (success, a correct abort, unreachable left out), the gap paired over queries."""
+    import pandas as pd
+
+    from psg_data.evaluation._sim_navigation_report import elapsed_text, paired_gap, readings_text
+
+    rows = []
+    # 6 queries: 4 present reachable, 1 absent, 1 unreachable (left out of both)
+    cats = ["static", "dynamic", "dynamic", "static", "absent", "static"]
+    reach = [True, True, True, True, False, False]
+    wins = {"perpetua_star": [1, 1, 0, 1, 1, 1], "fremen": [1, 0, 0, 0, 0, 0]}
+    for m, w in wins.items():
+        for k in range(6):
+            rows.append({"method": m, "seed": 10, "query_id": k, "category": cats[k], "reachable": reach[k],
+                         "success": bool(w[k]) and cats[k] != "absent", "aborted": cats[k] == "absent" and bool(w[k]),
+                         "path_m": 1.0, "shortest_path_m": 1.0, "t_s": 3600.0 * (k * 20 + 0.5), "t_map_s": 0.0,
+                         "shift": "shift 0.5", "last_map": "end-of-validation", "agent_memory": "visits",
+                         "absence": "delta"})
+    df = pd.DataFrame(rows)
+    g, lo, hi, n = paired_gap(df, "perpetua_star", "fremen")
+    assert n == 5 and g == pytest.approx(100 * (4 - 1) / 5)  # 4 of 5 against 1 of 5; the unreachable one left out
+    assert lo <= g <= hi
+    text = readings_text(df, ["perpetua_star", "fremen"], {}, [("end-of-validation", "visits", "delta")],
+                         ("end-of-validation", "visits", "delta"), ["shift 0.5"])
+    assert "shift 0.5 *" in text and "80.0" in text and "20.0" in text and "+60.0 [" in text
+    assert "100 (1)" in text and "0 (1)" in text  # absent AR of each method on its one absent query
+    el = elapsed_text(df, ["perpetua_star", "fremen"], {})
+    # 0.5, 20.5, 40.5, 60.5, 80.5 h (the unreachable query at 100.5 h left out)
+    assert "0-1 h (1)" in el and "1-6 h (0)" in el and "6-24 h (1)" in el and "24-72 h (2)" in el and "> 72 h (1)" in el
 
 
 @pytest.mark.slow
 def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     """The CI form end to end: builds two houses into an empty cache, runs every reference row and FreMEn."""
     import json
+
+    import pandas as pd
 
     from click.testing import CliRunner
 
@@ -388,6 +438,12 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     assert r.exit_code == 0, r.output
     assert "paper: Ours (Perpetua*) [Privileged]" in r.output and "process_oracle:model=train" in r.output
     assert "headroom (overall SR): process_oracle" in r.output and "adaptation gap" in r.output
+    assert "process_oracle:model=train - fremen" in r.output and "by time since the last map update" in r.output
+    grid = r.output.split("Every reading of the open choices")[1]
+    assert "shift 0.5 *  end-of-validation     visits           delta" in grid and "shift 0 " in grid  # the control
+    assert grid.count("\nshift ") == 12  # 6 readings on the shifted houses and on the shift-0 control
+    allrec = pd.read_parquet(out / "readings.parquet")
+    assert set(allrec["shift"]) == {"shift 0.5", "shift 0"} and len(allrec) == 12 * 12 * 8
     res = json.loads((out / "results.json").read_text())
     rows = {row["method"]: row for row in res["tables"][0]["rows"]}
     assert {"oracle", "process_oracle", "process_oracle:model=train", "fremen", "random_receptacle"} <= set(rows)
