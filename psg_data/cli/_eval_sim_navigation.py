@@ -138,7 +138,7 @@ def _run_houses(proto: Any, methods: dict[str, str], settings: dict[str, dict[st
             prog.update(0)
 
         records, outs = run_sim_navigation(paths, methods, settings, proto, labels=labels, label_seed=label_seed,
-                                           executor=executor, progress=progress, all_readings=proto.adaptive)
+                                           executor=executor, progress=progress, readings=proto.readings())
     return records, outs, root
 
 

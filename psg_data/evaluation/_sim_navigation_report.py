@@ -7,7 +7,10 @@ paper's ``±``; ``<metric>_ci_low`` / ``_ci_high`` the 95 % bootstrap over queri
 resampled within each column). :func:`sim_table_text` prints the paper's layout (Static presence /
 Dynamic presence / Absence / Overall; SR, SPL, AR, Dist) with the paper's rows of the same protocol
 (:data:`PAPER_SIM_ROWS`, from the paper's tables "Predictive Navigation" and the detailed "Adaptive
-Navigation"). :func:`plot_scene_sr` draws overall SR per scene and method.
+Navigation"). :func:`plot_scene_sr` draws overall SR per scene and method. :func:`readings_text` prints
+the grid of the adaptive protocol's readings of the paper's open choices (and its shift-0 control) with
+the headroom gaps and Perpetua* minus FreMEn paired over queries (:func:`paired_gap`);
+:func:`elapsed_text` overall SR by the time since the last map update.
 """
 
 from __future__ import annotations

@@ -286,7 +286,8 @@ def _adaptive_query(fed: Mapping[str, EdgeFilter], q: Query, cache: Any, cfg: An
 
 def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
                   protocol: SimProtocol, labels: str = "gt", label_seed: int = 0,
-                  keep: Sequence[int] = (), all_readings: bool = False) -> dict[str, Any]:
+                  keep: Sequence[int] = (), readings: Sequence[tuple[str, str, str]] | None = None
+                  ) -> dict[str, Any]:
     """Every method on one scene's queries (under the protocol's reading, or every reading).
 
     Args:
@@ -299,7 +300,8 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
             adaptive agent's own sight during an episode is exact whatever the source.
         label_seed: seed of noisy sources and sightings.
         keep: query ids whose trails and beliefs are returned (figures; the protocol's reading).
-        all_readings: run every reading of :meth:`SimProtocol.readings` on the same draws (records carry
+        readings: (last_map, agent_memory, absence) readings run on the same draws (default: the protocol's
+            own; :meth:`SimProtocol.readings` lists every distinct one; records carry
             ``last_map``, ``agent_memory``, ``absence``; ``lab`` for the predictive protocol's agent, which
             skips the receptacles it tried and declares absence when none above delta is left), not only the
             protocol's.
@@ -326,7 +328,9 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
                       speed_mps=protocol.speed_mps)
     sight: Any = None
     test: dict[EdgeKey, EdgeStream] = {}
-    readings = protocol.readings() if all_readings else [protocol.reading]
+    readings = list(readings or [protocol.reading])
+    if protocol.reading not in readings:
+        raise EvaluationError(f"{protocol.name}: the readings run must include the protocol's {protocol.reading}")
     if protocol.adaptive:
         pairs = {last: _adaptive_queries(env, test_starts, protocol.queries_per_scene, scene, protocol, last)
                  for last in dict.fromkeys(r[0] for r in readings)}
@@ -368,20 +372,20 @@ def run_sim_scene(path: str | Path, scene: int, methods: Mapping[str, str], sett
 
 def run_sim_navigation(paths: Sequence[Path], methods: Mapping[str, str], settings: Mapping[str, Mapping[str, Any]],
                        protocol: SimProtocol, *, labels: str = "gt", label_seed: int = 0, executor: Any = None,
-                       progress: Callable[[int, int], None] | None = None, all_readings: bool = False
-                       ) -> tuple[Any, dict[int, dict[str, Any]]]:
+                       progress: Callable[[int, int], None] | None = None,
+                       readings: Sequence[tuple[str, str, str]] | None = None) -> tuple[Any, dict[int, dict[str, Any]]]:
     """Every scene of ``protocol`` (``paths[k]`` is house ``protocol.scenes[k]``): (records DataFrame, raw
     output per scene).
 
-    With an ``executor`` (``submit`` / futures) scenes run in parallel; results are ordered by scene. With
-    ``all_readings`` the records hold every reading (:func:`run_sim_scene`).
+    With an ``executor`` (``submit`` / futures) scenes run in parallel; results are ordered by scene. The
+    records hold every one of ``readings`` (:func:`run_sim_scene`; default the protocol's own).
     """
     import pandas as pd
 
     if len(paths) != len(protocol.scenes):
         raise EvaluationError(f"{protocol.name}: {len(protocol.scenes)} scenes expected, got {len(paths)} paths")
     jobs = {sc: (str(p), sc, dict(methods), {k: dict(v) for k, v in settings.items()}, protocol, labels, label_seed,
-                 tuple(range(protocol.queries_per_scene)) if k == 0 else (), all_readings)
+                 tuple(range(protocol.queries_per_scene)) if k == 0 else (), tuple(readings or ()))
             for k, (sc, p) in enumerate(zip(protocol.scenes, paths))}
     outs: dict[int, dict[str, Any]] = {}
     done = 0
