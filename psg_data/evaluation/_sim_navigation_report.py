@@ -231,7 +231,9 @@ def elapsed_text(records: Any, names: Sequence[str], roles: Mapping[str, tuple[s
     h = (records["t_s"] - records["t_map_s"]).to_numpy(float) / 3600.0
     b = np.digitize(h, ELAPSED_BINS_H[1:-1])
     ceil = [n for n in ("process_oracle", "process_oracle:model=train") if n in names]
-    show = ceil + [n for n in names if roles.get(n, ("method", ""))[0] == "method" and n not in ceil]
+    have = set(records["method"])
+    show = [n for n in ceil + [n for n in names if roles.get(n, ("method", ""))[0] == "method" and n not in ceil]
+            if n in have]
     labels = [f"{lo:g}-{hi:g} h" if math.isfinite(hi) else f"> {lo:g} h"
               for lo, hi in zip(ELAPSED_BINS_H[:-1], ELAPSED_BINS_H[1:])]
     rows, ns = [], []
