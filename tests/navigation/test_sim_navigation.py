@@ -449,8 +449,10 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     assert {"oracle", "process_oracle", "process_oracle:model=train", "fremen", "random_receptacle"} <= set(rows)
     cfg = json.loads((out / "sim_config.json").read_text())
     assert cfg["scenes"] == [10, 11] and cfg["queries_per_scene"] == 6 and cfg["adaptive"]
-    assert sorted(p.name for p in (tmp_path / "cache").glob("navigation-benchmark-*/scene_*")) == ["scene_10",
-                                                                                                  "scene_11"]
+    built = sorted((p.parent.name.split("-")[3], p.name)
+                   for p in (tmp_path / "cache").glob("navigation-benchmark-*/scene_*"))
+    assert built == [("shift0", "scene_10"), ("shift0", "scene_11"), ("shift0.5", "scene_10"),
+                     ("shift0.5", "scene_11")]  # the shifted houses and the shift-0 control's
     assert (out / "scene_sr.png").is_file()
     oracle = rows["oracle"]["values"]["overall_sr"]["mean"]
     assert math.isfinite(oracle) and oracle == pytest.approx(1.0)
