@@ -15,7 +15,8 @@ import click
 from psg_data.cli._common import Progress
 from psg_data.cli._eval_provenance import provenance
 
-__all__ = ["run_sim_navigation_task", "sim_methods", "SIM_REFERENCES", "check_sim_options"]
+__all__ = ["run_sim_navigation_task", "sim_methods", "SIM_REFERENCES", "check_sim_options", "reading_options",
+           "check_reading_options"]
 
 SIM_REFERENCES: list[tuple[str, str, tuple[tuple[str, Any], ...], str, str]] = [
     ("oracle", "oracle", (), "ceiling", "the true receptacle at the query time"),
@@ -29,6 +30,48 @@ SIM_REFERENCES: list[tuple[str, str, tuple[tuple[str, Any], ...], str, str]] = [
     ("random_receptacle", "random_receptacle", (), "chance", "uniform random beliefs over the edges"),
 ]
 """(label, name, settings, role, description) of the reference rows."""
+
+
+_READING_HELP = {
+    "agent_memory": ("--agent-memory", ("visits", "estimator"),
+                     "paper-sim-adaptive: does the agent remember the receptacles it reached (visits, the default: "
+                     "\"up to two attempts\" as two receptacles) or only what its estimator's beliefs now say "
+                     "(estimator)? Tool 3 says only \"Navigation terminates when either the object is found or the "
+                     "target receptacle is reached\"."),
+    "absence": ("--absence", ("delta", "list-exhausted"),
+                "paper-sim-adaptive: when the agent declares the object absent: delta (the default, Tool 2: \"If no "
+                "receptacle exceeds the threshold, the object is reported as absent\") or list-exhausted (also when "
+                "every receptacle above delta has been reached; not in the paper)."),
+    "last_map": ("--last-map", ("end-of-validation", "test-week"),
+                 "paper-sim-adaptive: where the last map update falls (\"a future time point up to one week ahead "
+                 "from the last map update\"): end-of-validation (the default: end of week 3, as for the predictive "
+                 "protocol) or test-week (a uniform test-week step whose observations up to it the filters "
+                 "consume; our earlier reading)."),
+}
+
+
+def reading_options(f: Any) -> Any:
+    """The click options of the adaptive protocol's open choices and ``--queries-per-scene`` (one block)."""
+    f = click.option("--queries-per-scene", "queries_per_scene", type=click.IntRange(1), default=None,
+                     help="paper-sim protocols: queries drawn per house (default 25, the paper's 250 / 10 and "
+                          "125 / 5; more for a verdict; --quick: 6). The first 25 draws are the default's.")(f)
+    for key, (flag, choices, text) in reversed(_READING_HELP.items()):
+        f = click.option(flag, key, type=click.Choice(choices), default=None, help=text)(f)
+    return f
+
+
+def check_reading_options(task: str, protocol: str, readings: dict[str, Any]) -> None:
+    """Refuse the reading options outside the protocols they apply to (one ``error:`` line)."""
+    from psg_data.errors import EvaluationError
+
+    flags = {"agent_memory": "--agent-memory", "absence": "--absence", "last_map": "--last-map",
+             "queries_per_scene": "--queries-per-scene"}
+    given = [flags[k] for k, v in readings.items() if v is not None]
+    allowed = {"paper-sim-adaptive": list(flags.values()), "paper-sim-predictive": ["--queries-per-scene"]}
+    bad = [g for g in given if task != "navigation" or g not in allowed.get(protocol, [])]
+    if bad:
+        raise EvaluationError(f"{', '.join(bad)}: only with --task navigation --protocol paper-sim-adaptive "
+                              "(--queries-per-scene also with paper-sim-predictive)")
 
 
 def check_sim_options(protocol: str, *, queries: int | None, seeds: Any, reachable_only: bool,
@@ -69,24 +112,25 @@ def _executor(jobs: int) -> Any:
     return ex(jobs, None)
 
 
-def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: Path, *, quick: bool, jobs: int,
-                            no_plots: bool, quiet: bool, references: bool = True, label_seed: int = 0,
-                            table_format: str = "text") -> bool:
-    """Run a simulation protocol over its scenes, write the files, print the paper-shaped table."""
-    import time
+def sim_protocol(protocol: str, quick: bool, readings: dict[str, Any] | None = None) -> Any:
+    """The protocol run: the named one (its quick form), with the user's reading options (None: the defaults)."""
+    from dataclasses import replace
 
-    from psg_data.datasets import navigation_benchmark
-    from psg_data.evaluation._navigation_report import navigation_results
-    from psg_data.evaluation._sim_navigation_report import plot_scene_sr, sim_summary, sim_table_text
-    from psg_data.evaluation._tables import format_table, print_results
-    from psg_data.navigation._sim_benchmark import SIM_PROTOCOLS, run_sim_navigation
+    from psg_data.navigation._sim_benchmark import SIM_PROTOCOLS
 
     proto = SIM_PROTOCOLS[protocol].quick() if quick else SIM_PROTOCOLS[protocol]
-    t0 = time.perf_counter()
+    return replace(proto, **{k: v for k, v in (readings or {}).items() if v is not None})
+
+
+def _run_houses(proto: Any, methods: dict[str, str], settings: dict[str, dict[str, Any]], labels: str,
+                label_seed: int, jobs: int, quiet: bool) -> tuple[Any, dict[int, dict[str, Any]], Path]:
+    """Build (or find) the protocol's houses and run every reading on them: (records, raw outputs, root)."""
+    from psg_data.datasets import navigation_benchmark
+    from psg_data.navigation._sim_benchmark import run_sim_navigation
+
     with Progress("navigation benchmark scenes", total=len(proto.scenes), unit="scenes", quiet=quiet) as prog:
         root = navigation_benchmark(shift=proto.shift, which=proto.scenes, progress=lambda k: prog.update(k))
     paths = [root / f"scene_{k:02d}" for k in proto.scenes]
-    methods, settings, roles = sim_methods(specs, references)
     with Progress(f"{proto.name}: {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
             _executor(jobs) as executor:
         prog.start()  # a scene takes tens of seconds: the clock runs from the start
@@ -96,11 +140,59 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
             prog.update(0)
 
         records, outs = run_sim_navigation(paths, methods, settings, proto, labels=labels, label_seed=label_seed,
-                                           executor=executor, progress=progress)
+                                           executor=executor, progress=progress, readings=proto.readings())
+    return records, outs, root
+
+
+def _shift_label(shift: float | None) -> str:
+    from psg_data.synth._house_process import HouseProcessParams
+
+    return f"shift {HouseProcessParams().shift if shift is None else shift:g}"
+
+
+def _all_records(proto: Any, methods: dict[str, str], settings: dict[str, dict[str, Any]], labels: str,
+                 label_seed: int, jobs: int, quiet: bool) -> tuple[Any, Any, dict[int, dict[str, Any]], Path]:
+    """(the protocol's records, every reading's records with the shift-0 control's, raw outputs, root)."""
+    import pandas as pd
+
+    records, outs, root = _run_houses(proto, methods, settings, labels, label_seed, jobs, quiet)
+    allrec = [records.assign(shift=_shift_label(proto.shift))]
+    if proto.adaptive and proto.shift != 0:
+        from dataclasses import replace
+
+        control = replace(proto, name=proto.name + " shift-0 control", shift=0.0)
+        rec0, _, _ = _run_houses(control, methods, settings, labels, label_seed, jobs, quiet)
+        allrec.append(rec0.assign(shift=_shift_label(0.0)))
+    main = records
+    if proto.adaptive:
+        last, mem, ab = proto.reading
+        main = records[(records["last_map"] == last) & (records["agent_memory"] == mem)
+                       & (records["absence"] == ab)].reset_index(drop=True)
+    return main, pd.concat(allrec, ignore_index=True), outs, root
+
+
+def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: Path, *, quick: bool, jobs: int,
+                            no_plots: bool, quiet: bool, references: bool = True, label_seed: int = 0,
+                            table_format: str = "text", readings: dict[str, Any] | None = None) -> bool:
+    """Run a simulation protocol over its scenes, write the files, print the paper-shaped table (adaptive: with
+    every reading of the open choices and the shift-0 control beside it, and SR by time since the last map).
+    """
+    import time
+
+    from psg_data.evaluation import _sim_navigation_report as rep
+    from psg_data.evaluation._navigation_report import navigation_results
+    from psg_data.evaluation._tables import format_table, print_results
+
+    proto = sim_protocol(protocol, quick, readings)
+    t0 = time.perf_counter()
+    methods, settings, roles = sim_methods(specs, references)
+    records, allrec, outs, root = _all_records(proto, methods, settings, labels, label_seed, jobs, quiet)
+    paths = [root / f"scene_{k:02d}" for k in proto.scenes]
     errors = [e for sc in proto.scenes for e in outs[sc].get("errors", [])]
     names = _scored(methods, errors)
     records = records[records["method"].isin(names)] if len(records) else records
-    per_scene, summary = sim_summary(records, names)
+    allrec = allrec[allrec["method"].isin(names)] if len(allrec) else allrec
+    per_scene, summary = rep.sim_summary(records, names)
     seconds = round(time.perf_counter() - t0, 2)
     config = {"protocol": proto.name, **proto.to_dict(), "labels": labels, "label_seed": label_seed,
               "methods": names, "setting": "adaptive" if proto.adaptive else "predictive",
@@ -111,11 +203,19 @@ def run_sim_navigation_task(specs: list[Any], protocol: str, labels: str, out: P
                        "seconds": seconds, "jobs": jobs})
     results = navigation_results(_result(records, per_scene, summary, config, errors), roles=roles, info=info,
                                  spread="std")
-    text = sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths),
-                          table=format_table(results.tables[0]))
+    text = rep.sim_table_text(summary, protocol=proto.name, labels=labels, roles=roles, n_scenes=len(paths),
+                              table=format_table(results.tables[0]))
+    text += "\n" + rep.elapsed_text(records, names, roles)
+    if proto.adaptive:
+        shifts = list(dict.fromkeys(allrec["shift"]))
+        text += "\n" + rep.readings_text(allrec, names, roles, proto.readings(), proto.reading, shifts)
     _write(out, records, per_scene, summary, config, roles, info, text, errors)
+    if proto.adaptive:
+        from psg_data.writers._safe_output import write_atomically
+
+        write_atomically(out / "readings.parquet", lambda tmp: allrec.to_parquet(tmp, index=False))
     if not no_plots:
-        plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
+        rep.plot_scene_sr(per_scene, out / "scene_sr.png", roles=roles,
                       title=f"{proto.name}, labels {labels}: overall SR per scene (scene = house seed)")
         _maps(out, paths[0], proto, outs[proto.scenes[0]], records, names, roles, labels, label_seed)
     if table_format == "text":

@@ -12,6 +12,7 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -19,6 +20,8 @@ from psg_data import __version__
 from psg_data._executors import SCHEDULER_HELP, check_scheduler
 from psg_data.cli._common import EXIT_PROBLEMS, handle_errors, quiet_option, setup_logging
 from psg_data.cli._errors import ContractGroup, check_jobs
+from psg_data.cli._eval_sim_navigation import check_reading_options
+from psg_data.cli._eval_sim_navigation import reading_options as sim_reading_options
 from psg_data.cli._label_source import LabelSourceType
 from psg_data.cli._seeds import SeedsType
 
@@ -138,6 +141,7 @@ def _check_rerun(path: Path | None, task: str, overwrite: bool, inputs: list[Pat
                    "the test week up to each query's last map update, an agent that adapts while it walks).")
 @click.option("--quick", is_flag=True,
               help="With a paper-sim protocol: its small form (2 scenes, 6 queries each; for CI and a first look).")
+@sim_reading_options  # --agent-memory, --absence, --last-map, --queries-per-scene (paper-sim protocols)
 @click.option("--door-belief", type=click.Choice(["truth", "predicted", "last-map", "all-open"]), default=None,
               help="Navigation: door states the agent plans with (default: truth for sim, predicted for paper-real).")
 @click.option("--seeds", type=SeedsType(), default=None, metavar="N|S,S,...|A-B",
@@ -188,7 +192,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
          label_seed: int, queries: int | None, delta: str, reachable_only: bool, out: Path | None, overwrite: bool,
          quick: bool,
          jobs: int, scheduler: str | None, rerun_file: Path | None, estimator_timeout: float, list_estimators: bool,
-         no_plots: bool, table_format: str, quiet: bool) -> None:
+         no_plots: bool, table_format: str, quiet: bool, **sim_readings: Any) -> None:
     """Score persistence estimators like the paper's Table I (MAE, B-Acc, F1) next to a ceiling, baselines
     and chance, with a stated interval; or navigation (SR, SPL, AR, DIST) and doors with them.
 
@@ -265,6 +269,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
     require_hints(specs, available_hints(dataset), "the " + (dataset or "demo") + " dataset")
     nav_options = None
     sim = task == "navigation" and protocol.startswith("paper-sim")
+    check_reading_options(task, protocol, sim_readings)
     if sim:
         from psg_data.cli._eval_sim_navigation import check_sim_options
 
@@ -297,7 +302,7 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
 
             ok = run_sim_navigation_task(specs, protocol, labels, tmp, quick=quick, jobs=jobs, no_plots=no_plots,
                                          quiet=quiet, references=references, label_seed=label_seed,
-                                         table_format=table_format)
+                                         table_format=table_format, readings=sim_readings)
         elif task == "doors":
             ok = run_doors_task(specs, dataset, nav_options, tmp, no_plots, quiet, references=references,
                                 table_format=table_format)

@@ -7,7 +7,10 @@ paper's ``±``; ``<metric>_ci_low`` / ``_ci_high`` the 95 % bootstrap over queri
 resampled within each column). :func:`sim_table_text` prints the paper's layout (Static presence /
 Dynamic presence / Absence / Overall; SR, SPL, AR, Dist) with the paper's rows of the same protocol
 (:data:`PAPER_SIM_ROWS`, from the paper's tables "Predictive Navigation" and the detailed "Adaptive
-Navigation"). :func:`plot_scene_sr` draws overall SR per scene and method.
+Navigation"). :func:`plot_scene_sr` draws overall SR per scene and method. :func:`readings_text` prints
+the grid of the adaptive protocol's readings of the paper's open choices (and its shift-0 control) with
+the headroom gaps and Perpetua* minus FreMEn paired over queries (:func:`paired_gap`);
+:func:`elapsed_text` overall SR by the time since the last map update.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["PAPER_SIM_ROWS", "PAPER_SIM_COUNTS", "sim_summary", "sim_table_text", "plot_scene_sr", "SIM_COLUMNS",
-           "headroom_line"]
+           "headroom_line", "paired_gap", "readings_text", "elapsed_text", "ELAPSED_BINS_H"]
 
 SIM_COLUMNS = (("Static presence", ("static_sr", "static_spl")), ("Dynamic presence", ("dynamic_sr", "dynamic_spl")),
                ("Absence", ("absent_ar", "absent_dist_m")), ("Overall", ("overall_sr", "overall_spl")))
@@ -149,7 +152,109 @@ def headroom_line(summary: Any, roles: Mapping[str, tuple[str, str]]) -> str:
     if "process_oracle:model=train" in sr:
         out += (f"; adaptation gap process_oracle - process_oracle:model=train "
                 f"{sr['process_oracle'] - sr['process_oracle:model=train']:+.1f} points")
+        if "fremen" in sr:
+            out += (f"; process_oracle:model=train - fremen {sr['process_oracle:model=train'] - sr['fremen']:+.1f} "
+                    "points (what a predictor that does not adapt could still gain)")
     return out
+
+
+ELAPSED_BINS_H = (0.0, 1.0, 6.0, 24.0, 72.0, math.inf)
+"""Edges of the time since the last map update, hours (:func:`elapsed_text`)."""
+
+
+def _overall(records: Any, method: str) -> Any:
+    """Per scored query of ``method`` ((seed, query_id) index): 1 for a success or a correct abort, else 0
+    (the overall SR's terms: unreachable present targets left out).
+    """
+    import pandas as pd
+
+    from psg_data.evaluation._navigation_scores import query_terms
+
+    d = records[records["method"] == method]
+    num, den = query_terms(d, absent_in_overall="abort_is_success", unreachable="exclude")["overall_sr"]
+    idx = pd.MultiIndex.from_arrays([d["seed"].to_numpy(), d["query_id"].to_numpy()])
+    return pd.Series(num, index=idx)[den > 0]
+
+
+def paired_gap(records: Any, a: str, b: str, *, seed: int = 0) -> tuple[float, float, float, int]:
+    """Overall SR of ``a`` minus ``b`` on the queries both scored, in points, with its paired 95 % interval
+    (expanded percentile bootstrap over queries, or jackknife-t under 10): (gap, low, high, n queries).
+    """
+    from psg_data.evaluation._intervals import ratio_interval
+
+    sa, sb = _overall(records, a), _overall(records, b)
+    both = sa.index.intersection(sb.index)
+    if not len(both):
+        return math.nan, math.nan, math.nan, 0
+    diff = sa.loc[both].to_numpy(float) - sb.loc[both].to_numpy(float)
+    iv = ratio_interval(diff, [1.0] * diff.size, seed=seed, unit="queries")
+    return 100 * iv.estimate, 100 * iv.low, 100 * iv.high, int(diff.size)
+
+
+def _gap_cell(records: Any, a: str, b: str, names: Sequence[str], interval: bool = False) -> str:
+    if a not in names or b not in names:
+        return "-"
+    g, lo, hi, n = paired_gap(records, a, b)
+    if not n:
+        return "-"
+    return f"{g:+.1f}" + (f" [{lo:+.1f}, {hi:+.1f}]" if interval and math.isfinite(lo) else "")
+
+
+def readings_text(records: Any, names: Sequence[str], roles: Mapping[str, tuple[str, str]],
+                  readings: Sequence[tuple[str, str, str]], main: tuple[str, str, str], shifts: Sequence[str]
+                  ) -> str:
+    """The readings grid: per house shift and reading of the open choices, overall SR of the ceilings and the
+    methods, absent AR of the methods, the two headroom gaps and Perpetua* - FreMEn with its paired 95 %
+    interval. ``records`` carry ``shift``, ``last_map``, ``agent_memory``, ``absence``.
+    """
+    ceil = [n for n in ("process_oracle", "process_oracle:model=train") if n in names]
+    meth = [n for n in names if roles.get(n, ("method", ""))[0] == "method" and n not in ceil]
+    head = ["houses", "last map", "memory", "absence"] + [f"{n} SR" for n in ceil + meth] + \
+        [f"{n} AR" for n in meth] + ["oracle - train", "train - fremen", "perpetua_star - fremen [95 %]"]
+    rows = []
+    for sh in shifts:
+        for r in readings:
+            d = records[(records["shift"] == sh) & (records["last_map"] == r[0]) & (records["agent_memory"] == r[1])
+                        & (records["absence"] == r[2])]
+            if d.empty:
+                continue
+            sr = {n: 100 * float(_overall(d, n).mean()) for n in ceil + meth}
+            ar = [d[(d["method"] == n) & (d["category"] == "absent")]["aborted"] for n in meth]
+            rows.append([sh + (" *" if r == main and sh == shifts[0] else ""), *r]
+                        + [f"{sr[n]:.1f}" for n in ceil + meth]
+                        + [f"{100 * a.mean():.0f} ({len(a)})" if len(a) else "-" for a in ar]
+                        + [_gap_cell(d, "process_oracle", "process_oracle:model=train", names),
+                           _gap_cell(d, "process_oracle:model=train", "fremen", names),
+                           _gap_cell(d, "perpetua_star", "fremen", names, interval=True)])
+    lines = ["Every reading of the open choices on the same draws (overall SR %, absent AR % (n); gaps in points, "
+             "paired over queries; * = the table above):", ""]
+    return "\n".join(lines + _grid(head, rows)) + "\n"
+
+
+def elapsed_text(records: Any, names: Sequence[str], roles: Mapping[str, tuple[str, str]]) -> str:
+    """Overall SR by the time from the last map update to the query (:data:`ELAPSED_BINS_H`)."""
+    import numpy as np
+
+    h = (records["t_s"] - records["t_map_s"]).to_numpy(float) / 3600.0
+    b = np.digitize(h, ELAPSED_BINS_H[1:-1])
+    ceil = [n for n in ("process_oracle", "process_oracle:model=train") if n in names]
+    have = set(records["method"])
+    show = [n for n in ceil + [n for n in names if roles.get(n, ("method", ""))[0] == "method" and n not in ceil]
+            if n in have]
+    labels = [f"{lo:g}-{hi:g} h" if math.isfinite(hi) else f"> {lo:g} h"
+              for lo, hi in zip(ELAPSED_BINS_H[:-1], ELAPSED_BINS_H[1:])]
+    rows, ns = [], []
+    for k in range(len(labels)):
+        d = records[b == k]
+        ns.append(len(_overall(d, show[0])) if show and not d.empty else 0)
+    for n in show:
+        rows.append([n] + [f"{100 * float(_overall(records[b == k], n).mean()):.1f}" if ns[k] else "-"
+                           for k in range(len(labels))])
+    if {"perpetua_star", "fremen"} <= set(names):
+        rows.append(["perpetua_star - fremen"] + [_gap_cell(records[b == k], "perpetua_star", "fremen", names)
+                                                  if ns[k] else "-" for k in range(len(labels))])
+    head = ["overall SR % by time since the last map update"] + [f"{lab} ({n})" for lab, n in zip(labels, ns)]
+    return "\n".join(_grid(head, rows)) + "\n"
 
 
 def plot_scene_sr(per_scene: Any, out_path: str | Path, *, title: str, roles: Mapping[str, tuple[str, str]]) -> Path:

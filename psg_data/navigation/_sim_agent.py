@@ -7,8 +7,15 @@ target receptacle is reached"; and its adaptive experiment, "the agent can dynam
 targets during navigation by consuming new observations". :func:`run_adaptive_episode` does this:
 
 1. Beliefs ``b_r`` of the target's edges at the current time ``t`` (query time plus walking time at
-   ``speed_mps``). Candidates: receptacles with ``b_r >= delta`` not inspected yet, most believed
-   first. None left: **abort** (the object is reported absent).
+   ``speed_mps``). Candidates: receptacles with ``b_r >= delta``, most believed first; with
+   ``memory="visits"`` the receptacles already inspected in this episode are left out, with
+   ``memory="estimator"`` they are not (the filters' beliefs, updated by what the agent saw, are its
+   only memory: an estimator that does not move on a ``y = 0`` may send it back). No belief at or
+   above delta: **abort** (the object is reported absent; Tool 2, "If no receptacle exceeds the
+   threshold, the object is reported as absent"). Candidates above delta but all inspected (``visits``
+   only): with ``absence="delta"`` the agent stops without declaring absence (``exhausted``), with
+   ``absence="list-exhausted"`` it declares the object absent (``abort``), a rule the paper does not
+   state.
 2. The agent walks the shortest path (A* field of the planning cache, true door states: the
    ``sim`` protocols' door rule) towards the best candidate in steps of ``look_every_m``.
 3. After each step it looks (:class:`HouseSight`: line of sight through open doorways, as the
@@ -37,13 +44,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeFilter
 from psg_data.graph._plan import ranked_candidates
 from psg_data.maps._planner import PlanningCache
 from psg_data.navigation._agent import AgentConfig, Episode, true_shortest_path
 from psg_data.navigation._queries import Query
 
-__all__ = ["HouseSight", "run_adaptive_episode"]
+__all__ = ["HouseSight", "run_adaptive_episode", "AGENT_MEMORIES", "ABSENCE_RULES"]
+
+AGENT_MEMORIES = ("visits", "estimator")
+"""Does the agent remember the receptacles it inspected (``visits``) or only its filters' beliefs (``estimator``)."""
+ABSENCE_RULES = ("delta", "list-exhausted")
+"""When the object is declared absent: no belief at or above delta, or also when every candidate is inspected."""
 
 
 @dataclass
@@ -146,8 +159,26 @@ class _Walker:
         return self.gt is not None and self.gt in seen
 
 
+def _next_target(bel: Mapping[str, float], config: AgentConfig, inspected: Sequence[str], blocked: set[str],
+                 cache: PlanningCache, w: _Walker, memory: str, absence: str) -> tuple[str | None, str]:
+    """(the best reachable candidate, "") or (None, the outcome that ends the episode): step 1 of the module
+    docstring.
+    """
+    above = ranked_candidates(bel, config.delta)
+    if not above:
+        return None, "abort"
+    ranked = [r for r in above if r not in inspected] if memory == "visits" else above
+    if not ranked:
+        return None, "abort" if absence == "list-exhausted" else "exhausted"
+    cands = [r for r in ranked if r not in blocked and math.isfinite(cache.distance(r, w.doors, w.cur))]
+    if not cands:
+        return None, "no_path"
+    return cands[0], ""
+
+
 def run_adaptive_episode(cache: PlanningCache, query: Query, filters: Mapping[str, EdgeFilter], config: AgentConfig,
-                         sight: HouseSight, *, look_every_m: float = 1.0) -> tuple[Episode, int]:
+                         sight: HouseSight, *, look_every_m: float = 1.0, memory: str = "visits",
+                         absence: str = "delta") -> tuple[Episode, int]:
     """One query with looking, belief updates and target switching (module docstring).
 
     Args:
@@ -158,16 +189,22 @@ def run_adaptive_episode(cache: PlanningCache, query: Query, filters: Mapping[st
         config: delta, max_attempts, speed_mps (its ``setting`` is ignored: this agent is adaptive).
         sight: what the robot sees from a point.
         look_every_m: metres walked between looks.
+        memory: ``visits`` or ``estimator`` (:data:`AGENT_MEMORIES`, module docstring).
+        absence: ``delta`` or ``list-exhausted`` (:data:`ABSENCE_RULES`, module docstring).
 
     Returns:
         (the :class:`~psg_data.navigation.Episode`, the number of target switches).
     """
+    if memory not in AGENT_MEMORIES or absence not in ABSENCE_RULES:
+        raise EvaluationError(f"memory / absence: expected one of {AGENT_MEMORIES} / {ABSENCE_RULES}, "
+                              f"got {memory!r} / {absence!r}")
     grid = cache.grid
     w = _Walker(cache, query, config, sight, look_every_m)
     known = {r: f for r, f in filters.items() if r in grid.receptacle_cells}
     bel0 = {r: _predict(f, query.t_s) for r, f in known.items()}
     pred = min(bel0, key=lambda r: (-bel0[r], r)) if bel0 else None
     inspected: list[str] = []
+    blocked: set[str] = set()
     attempts = switches = 0
     target: str | None = None
     seen_object = w.look(known)
@@ -179,21 +216,20 @@ def run_adaptive_episode(cache: PlanningCache, query: Query, filters: Mapping[st
         nxt: str | None = w.gt if seen_object and w.gt not in inspected else None
         if nxt is None:
             bel = {r: _predict(f, w.t) for r, f in known.items()}
-            ranked = ranked_candidates(bel, config.delta, inspected)
-            cands = [r for r in ranked if math.isfinite(cache.distance(r, w.doors, w.cur))]
-            if not cands:
-                outcome = "abort" if not ranked else "no_path"
+            nxt, end = _next_target(bel, config, inspected, blocked, cache, w, memory, absence)
+            if nxt is None:
+                outcome = end
                 break
             if attempts >= config.max_attempts:
                 outcome = "exhausted"
                 break
-            nxt = cands[0]
         if target is not None and nxt != target:
             switches += 1
         target = nxt
         event = w.step(target)
         if event == "no_path":
             inspected.append(target)
+            blocked.add(target)  # not an observation: left out whatever the memory
             continue
         if event == "at_object":
             outcome = "found"

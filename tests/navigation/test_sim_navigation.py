@@ -114,6 +114,73 @@ def test_updates_are_timed_by_the_walk(corridor: PlanningCache) -> None:
     assert fs["A"].updates == [(pytest.approx(q.t_s + 9.0 / 0.5), 0)] and not fs["B"].updates
 
 
+def fremen_filters(**means: float) -> dict[str, Any]:
+    """Real FreMEn filters of edges (obj, r) fitted on one week of hourly observations with mean ``means[r]``
+    (under 1.5 weeks and no validation week: order 0, the mean); FreMEn does not move on an update.
+    """
+    from psg_data.estimators import EdgeStream
+    from psg_data.graph._fit import resolve_estimator
+
+    t = 1_700_000_000.0 + 3600.0 * np.arange(168)
+    streams = [EdgeStream(("obj", r), t, (np.arange(168) % 10 < round(10 * m)).astype(np.int8)) for r, m in
+               means.items()]
+    est = resolve_estimator("fremen").fit(streams)
+    return {r: est.make_filter(("obj", r)) for r in means}
+
+
+def test_absence_by_delta_aborts_only_when_no_belief_reaches_delta(corridor: PlanningCache) -> None:
+    """--absence delta: an agent that has reached every candidate but still believes one at or above delta
+    stops without declaring absence; list-exhausted declares it; an estimator that learns aborts either way.
+    """
+    q = make_query(corridor.grid, (2, 14), None)  # the object is not in the house
+    cfg = AgentConfig(delta=0.2)
+    fs = fremen_filters(A=0.9, B=0.1)
+    assert fs["A"].predict(np.array([q.t_s]))[0] == pytest.approx(0.9, abs=0.02)
+    ep, _ = run_adaptive_episode(corridor, q, fs, cfg, sight(corridor, 1.5), absence="delta")
+    assert ep.visited == ["A"] and ep.outcome == "exhausted" and not ep.aborted  # A is still at 0.9
+    ep, _ = run_adaptive_episode(corridor, q, fremen_filters(A=0.9, B=0.1), cfg, sight(corridor, 1.5),
+                                 absence="list-exhausted")
+    assert ep.visited == ["A"] and ep.outcome == "abort" and ep.aborted
+    ep, _ = run_adaptive_episode(corridor, q, beliefs(A=0.9, B=0.1), cfg, sight(corridor, 1.5), absence="delta")
+    assert ep.outcome == "abort" and ep.aborted and ep.path_m == pytest.approx(13.0)  # A seen empty: 0 < delta
+
+
+def test_estimator_memory_lets_fremen_return_to_a_checked_receptacle(corridor: PlanningCache) -> None:
+    """--agent-memory estimator: the beliefs are the only memory; FreMEn's do not move, so the agent goes back
+    to the empty A (its second attempt) instead of B; with visits it tries B; an estimator that learns does too.
+    """
+    q = make_query(corridor.grid, (2, 14), "B")
+    cfg = AgentConfig(delta=0.2, max_attempts=2)
+    ep, _ = run_adaptive_episode(corridor, q, fremen_filters(A=0.9, B=0.5), cfg, sight(corridor, 1.5),
+                                 memory="estimator")
+    assert ep.visited == ["A", "A"] and ep.n_attempts == 2 and not ep.success and ep.outcome == "exhausted"
+    ep, _ = run_adaptive_episode(corridor, q, fremen_filters(A=0.9, B=0.5), cfg, sight(corridor, 1.5),
+                                 memory="visits")
+    assert ep.visited[0] == "A" and ep.success and ep.path_m == pytest.approx(13.0 + 27.0)  # to A, then to B
+    ep, _ = run_adaptive_episode(corridor, q, beliefs(A=0.9, B=0.5), cfg, sight(corridor, 1.5), memory="estimator")
+    assert ep.visited == ["A"] and ep.success
+    with pytest.raises(Exception, match="memory / absence"):
+        run_adaptive_episode(corridor, q, beliefs(A=0.9), cfg, sight(corridor, 1.5), memory="none")
+
+
+def test_readings_are_every_distinct_combination_the_protocols_own_first() -> None:
+    from dataclasses import replace
+
+    from psg_data.navigation._sim_benchmark import SIM_PROTOCOLS
+
+    ad = SIM_PROTOCOLS["paper-sim-adaptive"]
+    assert ad.reading == ("end-of-validation", "visits", "delta") and ad.queries_per_scene == 25
+    rs = ad.readings()
+    assert rs[0] == ad.reading and len(rs) == len(set(rs)) == 6  # estimator has no list: one absence rule
+    assert {r for r in rs if r[1] == "estimator"} == {("end-of-validation", "estimator", "delta"),
+                                                       ("test-week", "estimator", "delta")}
+    other = replace(ad, last_map="test-week", agent_memory="estimator", absence="list-exhausted")
+    assert other.readings()[0] == other.reading and len(other.readings()) == 6
+    assert SIM_PROTOCOLS["paper-sim-predictive"].readings() == [SIM_PROTOCOLS["paper-sim-predictive"].reading]
+    with pytest.raises(Exception, match="last_map"):
+        replace(ad, last_map="now")
+
+
 # ---------------------------------------------------------------------------------------------------
 # Tiny houses: the harness (queries, what the filters see, scoring) and the CLI.
 
@@ -153,6 +220,11 @@ def test_adaptive_queries_sit_in_the_test_week(house: Path) -> None:
                                                          else "dynamic")
         assert q.category == cat and q.gt_receptacle == env.gt_at(q.object_id, q.t_s)
     assert len({t for _, t in pairs}) > 10
+    ev = _adaptive_queries(env, test, 40, 3, _protocol(True), "end-of-validation")
+    assert all(t_m == env.t_map_s < q.t_s <= env.t_map_s + 7 * 86400.0 for q, t_m in ev)  # the end of week 3
+    assert [(q.object_id, q.start_cell) for q, _ in ev] == [(q.object_id, q.start_cell) for q, _ in pairs]
+    assert [q.object_id for q, _ in _adaptive_queries(env, test, 12, 3, _protocol(True))] == [
+        q.object_id for q, _ in pairs[:12]]  # more queries per scene: the first draws are the same
 
 
 class Spy:
@@ -188,9 +260,12 @@ def test_fit_sees_train_weeks_and_the_validation_week_only_as_val_streams(house:
     assert last == float(starts[ids["val"][-1]])  # the map ends with the validation week; no test step
 
 
-@pytest.mark.parametrize("adaptive", [False, True])
+@pytest.mark.parametrize("adaptive,last_map", [(False, "end-of-validation"), (True, "end-of-validation"),
+                                               (True, "test-week")])
 def test_filters_see_the_test_week_only_up_to_the_last_map_update(house: Path, monkeypatch: Any,
-                                                                   adaptive: bool) -> None:
+                                                                   adaptive: bool, last_map: str) -> None:
+    from dataclasses import replace
+
     import psg_data.navigation._sim_agent as agent
     import psg_data.navigation._sim_benchmark as bench
 
@@ -211,13 +286,17 @@ def test_filters_see_the_test_week_only_up_to_the_last_map_update(house: Path, m
         return fs
 
     monkeypatch.setattr(bench, "method_filters", filled)
-    out = bench.run_sim_scene(house, 3, {"spy": "spy"}, {}, _protocol(adaptive, 10), labels="gt")
+    proto = replace(_protocol(adaptive, 10), last_map=last_map)
+    out = bench.run_sim_scene(house, 3, {"spy": "spy"}, {}, proto, labels="gt")
     recs = out["records"]
-    assert len(recs) == 10
+    assert len(recs) == 10 and {r["last_map"] for r in recs} == {last_map}
     if adaptive:
         for r in recs:
             last, t_q = seen[r["query_id"]]
-            assert last == r["t_map_s"] < t_q == r["t_s"]  # gt labels: every edge observed at every step
+            assert last <= r["t_map_s"] < t_q == r["t_s"]  # nothing after the last map update reaches them
+            if last_map == "test-week":
+                assert last == r["t_map_s"]  # gt labels: every edge observed at every step up to it
+        assert (len({r["t_map_s"] for r in recs}) == 1) == (last_map == "end-of-validation")
     else:
         assert not seen and all(r["t_map_s"] < r["t_s"] for r in recs)
 
@@ -290,6 +369,54 @@ def test_cli_refuses_sim_protocols_elsewhere_and_quick_alone() -> None:
     r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
                                   "paper-sim-predictive", "--queries", "10", "--delta", "0.3", "-e", "fremen"])
     assert r.exit_code == 1 and "--queries, --delta with --protocol paper-sim-predictive" in r.output
+    r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
+                                  "paper-sim-predictive", "--agent-memory", "estimator", "-e", "fremen"])
+    assert r.exit_code == 1 and r.output.startswith("error: --agent-memory: only with --task navigation")
+    r = CliRunner().invoke(main, ["--absence", "delta", "--queries-per-scene", "5", "-e", "fremen"])
+    assert r.exit_code == 1 and "--absence, --queries-per-scene: only with" in r.output
+    r = CliRunner().invoke(main, ["--task", "navigation", "--dataset", "navigation-benchmark", "--protocol",
+                                  "paper-sim-adaptive", "--last-map", "yesterday", "-e", "fremen"])
+    assert r.exit_code == 2 and "yesterday" in r.output
+
+
+def test_sim_protocol_takes_the_reading_options() -> None:
+    from psg_data.cli._eval_sim_navigation import sim_protocol
+
+    p = sim_protocol("paper-sim-adaptive", True, {"agent_memory": "estimator", "absence": None,
+                                                  "last_map": "test-week", "queries_per_scene": 40})
+    assert p.reading == ("test-week", "estimator", "delta") and p.queries_per_scene == 40 and p.scenes == (10, 11)
+    assert sim_protocol("paper-sim-adaptive", False, {}).reading == ("end-of-validation", "visits", "delta")
+
+
+def test_paired_gap_and_the_readings_grid_score_like_the_table() -> None:
+    """Overall SR per query (success, a correct abort, unreachable left out), the gap paired over queries."""
+    import pandas as pd
+
+    from psg_data.evaluation._sim_navigation_report import elapsed_text, paired_gap, readings_text
+
+    rows = []
+    # 6 queries: 4 present reachable, 1 absent, 1 unreachable (left out of both)
+    cats = ["static", "dynamic", "dynamic", "static", "absent", "static"]
+    reach = [True, True, True, True, False, False]
+    wins = {"perpetua_star": [1, 1, 0, 1, 1, 1], "fremen": [1, 0, 0, 0, 0, 0]}
+    for m, w in wins.items():
+        for k in range(6):
+            rows.append({"method": m, "seed": 10, "query_id": k, "category": cats[k], "reachable": reach[k],
+                         "success": bool(w[k]) and cats[k] != "absent", "aborted": cats[k] == "absent" and bool(w[k]),
+                         "path_m": 1.0, "shortest_path_m": 1.0, "t_s": 3600.0 * (k * 20 + 0.5), "t_map_s": 0.0,
+                         "shift": "shift 0.5", "last_map": "end-of-validation", "agent_memory": "visits",
+                         "absence": "delta"})
+    df = pd.DataFrame(rows)
+    g, lo, hi, n = paired_gap(df, "perpetua_star", "fremen")
+    assert n == 5 and g == pytest.approx(100 * (4 - 1) / 5)  # 4 of 5 against 1 of 5; the unreachable one left out
+    assert lo <= g <= hi
+    text = readings_text(df, ["perpetua_star", "fremen"], {}, [("end-of-validation", "visits", "delta")],
+                         ("end-of-validation", "visits", "delta"), ["shift 0.5"])
+    assert "shift 0.5 *" in text and "80.0" in text and "20.0" in text and "+60.0 [" in text
+    assert "100 (1)" in text and "0 (1)" in text  # absent AR of each method on its one absent query
+    el = elapsed_text(df, ["perpetua_star", "fremen"], {})
+    # 0.5, 20.5, 40.5, 60.5, 80.5 h (the unreachable query at 100.5 h left out)
+    assert "0-1 h (1)" in el and "1-6 h (0)" in el and "6-24 h (1)" in el and "24-72 h (2)" in el and "> 72 h (1)" in el
 
 
 @pytest.mark.slow
@@ -297,6 +424,7 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     """The CI form end to end: builds two houses into an empty cache, runs every reference row and FreMEn."""
     import json
 
+    import pandas as pd
     from click.testing import CliRunner
 
     from psg_data.cli.psg_eval_cmd import main
@@ -309,13 +437,22 @@ def test_cli_quick_adaptive(tmp_path: Path, monkeypatch: Any) -> None:
     assert r.exit_code == 0, r.output
     assert "paper: Ours (Perpetua*) [Privileged]" in r.output and "process_oracle:model=train" in r.output
     assert "headroom (overall SR): process_oracle" in r.output and "adaptation gap" in r.output
+    assert "process_oracle:model=train - fremen" in r.output and "by time since the last map update" in r.output
+    grid = r.output.split("Every reading of the open choices")[1]
+    assert "shift 0.5 *  end-of-validation     visits           delta" in grid and "shift 0 " in grid  # the control
+    assert grid.count("\nshift ") == 12  # 6 readings on the shifted houses and on the shift-0 control
+    allrec = pd.read_parquet(out / "readings.parquet")
+    n_methods = allrec["method"].nunique()
+    assert set(allrec["shift"]) == {"shift 0.5", "shift 0"} and n_methods >= 7 and len(allrec) == 12 * 12 * n_methods
     res = json.loads((out / "results.json").read_text())
     rows = {row["method"]: row for row in res["tables"][0]["rows"]}
     assert {"oracle", "process_oracle", "process_oracle:model=train", "fremen", "random_receptacle"} <= set(rows)
     cfg = json.loads((out / "sim_config.json").read_text())
     assert cfg["scenes"] == [10, 11] and cfg["queries_per_scene"] == 6 and cfg["adaptive"]
-    assert sorted(p.name for p in (tmp_path / "cache").glob("navigation-benchmark-*/scene_*")) == ["scene_10",
-                                                                                                  "scene_11"]
+    built = sorted((p.parent.name.split("-")[3], p.name)
+                   for p in (tmp_path / "cache").glob("navigation-benchmark-*/scene_*"))
+    assert built == [("shift0", "scene_10"), ("shift0", "scene_11"), ("shift0.5", "scene_10"),
+                     ("shift0.5", "scene_11")]  # the shifted houses and the shift-0 control's
     assert (out / "scene_sr.png").is_file()
     oracle = rows["oracle"]["values"]["overall_sr"]["mean"]
     assert math.isfinite(oracle) and oracle == pytest.approx(1.0)
