@@ -127,7 +127,7 @@ def _print_text(g: Any, snap: Any, table: Any, object_id: str | None, when: str)
 @click.option("--save-graph", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.json",
               help="Save the fitted graph (load it later by giving FILE.json as PATH).")
 @click.option("--overwrite", is_flag=True,
-              help="Replace existing output files (--csv, --png, --rerun, --save-graph), only ones psg-data wrote.")
+              help="Replace existing output files (--png, --rerun, --save-graph), only ones psg-data wrote.")
 @quiet_option
 @click.option("--verbose", "-v", is_flag=True, help="Also print the fit's INFO lines (settings decided, error rates).")
 @click.pass_context

@@ -257,7 +257,7 @@ def test_order_scores_threshold_is_strict_and_sizes_zero_and_one() -> None:
     assert empty.tolist() == [0.0, 0.0, 0.0]
     one = m.order_scores([1800.0], [1.0], max_order=0)
     assert one.tolist() == [1.0]
-    with pytest.raises(EstimatorError, match="must be one of reference, mae, got 'auc'"):
+    with pytest.raises(EstimatorError, match="must be one of reference, mae, train_mse, got 'auc'"):
         m.order_scores([1.0], [1.0], rule="auc")
 
 
@@ -272,5 +272,5 @@ def test_choose_order_default_rule_shapes_and_no_finite_score() -> None:
     # 1.0 - tol would round to 1 - 2^-24 in float32
     s32 = np.array([1.0, 1.0 - 2.0**-24], dtype=np.float32)
     assert choose_order(s32, 3 * 2.0**-26) == 1
-    with pytest.raises(EstimatorError, match="must be one of reference, mae, got 'aic'"):
+    with pytest.raises(EstimatorError, match="must be one of reference, mae, train_mse, got 'aic'"):
         choose_order(s, 1e-3, "aic")
