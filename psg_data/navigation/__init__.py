@@ -27,7 +27,9 @@
 - Simulation protocols (:mod:`._sim_benchmark`, :mod:`._sim_agent`): the paper's
   ``paper-sim-predictive`` / ``paper-sim-adaptive`` on the navigation benchmark's houses
   (:data:`SIM_PROTOCOLS`, :func:`run_sim_navigation`), the adaptive agent that looks while it walks,
-  updates its filters and switches targets (:func:`run_adaptive_episode`, :class:`HouseSight`).
+  updates its filters and switches targets (:func:`run_adaptive_episode`, :class:`HouseSight`; the
+  readings of the open choices: :data:`AGENT_MEMORIES`, :data:`ABSENCE_RULES`,
+  :data:`LAST_MAPS`).
 - Plots (:mod:`._plots`): :func:`plot_query`, :func:`plot_snapshot` (a predictive graph's snapshot on the map).
 - Doors (:mod:`._doors`, :mod:`._door_dataset`): door estimators' P(open) (:func:`fit_door_filters`,
   :func:`door_open_probabilities`), door-aware episodes with replanning at closed doors
@@ -121,8 +123,9 @@ from psg_data.navigation._runner import (
     run_navigation,
     score_records,
 )
-from psg_data.navigation._sim_agent import HouseSight, run_adaptive_episode
+from psg_data.navigation._sim_agent import ABSENCE_RULES, AGENT_MEMORIES, HouseSight, run_adaptive_episode
 from psg_data.navigation._sim_benchmark import (
+    LAST_MAPS,
     SIM_PROTOCOLS,
     SimProtocol,
     method_filters,
@@ -225,5 +228,8 @@ __all__ = [
     "scene_settings",
     "scene_split_ids",
     "HouseSight",
+    "ABSENCE_RULES",
+    "AGENT_MEMORIES",
+    "LAST_MAPS",
     "run_adaptive_episode",
 ]
