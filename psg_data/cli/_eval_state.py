@@ -63,10 +63,10 @@ def _bench(name: str, settings: dict[str, str], quiet: bool) -> Any:
     from psg_data.cli._progress import Progress
     from psg_data.datasets import door_benchmark, room_presence_benchmark
 
-    reader = {k: v for k, v in settings.items() if k != "patrol"}
+    reader: dict[str, Any] = {k: v for k, v in settings.items() if k != "patrol"}
     if "train_weeks" in reader:
         try:
-            reader["train_weeks"] = int(reader["train_weeks"])  # type: ignore[assignment]
+            reader["train_weeks"] = int(reader["train_weeks"])
         except ValueError:
             raise EvaluationError(f"--dataset {name}: train_weeks={reader['train_weeks']!r}; expected a whole "
                                   "number of weeks") from None

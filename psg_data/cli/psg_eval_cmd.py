@@ -259,8 +259,9 @@ def main(ctx: click.Context, dataset: str | None, estimators: tuple[str, ...], r
 
         raise EvaluationError(f"--protocol {protocol}: a protocol of the real benchmarks (--dataset door-benchmark or "
                               "room-presence-benchmark)")
-    check_protocol(task, protocol, given=ctx.get_parameter_source("protocol") != click.core.ParameterSource.DEFAULT)
+    given_protocol = ctx.get_parameter_source("protocol") != click.core.ParameterSource.DEFAULT
     protocol = protocol or "sim"
+    check_protocol(task, protocol, given=given_protocol)
     _check_rerun(rerun_file, task, overwrite, _eval_inputs(dataset, labels))
     deltas = parse_deltas(delta, task)
     p_opts = persistence_options(setting=setting, horizon=horizon, weighting=weighting, windows=windows, seeds=seeds)

@@ -226,9 +226,11 @@ def _row_job(bench: Any, row: StateRow, opts: StateRunOptions) -> tuple[list[dic
                 per_seed.append([{m: math.nan for m in METRICS} for _ in bench.periods])
                 continue
             summary = summary or getattr(est, "fit_summary_", None)
-        prepared = _WithHistory(est, hist) if est is not None else None
+        prepared: Any = _WithHistory(est, hist) if est is not None else None
         for k, p in enumerate(bench.periods):
-            e, h, te, truth = prepared, {}, tests[k], _scored(p.truth, opts.windows)
+            e: Any = prepared
+            h: dict[EdgeKey, EdgeStream] = {}
+            te, truth = tests[k], _scored(p.truth, opts.windows)
             if row.role == "hindsight":  # fitted on the period's own scored rows, then asked with nothing else
                 own = [EdgeStream(x, t[y >= 0], y[y >= 0]) for x, (t, y) in truth.items()]
                 e, msg = fit_estimator(row.label, factory, seed, own, None, bench.timezone)

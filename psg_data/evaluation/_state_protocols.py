@@ -80,7 +80,7 @@ class PatrolPlan:
     def hours(self) -> NDArray[np.float64]:
         """The patrol's local hours of a day."""
         n = int(np.floor((self.end_h - self.start_h) / self.step_h + 1e-9)) + 1
-        return self.start_h + self.step_h * np.arange(n)
+        return np.asarray(self.start_h + self.step_h * np.arange(n), dtype=np.float64)
 
     @property
     def label(self) -> str:
