@@ -16,7 +16,6 @@ from psg_data.cli.psg_data_cmd import main
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
 def test_default_results_folder_is_ignored_by_git(tmp_path: Path) -> None:
     """``psg-eval`` writes psg-eval-out/<timestamp>/ in the working directory: a clone ignores it."""
     repo = tmp_path / "clone"

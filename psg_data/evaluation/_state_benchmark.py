@@ -295,15 +295,13 @@ def run_state_benchmark(bench: Any, rows: Sequence[StateRow], opts: StateRunOpti
 
 
 def _interval(x: NDArray[np.float64]) -> tuple[float, float, float]:
-    """Mean, 95 % t half-width and standard deviation over periods (NaN half-width for one period)."""
-    from scipy import stats
+    """Mean, 95 % t half-width (:func:`~psg_data.evaluation.t_interval`) and standard deviation over periods."""
+    from psg_data.evaluation._intervals import t_interval
 
+    iv = t_interval(x, unit="test weeks")
     x = x[np.isfinite(x)]
-    if x.size == 0:
-        return math.nan, math.nan, math.nan
     sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
-    hw = float(stats.t.ppf(0.975, x.size - 1) * sd / math.sqrt(x.size)) if x.size > 1 else math.nan
-    return float(np.mean(x)), hw, sd
+    return iv.estimate, iv.high - iv.estimate, sd
 
 
 def summarize_state_run(run: StateRun, rows: Sequence[StateRow], *, one_hot: bool) -> dict[str, Any]:

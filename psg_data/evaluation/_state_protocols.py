@@ -118,8 +118,12 @@ def patrol_streams(rows: dict[EdgeKey, tuple[NDArray[np.float64], NDArray[Any]]]
     rng = np.random.default_rng([int(plan.seed), int(salt)])
     out: list[EdgeStream] = []
     first: NDArray[np.int8] | None = None
+    spans: dict[tuple[float, float], NDArray[np.float64]] = {}  # the edges of a benchmark share their rows' span
     for k, (e, (t, y)) in enumerate(rows.items()):
-        pt = plan.times(float(t[0]), float(t[-1]), timezone) if t.size else np.zeros(0)
+        span = (float(t[0]), float(t[-1])) if t.size else (0.0, -1.0)
+        if span not in spans:
+            spans[span] = plan.times(*span, timezone) if t.size else np.zeros(0)
+        pt = spans[span]
         i = np.clip(np.searchsorted(t, pt), 0, max(t.size - 1, 0))
         hit = (t.size > 0) & (np.abs(t[i] - pt) < 0.5) & (np.asarray(y)[i] >= 0)
         ts, ys = pt[hit], np.asarray(y)[i[hit]].astype(np.int8)

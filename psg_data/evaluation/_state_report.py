@@ -232,11 +232,15 @@ def _plot_weeks(doc: dict[str, Any], path: Path) -> None:
 
     fig = Figure(figsize=(9, 4.5))
     ax = fig.subplots()
+    from psg_data.evaluation._persistence_plots import _colours
+
     x = range(1, len(doc["periods"]) + 1)
-    for r in sorted(doc["rows"], key=lambda r: ROLE_ORDER.get(r["role"], 9)):
+    rows = sorted(doc["rows"], key=lambda r: ROLE_ORDER.get(r["role"], 9))
+    colours = dict(zip([r["label"] for r in rows], _colours([r["label"] for r in rows])))
+    for r in rows:
         y = [p.get("mse") if p.get("mse") is not None else float("nan") for p in r["per_period"]]
         style = {"hindsight": ":", "baseline": "--", "chance": ":", "authors": "-.", "method": "-"}[r["role"]]
-        ax.plot(list(x), y, style, marker="o", ms=3, label=f"{r['label']} ({r['role']})")
+        ax.plot(list(x), y, style, marker="o", ms=3, color=colours[r["label"]], label=f"{r['label']} ({r['role']})")
     ax.set_xticks(list(x), doc["periods"], rotation=30)
     ax.set_ylabel("mean squared error of P(state) (lower is better)")
     ax.set_title(f"{doc['info'].get('dataset', '')}, protocol {doc['protocol']}: error per test week")
