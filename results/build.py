@@ -1,0 +1,436 @@
+"""Rebuild RESULTS.md (and README's main-job table) from the runs listed in results/manifest.json.
+
+    python results/build.py                 # run what is stale, then rewrite the documents' blocks
+    python results/build.py --check         # exit 1 if a document differs from what the runs render
+    python results/build.py --quick         # the manifest's quick form (tiny sizes): every block renders
+    python results/build.py --list          # the runs, their commands and whether they are current
+
+A document holds its generated parts between markers; everything outside them is hand-written::
+
+    <!-- results:table main-job format=text -->...<!-- /results -->      a table of a run's results.json
+    <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
+    <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
+    <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
+    <!-- results:runs -->...<!-- /results -->                             the manifest: every run, its machine and time
+    <!-- results:revision -->...<!-- /results -->                         the one code revision of every run
+
+A run is current when its command and the code it ran (the git tree of ``psg_data/`` and
+``pyproject.toml``) equal today's; stale runs are rerun into ``--runs DIR`` (default
+``.results-runs/``, git-ignored): each into a temporary folder renamed into place when it ends, with
+``run.json`` (command, revision, machine, wall and CPU seconds, load). A folder without the builder's
+``run.json`` is never replaced. The documents are rewritten atomically, and only their blocks change.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+MANIFEST = ROOT / "results" / "manifest.json"
+DOCUMENTS = ("RESULTS.md", "README.md")
+CODE = ("psg_data", "pyproject.toml")
+"""What a run's numbers depend on: a change here makes every run stale."""
+BLOCK = re.compile(r"<!-- results:(?P<kind>[a-z-]+)(?P<args>[^>]*?) -->(?P<body>.*?)<!-- /results -->", re.S)
+
+
+class BuildError(Exception):
+    """One line for the user: which document, block, run or field, and what was expected."""
+
+
+# ---------------------------------------------------------------------------------------------- manifest
+
+
+@dataclass(frozen=True)
+class Run:
+    """One manifest entry: ``command`` (and its ``quick`` form) with ``{out}`` (the run's folder) and
+    ``{work}`` (a scratch folder of the builder), after the ``setup`` commands of the same form."""
+
+    id: str
+    purpose: str
+    command: str
+    setup: tuple[str, ...] = ()
+    quick: str | None = None
+    quick_setup: tuple[str, ...] = ()
+    env: tuple[tuple[str, str], ...] = ()
+
+    def form(self, quick: bool) -> tuple[tuple[str, ...], str | None]:
+        """(setup commands, command) of the full or quick form; command None: no quick form."""
+        return (self.quick_setup, self.quick) if quick else (self.setup, self.command)
+
+
+def load_manifest(path: Path = MANIFEST) -> list[Run]:
+    """The runs of ``path``, in order; one :class:`BuildError` for a malformed entry."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise BuildError(f"{path}: cannot read the manifest ({exc})") from None
+    runs, known = [], {"id", "purpose", "command", "setup", "quick", "quick_setup", "env"}
+    for k, e in enumerate(doc.get("runs", []) if isinstance(doc, dict) else []):
+        where = f"{path}: runs[{k}]"
+        if not isinstance(e, dict) or not isinstance(e.get("id"), str) or not isinstance(e.get("command"), str):
+            raise BuildError(f"{where}: expected an object with string fields id and command")
+        if set(e) - known:
+            raise BuildError(f"{where}: unknown field(s) {sorted(set(e) - known)}, expected {sorted(known)}")
+        runs.append(Run(e["id"], e.get("purpose", ""), e["command"], tuple(e.get("setup", ())), e.get("quick"),
+                        tuple(e.get("quick_setup", ())), tuple(sorted(e.get("env", {}).items()))))
+    ids = [r.id for r in runs]
+    if not runs or len(set(ids)) != len(ids):
+        raise BuildError(f"{path}: expected a non-empty list 'runs' with distinct ids")
+    return runs
+
+
+# ---------------------------------------------------------------------------------------------- running
+
+
+def _git(*args: str) -> str:
+    return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+
+
+def code_state() -> dict[str, Any]:
+    """The revision, the hash of the code a run depends on (:data:`CODE`) and whether it has local changes."""
+    rev = _git("rev-parse", "HEAD")
+    code = ":".join(_git("rev-parse", f"HEAD:{p}") for p in CODE)
+    dirty = bool(_git("status", "--porcelain", "--", *CODE))
+    return {"revision": rev, "code": code, "dirty": dirty}
+
+
+def machine() -> dict[str, Any]:
+    """What the wall times mean: platform, CPU model and count."""
+    model = platform.processor()
+    try:
+        model = next(ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                     if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"platform": platform.platform(), "cpu": model, "cpus": os.cpu_count(), "python": platform.python_version()}
+
+
+def _load() -> float | None:
+    return round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
+
+
+def _cpu_children() -> float:
+    try:
+        import resource
+    except ImportError:  # Windows: no CPU time of children
+        return float("nan")
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def _argv(command: str, subs: dict[str, str]) -> list[str]:
+    """The command's words with ``{out}`` / ``{work}`` filled in; ``psg-eval`` / ``psg-data`` from this Python."""
+    words = shlex.split(command)
+    for key, value in subs.items():
+        words = [w.replace("{" + key + "}", value) for w in words]
+    exe = Path(sys.executable).parent / words[0]
+    return [str(exe) if exe.exists() else words[0], *words[1:]]
+
+
+def is_current(folder: Path, command: str, state: dict[str, Any]) -> bool:
+    """The builder's run in ``folder`` ran ``command`` on today's code (and ended well)."""
+    try:
+        info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return (info.get("command") == command and info.get("code") == state["code"] and not info.get("dirty")
+            and info.get("exit_code") == 0 and not state["dirty"])
+
+
+def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], quiet: bool = False) -> Path:
+    """Run ``run`` (setup, then command) into a temporary folder and rename it to ``runs_dir/ID``."""
+    setup, command = run.form(quick)
+    assert command is not None
+    final, tmp = runs_dir / run.id, runs_dir / f".{run.id}.partial-{os.getpid()}"
+    if final.exists() and not (final / "run.json").exists():
+        raise BuildError(f"{final}: exists and is not a run this builder wrote (no run.json); move it away")
+    work = runs_dir / ".work" / run.id
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    subs, env = {"out": str(tmp), "work": str(work)}, {**os.environ, **dict(run.env)}
+    load0, cpu0, t0 = _load(), _cpu_children(), time.perf_counter()
+    started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    for cmd in (*setup, command):
+        argv = _argv(cmd, subs)
+        if not quiet:
+            print(f"results: {run.id}: {' '.join(shlex.quote(a) for a in argv)}", file=sys.stderr, flush=True)
+        rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL if quiet else None).returncode
+        if rc != 0:
+            raise BuildError(f"run {run.id}: {cmd!r} exited with {rc}")
+    if not (tmp / "results.json").is_file():
+        raise BuildError(f"run {run.id}: {command!r} wrote no {tmp}/results.json (it must write to --out {{out}})")
+    info = {"id": run.id, "command": command, "quick": quick, **state, "started": started,
+            "wall_s": round(time.perf_counter() - t0, 1), "cpu_s": round(_cpu_children() - cpu0, 1),
+            "load_before": load0, "load_after": _load(), "machine": machine(), "exit_code": 0}
+    (tmp / "run.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+    old = runs_dir / f".{run.id}.old-{os.getpid()}"
+    if final.exists():
+        final.rename(old)
+    tmp.rename(final)
+    shutil.rmtree(old, ignore_errors=True)
+    shutil.rmtree(work, ignore_errors=True)
+    return final
+
+
+# ---------------------------------------------------------------------------------------------- rendering
+
+
+_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\])?")
+
+
+def lookup(doc: Any, path: str) -> Any:
+    """``doc`` at ``path``: dotted keys, list indices, and ``key[field=value]`` for the list item whose
+    ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``)."""
+    cur = doc
+    for part in path.split("."):
+        m = _STEP.fullmatch(part)
+        if m is None:
+            raise BuildError(f"path {path!r}: cannot read step {part!r}")
+        key = m["key"]
+        if isinstance(cur, list) and key.isdigit() and int(key) < len(cur):
+            cur = cur[int(key)]
+        elif isinstance(cur, dict) and key in cur:
+            cur = cur[key]
+        elif isinstance(cur, dict) and key == "half_width" and {"ci_low", "ci_high"} <= set(cur):
+            cur = _half_width(cur)  # what a table's ± shows (psg_data.evaluation.Summary.half_width)
+        else:
+            raise BuildError(f"path {path!r}: no {key!r} at this step")
+        if m["field"] is not None:
+            hits = [x for x in cur if isinstance(x, dict) and str(x.get(m["field"])) == m["value"]] \
+                if isinstance(cur, list) else []
+            if len(hits) != 1:
+                raise BuildError(f"path {path!r}: expected one item with {m['field']}={m['value']}, found {len(hits)}")
+            cur = hits[0]
+    return cur
+
+
+def _half_width(summary: dict[str, Any]) -> float:
+    """Half the interval's width, as ``psg_data.evaluation.Summary.half_width`` (NaN without an interval)."""
+    lo, hi = summary["ci_low"], summary["ci_high"]
+    return (hi - lo) / 2.0 if lo is not None and hi is not None else float("nan")
+
+
+def _options(args: str, where: str) -> tuple[list[str], dict[str, str]]:
+    words = shlex.split(args)
+    is_opt = [re.match(r"[a-z_]+=", w) is not None for w in words]  # a path may hold '=' inside [...]
+    pos = [w for w, o in zip(words, is_opt) if not o]
+    opts = dict(w.split("=", 1) for w, o in zip(words, is_opt) if o)
+    if not pos and where not in ("runs", "revision"):
+        raise BuildError(f"results:{where}: expected a run id")
+    return pos, opts
+
+
+class Renderer:
+    """Renders blocks from the runs in ``runs_dir`` (read through psg-data's own results loader)."""
+
+    def __init__(self, runs: list[Run], runs_dir: Path) -> None:
+        self.runs, self.runs_dir = {r.id: r for r in runs}, runs_dir
+        self.used: set[str] = set()
+
+    def _folder(self, run_id: str) -> Path:
+        if run_id not in self.runs:
+            raise BuildError(f"run {run_id!r} is not in the manifest")
+        self.used.add(run_id)
+        folder = self.runs_dir / run_id
+        if not (folder / "results.json").is_file():
+            raise BuildError(f"run {run_id!r}: no {folder}/results.json (run the builder without --render-only)")
+        return folder
+
+    def _json(self, run_id: str, name: str = "results.json") -> Any:
+        return json.loads((self._folder(run_id) / name).read_text(encoding="utf-8"))
+
+    def block(self, kind: str, args: str) -> str:
+        """The new body of one block."""
+        pos, opts = _options(args, kind)
+        fn = getattr(self, "_" + kind.replace("-", "_"), None)
+        if fn is None:
+            raise BuildError(f"results:{kind}: unknown block kind (table, state, value, run, runs, revision)")
+        return str(fn(pos, opts))
+
+    def _table(self, pos: list[str], opts: dict[str, str]) -> str:
+        from psg_data.evaluation import load_results
+        from psg_data.evaluation._table_formats import markdown_table, select_table, table_grid
+        from psg_data.evaluation._tables import format_table
+
+        res = load_results(self._folder(pos[0]))
+        which = opts.get("table", "0")
+        tables = [t for k, t in enumerate(res.tables) if str(k) == which or t.name == which]
+        if len(tables) != 1:
+            raise BuildError(f"run {pos[0]}: no table {which!r} (tables: {[t.name for t in res.tables]})")
+        table = select_table(tables[0], metrics=opts["metrics"].split(",") if "metrics" in opts else None,
+                             references=opts.get("references", "yes") == "yes")
+        if opts.get("notes", "no") != "yes":
+            table = dataclasses.replace(table, notes=[])
+        if opts.get("format", "markdown") == "text":
+            return "\n```\n" + format_table(table) + "\n```\n"
+        return "\n" + markdown_table(table_grid(table)) + "\n"
+
+    def _state(self, pos: list[str], opts: dict[str, str]) -> str:
+        from psg_data.evaluation._state_report import render, state_tables
+
+        doc = self._json(pos[0])
+        title = f"{doc.get('info', {}).get('dataset', pos[0])}, protocol {doc['protocol']}"
+        names = ["headroom", "main", "per-week"]
+        want = opts.get("tables", "headroom,main,per-week").split(",")
+        if set(want) - set(names):
+            raise BuildError(f"results:state {pos[0]}: tables={opts['tables']!r}, expected some of {names}")
+        grids = state_tables(doc, title)[:3]
+        return "\n" + render([g for g, n in zip(grids, names) if n in want], "markdown") + "\n"
+
+    def _value(self, pos: list[str], opts: dict[str, str]) -> str:
+        if len(pos) != 2:
+            raise BuildError(f"results:value {' '.join(pos)}: expected RUN PATH")
+        v = lookup(self._json(pos[0]), pos[1])
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            return str(v)
+        v = float(v) * float(opts.get("scale", "1"))
+        return format(v, opts.get("fmt", ".3f"))
+
+    def _run(self, pos: list[str], opts: dict[str, str]) -> str:
+        info = self._json(pos[0], "run.json")
+        return (f"`{info['command'].replace(' --out {out}', '')}` (revision {info['revision'][:7]}, "
+                f"{info['started']}, {info['wall_s']:.0f} s wall, {info['cpu_s']:.0f} CPU-s, load "
+                f"{info['load_before']} -> {info['load_after']})")
+
+    def _runs(self, pos: list[str], opts: dict[str, str]) -> str:
+        rows = ["| run | command | revision | started (UTC) | wall s | CPU s | load |", "|---|---|---|---|---:|---:|---|"]
+        machines, wall, cpu = set(), 0.0, 0.0
+        for rid in self.runs:
+            try:
+                info = self._json(rid, "run.json")
+            except (BuildError, OSError, ValueError):
+                rows.append(f"| {rid} | `{self.runs[rid].command}` | not run | | | | |")
+                continue
+            machines.add(f"{info['machine']['cpus']} x {info['machine']['cpu']}, {info['machine']['platform']}")
+            wall, cpu = wall + info["wall_s"], cpu + info["cpu_s"]
+            rows.append(f"| {rid} | `{info['command'].replace(' --out {out}', '')}` | {info['revision'][:7]} | "
+                        f"{info['started']} | {info['wall_s']:.0f} | {info['cpu_s']:.0f} | "
+                        f"{info['load_before']} -> {info['load_after']} |")
+        rows.append(f"| all | | | | {wall:.0f} | {cpu:.0f} | |")
+        return "\n" + "\n".join(rows) + "\n\nMachine: " + "; ".join(sorted(machines) or ["-"]) + "\n"
+
+    def _revision(self, pos: list[str], opts: dict[str, str]) -> str:
+        revs = set()
+        for rid in self.runs:
+            try:
+                revs.add(self._json(rid, "run.json")["code"])
+            except (BuildError, OSError, ValueError):
+                continue
+        if len(revs) > 1:
+            raise BuildError("the runs were made on different code (rerun the stale ones: results/build.py)")
+        info = [self._json(rid, "run.json") for rid in self.runs if (self.runs_dir / rid / "run.json").exists()]
+        return min((i["revision"][:7] for i in info), default="-")
+
+
+def render_text(text: str, renderer: Renderer, name: str) -> str:
+    """``text`` with every block's body replaced by what the renderer makes of it."""
+    def sub(m: re.Match[str]) -> str:
+        try:
+            body = renderer.block(m["kind"], m["args"])
+        except BuildError as exc:
+            line = text.count("\n", 0, m.start()) + 1
+            raise BuildError(f"{name}:{line}: results:{m['kind']}{m['args']}: {exc}") from None
+        return f"<!-- results:{m['kind']}{m['args']} -->{body}<!-- /results -->"
+    return BLOCK.sub(sub, text)
+
+
+def write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+# ---------------------------------------------------------------------------------------------- command
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="results/build.py", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n\n", 1)[1])
+    p.add_argument("--runs", type=Path, default=None, help="folder of the runs (default .results-runs/, "
+                   "--quick: .results-quick/)")
+    p.add_argument("--quick", action="store_true", help="the manifest's quick form; documents are rendered into "
+                   "RUNS/rendered/, never over the real ones")
+    p.add_argument("--check", action="store_true", help="render and compare, write nothing; exit 1 on a difference")
+    p.add_argument("--render-only", action="store_true", help="run nothing; render from the runs there are")
+    p.add_argument("--only", action="append", default=[], metavar="ID", help="run only these runs (repeatable)")
+    p.add_argument("--list", action="store_true", help="the runs and whether each is current; run nothing")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines, no output of the runs")
+    a = p.parse_args(argv)
+    try:
+        return _build(a)
+    except BuildError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+
+
+def _build(a: argparse.Namespace) -> int:
+    runs = load_manifest()
+    runs_dir = (a.runs or ROOT / (".results-quick" if a.quick else ".results-runs")).resolve()
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    state = code_state()
+    if state["dirty"] and not (a.quick or a.check or a.render_only or a.list):
+        raise BuildError(f"{', '.join(CODE)} have uncommitted changes: commit them so each run names its code")
+    todo = [r for r in runs if (not a.only or r.id in a.only) and r.form(a.quick)[1] is not None
+            and not is_current(runs_dir / r.id, r.form(a.quick)[1] or "", state)]
+    if a.list:
+        for r in runs:
+            status = "no quick form" if r.form(a.quick)[1] is None else ("stale" if r in todo else "current")
+            print(f"{r.id:28s} {status:14s} {r.form(a.quick)[1] or r.command}")
+        return 0
+    if not (a.check or a.render_only):
+        for k, r in enumerate(todo, 1):
+            if not a.quiet:
+                print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
+            execute(r, runs_dir, quick=a.quick, state=state, quiet=a.quiet)
+    return _render(runs, runs_dir, a)
+
+
+def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:
+    renderer, changed = Renderer(runs, runs_dir), []
+    skipped = {r.id for r in runs if r.form(a.quick)[1] is None}
+    for name in DOCUMENTS:
+        path = ROOT / name
+        old = path.read_text(encoding="utf-8")
+        if a.quick and skipped:  # blocks of runs without a quick form stay as they are
+            renderer.runs = {k: v for k, v in renderer.runs.items() if k not in skipped}
+            new = BLOCK.sub(lambda m: m[0] if _run_of(m) in skipped else render_text(m[0], renderer, name), old)
+        else:
+            new = render_text(old, renderer, name)
+        if a.quick:
+            (runs_dir / "rendered").mkdir(exist_ok=True)
+            write_atomic(runs_dir / "rendered" / name, new)
+        elif new != old:
+            changed.append(name)
+            if not a.check:
+                write_atomic(path, new)
+    n_blocks = sum(len(BLOCK.findall((ROOT / d).read_text(encoding="utf-8"))) for d in DOCUMENTS)
+    if not a.quiet:
+        print(f"results: {n_blocks} blocks rendered from {len(renderer.used)} runs"
+              + (f" ({len(skipped)} runs without a quick form left as they are: {', '.join(sorted(skipped))})"
+                 if a.quick and skipped else "")
+              + (f"; changed: {', '.join(changed)}" if changed else "; documents unchanged"), file=sys.stderr)
+    return 1 if a.check and changed else 0
+
+
+def _run_of(m: re.Match[str]) -> str:
+    words = shlex.split(m["args"])
+    return words[0] if words else ""
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,145 @@
+"""results/build.py: RESULTS.md and README blocks rendered from the runs of results/manifest.json (issue 45, point 5).
+
+The quick form runs the manifest's tiny commands for real (psg-data synth, psg-eval) and renders every block of
+the documents whose run has a quick form; the rest pins the path language, the block parser, the cache rule and
+the atomic, never-clobbering run folders.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("results_build", ROOT / "results" / "build.py")
+assert _spec is not None and _spec.loader is not None
+build = importlib.util.module_from_spec(_spec)
+sys.modules["results_build"] = build
+_spec.loader.exec_module(build)
+
+
+def test_lookup_follows_keys_indices_and_selectors() -> None:
+    """A value path: keys, indices, [field=value] selectors (the value may hold "="), half_width derived."""
+    doc = {"tables": [{"rows": [{"method": "fremen:max_order=5", "values": {"mae": {"mean": 0.25, "ci_low": 0.1,
+                                                                                   "ci_high": 0.5}}},
+                                {"method": "fremen", "values": {"mae": {"mean": 0.5}}}]}]}
+    assert build.lookup(doc, "tables.0.rows[method=fremen].values.mae.mean") == 0.5
+    assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.mean") == 0.25
+    assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.half_width") == pytest.approx(0.2)
+    for bad in ("tables.1", "tables.0.rows[method=perpetua].values", "tables.0.rows.values", "nope"):
+        with pytest.raises(build.BuildError, match="path"):
+            build.lookup(doc, bad)
+
+
+def _renderer(tmp_path: Path, doc: dict) -> object:
+    run = build.Run("r", "", "psg-eval --out {out}")
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "results.json").write_text(json.dumps(doc))
+    return build.Renderer([run], tmp_path)
+
+
+def test_render_replaces_only_block_bodies(tmp_path: Path) -> None:
+    """Only what lies between the markers changes; prose numbers outside stay; a second render changes nothing."""
+    r = _renderer(tmp_path, {"x": {"y": 0.123456}, "name": "lab"})
+    text = ("Prose 0.9 stays. <!-- results:value r x.y fmt=.2f -->0.99<!-- /results --> and "
+            "<!-- results:value r x.y scale=100 fmt=.1f -->1<!-- /results --> % of "
+            "<!-- results:value r name -->?<!-- /results -->.\n")
+    out = build.render_text(text, r, "DOC.md")
+    assert out == ("Prose 0.9 stays. <!-- results:value r x.y fmt=.2f -->0.12<!-- /results --> and "
+                   "<!-- results:value r x.y scale=100 fmt=.1f -->12.3<!-- /results --> % of "
+                   "<!-- results:value r name -->lab<!-- /results -->.\n")
+    assert build.render_text(out, r, "DOC.md") == out  # rendering is idempotent
+
+
+@pytest.mark.parametrize(("block", "message"), [
+    ("<!-- results:value other x.y -->1<!-- /results -->", "run 'other' is not in the manifest"),
+    ("<!-- results:value r x.z -->1<!-- /results -->", "no 'z'"),
+    ("<!-- results:bogus r -->1<!-- /results -->", "unknown block kind"),
+    ("<!-- results:value r -->1<!-- /results -->", "expected RUN PATH"),
+])
+def test_a_bad_block_names_document_and_line(tmp_path: Path, block: str, message: str) -> None:
+    """One error naming the document, its line and the block, for each way a block can be wrong."""
+    r = _renderer(tmp_path, {"x": {"y": 1.0}})
+    with pytest.raises(build.BuildError, match=r"^DOC\.md:3: results:") as exc:
+        build.render_text("a\nb\n" + block + "\n", r, "DOC.md")
+    assert message in str(exc.value)
+
+
+def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() -> None:
+    """RESULTS.md and README.md: every marker parses, names a known kind and a run of the manifest."""
+    ids = {r.id for r in build.load_manifest()}
+    kinds = {"table", "state", "value", "run", "runs", "revision"}
+    seen = 0
+    for name in build.DOCUMENTS:
+        for m in build.BLOCK.finditer((ROOT / name).read_text(encoding="utf-8")):
+            seen += 1
+            assert m["kind"] in kinds, (name, m[0][:80])
+            words = m["args"].split()
+            assert m["kind"] in ("runs", "revision") or words[0] in ids, (name, m[0][:80])
+    assert seen >= 20
+    # a marker the parser does not see (a typo in the closing tag) would leave a stale number unnoticed
+    for name in build.DOCUMENTS:
+        text = (ROOT / name).read_text(encoding="utf-8")
+        assert text.count("<!-- results:") == len(build.BLOCK.findall(text)), name
+
+
+WRITES_RESULTS = ("import json, os, sys; os.makedirs(sys.argv[1]); "
+                  "json.dump({'v': 1}, open(sys.argv[1] + '/results.json', 'w'))")
+
+
+def _script_run(tmp_path: Path, code: str) -> object:
+    return build.Run("s", "", f"python -c {code!r} {{out}}")
+
+
+def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path) -> None:
+    """A run lands in RUNS/ID with run.json (the cache key); a folder the builder did not write is refused."""
+    run = _script_run(tmp_path, WRITES_RESULTS)
+    state = {"revision": "abc", "code": "tree", "dirty": False}
+    folder = build.execute(run, tmp_path, quick=False, state=state, quiet=True)
+    info = json.loads((folder / "run.json").read_text())
+    assert folder == tmp_path / "s" and info["command"] == run.command and info["code"] == "tree"
+    assert build.is_current(folder, run.command, state)
+    assert not build.is_current(folder, run.command, {**state, "code": "other"})
+    assert not build.is_current(folder, run.command + " -x", state)
+    assert [p.name for p in tmp_path.iterdir()] in (["s", ".work"], [".work", "s"])
+    build.execute(run, tmp_path, quick=False, state=state, quiet=True)  # its own run: replaced
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    with pytest.raises(build.BuildError, match="not a run this builder wrote"):
+        build.execute(build.Run("mine", "", run.command), tmp_path, quick=False, state=state, quiet=True)
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+def test_a_failing_run_leaves_the_previous_one(tmp_path: Path) -> None:
+    """A run that fails replaces nothing: the last good results stay."""
+    state = {"revision": "abc", "code": "tree", "dirty": False}
+    build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=state, quiet=True)
+    with pytest.raises(build.BuildError, match="exited with 3"):
+        build.execute(_script_run(tmp_path, "import sys; sys.exit(3)"), tmp_path, quick=False, state=state, quiet=True)
+    assert json.loads((tmp_path / "s" / "results.json").read_text()) == {"v": 1}
+
+
+@pytest.mark.slow
+def test_quick_form_renders_every_block_from_real_runs(tmp_path: Path) -> None:
+    """CI's quick form: the tiny runs made for real, every block with a quick run rendered from them."""
+    runs = tmp_path / "runs"
+    res = subprocess.run([sys.executable, str(ROOT / "results" / "build.py"), "--quick", "--runs", str(runs), "-q"],
+                         capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stderr[-2000:]
+    rendered = (runs / "rendered" / "README.md").read_text(encoding="utf-8")
+    committed = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = re.compile(r"<!-- results:table main-job format=text -->\n```\n(.*?)```", re.S)
+    new, old = block.search(rendered), block.search(committed)
+    assert new and old
+    methods = lambda t: [ln.split()[0] for ln in t.splitlines()[4:] if ln.strip()]  # noqa: E731
+    assert methods(new[1]) == methods(old[1])  # the same rows, from the tiny lab's run
+    assert new[1] != old[1]
+    assert (ROOT / "README.md").read_text(encoding="utf-8") == committed  # --quick never writes the documents
+    info = json.loads((runs / "main-job" / "run.json").read_text())
+    assert info["quick"] is True and info["exit_code"] == 0 and info["cpu_s"] > 0
