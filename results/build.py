@@ -172,6 +172,8 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL if quiet else None).returncode
         if rc != 0:
             raise BuildError(f"run {run.id}: {cmd!r} exited with {rc}")
+    if code_state() != state:
+        raise BuildError(f"run {run.id}: {', '.join(CODE)} changed while it ran; its numbers name no one revision")
     if not (tmp / "results.json").is_file():
         raise BuildError(f"run {run.id}: {command!r} wrote no {tmp}/results.json (it must write to --out {{out}})")
     info = {"id": run.id, "command": command, "quick": quick, **state, "started": started,

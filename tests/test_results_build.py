@@ -97,13 +97,17 @@ def _script_run(tmp_path: Path, code: str) -> object:
     return build.Run("s", "", f"python -c {code!r} {{out}}")
 
 
-def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path) -> None:
+CLEAN = {"revision": "a" * 40, "code": "tree:blob", "dirty": False}
+
+
+def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A run lands in RUNS/ID with run.json (the cache key); a folder the builder did not write is refused."""
     run = _script_run(tmp_path, WRITES_RESULTS)
-    state = {"revision": "abc", "code": "tree", "dirty": False}
+    monkeypatch.setattr(build, "code_state", lambda: dict(CLEAN))  # the repository's own state may be dirty
+    state = dict(CLEAN)
     folder = build.execute(run, tmp_path, quick=False, state=state, quiet=True)
     info = json.loads((folder / "run.json").read_text())
-    assert folder == tmp_path / "s" and info["command"] == run.command and info["code"] == "tree"
+    assert folder == tmp_path / "s" and info["command"] == run.command and info["code"] == state["code"]
     assert build.is_current(folder, run.command, state)
     assert not build.is_current(folder, run.command, {**state, "code": "other"})
     assert not build.is_current(folder, run.command + " -x", state)
@@ -116,12 +120,16 @@ def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path) ->
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 
 
-def test_a_failing_run_leaves_the_previous_one(tmp_path: Path) -> None:
-    """A run that fails replaces nothing: the last good results stay."""
-    state = {"revision": "abc", "code": "tree", "dirty": False}
+def test_a_failing_run_leaves_the_previous_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run that fails, or whose code changed while it ran, replaces nothing: the last good results stay."""
+    monkeypatch.setattr(build, "code_state", lambda: dict(CLEAN))  # the repository's own state may be dirty
+    state = dict(CLEAN)
     build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=state, quiet=True)
     with pytest.raises(build.BuildError, match="exited with 3"):
         build.execute(_script_run(tmp_path, "import sys; sys.exit(3)"), tmp_path, quick=False, state=state, quiet=True)
+    with pytest.raises(build.BuildError, match="changed while it ran"):
+        build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state={**state, "code": "x"},
+                      quiet=True)
     assert json.loads((tmp_path / "s" / "results.json").read_text()) == {"v": 1}
 
 

@@ -103,3 +103,28 @@ def test_cluster_bootstrap_is_deterministic_and_keeps_units_whole() -> None:
     # a unit with zero weight is dropped, not resampled
     c = cluster_bootstrap(np.append(num, 9.0), np.append(den, 0.0), seed=5)
     assert c.n == 10 and c.estimate == pytest.approx(a.estimate)
+
+
+def _bootstrap_uncached(num: np.ndarray, den: np.ndarray, n_bootstrap: int, seed: int) -> tuple[float, float]:
+    """The expanded percentile bootstrap written out with fresh draws (what cluster_bootstrap computed before
+    its resample counts were shared between calls)."""
+    n = num.size
+    counts = np.random.default_rng(seed).multinomial(n, np.full(n, 1.0 / n), size=n_bootstrap).astype(np.float64)
+    stat = (counts @ num) / (counts @ den)
+    a = float(stats.norm.cdf(np.sqrt(n / (n - 1)) * stats.t.ppf((1.0 - 0.95) / 2.0, n - 1)))
+    lo, hi = np.nanquantile(stat, [a, 1.0 - a])
+    return float(lo), float(hi)
+
+
+def test_shared_resample_counts_give_the_fresh_draws_intervals_exactly() -> None:
+    """Many intervals in a row, with unit counts and seeds interleaved: each equals its own fresh-draw bootstrap
+    bit for bit, and no call can change the counts another sees."""
+    rng = np.random.default_rng(5)
+    for n, seed in [(21, 0), (12, 0), (21, 0), (21, 3), (12, 0), (40, 1), (21, 0)]:
+        num, den = rng.random(n), rng.random(n) + 0.25
+        iv = cluster_bootstrap(num, den, n_bootstrap=500, seed=seed)
+        assert (iv.low, iv.high) == _bootstrap_uncached(num, den, 500, seed)
+    from psg_data.evaluation._intervals import _resample_counts
+
+    with pytest.raises(ValueError):
+        _resample_counts(21, 500, 0)[0, 0] = 99.0
