@@ -4,7 +4,9 @@
 every queued task to run to the end (a Ctrl-C of ``psg-eval -j -1`` took 17-23 s), and each worker
 gets the terminal's SIGINT too and prints its own traceback. Here the workers ignore SIGINT (the
 parent handles it), and when the ``with`` body raises, queued tasks are cancelled and the workers
-terminated before the exception goes on. Multiprocessing's resource tracker (a process started with
+terminated before the exception goes on; a worker whose parent is killed (SIGTERM, SIGHUP of a
+closed terminal, SIGKILL) ends by itself within a second instead of finishing its task for nobody.
+Multiprocessing's resource tracker (a process started with
 the first pool, which otherwise ends only after the command has exited, left behind in its process
 group) is stopped and reaped at exit, after the queues' semaphores are released.
 """
@@ -13,7 +15,10 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import os
 import signal
+import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
@@ -21,13 +26,28 @@ from typing import Any
 __all__ = ["process_pool"]
 
 _JOIN_S = 1.0
+_PARENT_POLL_S = 0.5
+"""How often a worker looks whether its parent is still there (seconds)."""
 
 
 _MASKS = hasattr(signal, "pthread_sigmask")
 
 
-def _init(initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> None:
+def _watch_parent(parent: int) -> None:
+    """End this worker once its parent is gone (killed by SIGTERM, SIGHUP or SIGKILL, it cannot stop us).
+
+    Polling ``os.getppid()`` works on every platform (a worker re-parented to init, or to a subreaper,
+    sees another pid); ``prctl(PR_SET_PDEATHSIG)`` would be Linux only and fires on the death of the
+    parent's *thread*. ``os._exit``: no cleanup of a task that has no one to report to.
+    """
+    while os.getppid() == parent:
+        time.sleep(_PARENT_POLL_S)
+    os._exit(1)
+
+
+def _init(initializer: Callable[..., Any] | None, initargs: tuple[Any, ...], parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a worker of ours: the parent stops it
+    threading.Thread(target=_watch_parent, args=(parent,), name="psg-data-parent-watch", daemon=True).start()
     if _MASKS:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # started blocked (see _start_all)
     if initializer is not None:
@@ -98,7 +118,7 @@ def process_pool(max_workers: int, initializer: Callable[..., Any] | None = None
     """
     _stop_tracker_at_exit()
     pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_init, initargs=(initializer, tuple(initargs)))
+                               initializer=_init, initargs=(initializer, tuple(initargs), os.getpid()))
     try:
         _start_all(pool, max_workers)
         yield pool
