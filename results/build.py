@@ -327,16 +327,12 @@ class Renderer:
         return "\n" + "\n".join(rows) + "\n\nMachine: " + "; ".join(sorted(machines) or ["-"]) + "\n"
 
     def _revision(self, pos: list[str], opts: dict[str, str]) -> str:
-        revs = set()
-        for rid in self.runs:
-            try:
-                revs.add(self._json(rid, "run.json")["code"])
-            except (BuildError, OSError, ValueError):
-                continue
-        if len(revs) > 1:
-            raise BuildError("the runs were made on different code (rerun the stale ones: results/build.py)")
-        info = [self._json(rid, "run.json") for rid in self.runs if (self.runs_dir / rid / "run.json").exists()]
-        return min((i["revision"][:7] for i in info), default="-")
+        infos = [self._json(rid, "run.json") for rid in self.runs if (self.runs_dir / rid / "run.json").exists()]
+        codes = {i["code"] for i in infos}
+        revs = sorted({i["revision"][:7] for i in infos})
+        if len(codes) <= 1:
+            return revs[0] if revs else "-"
+        return f"(not one: the runs were made at {', '.join(revs)}; `python results/build.py` reruns the stale ones)"
 
 
 def render_text(text: str, renderer: Renderer, name: str) -> str:
