@@ -60,6 +60,9 @@ MAX_DEPTH = 64
 """Deepest JSON nesting accepted."""
 Y_UP_TO_Z_UP = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
 """HOV-SG's y-up frame to psg-data's z-up frame: (x, y, z) -> (x, -z, y)."""
+CG_ROUNDING_M = {"scene_graph": 0.1, "obj_json": 0.01}
+"""ConceptGraphs' rounding of ``bbox_extent`` (``np.round(extent, 1)`` in ``generate_scenegraph_json``,
+``round(val, 2)`` in ``save_obj_json``): a side written as 0 is read as half a step."""
 _PICKLE_SUFFIXES = (".pkl", ".pickle", ".pkl.gz", ".pickle.gz")
 
 
@@ -231,13 +234,18 @@ def _vec(v: Any, n: int, where: str, what: str) -> NDArray[np.float64]:
     return a
 
 
-def _box_node(scan_id: str, label: Any, center: Any, extent: Any, R: NDArray[np.float64], where: str) -> _Node:
+def _box_node(scan_id: str, label: Any, center: Any, extent: Any, R: NDArray[np.float64], where: str,
+              rounded_to: float = 0.0) -> _Node:
+    """One node; ``rounded_to``: the tool's rounding step of the extent (a zero side becomes half of it)."""
     if not isinstance(label, str) or not label.strip():
         raise _err(where, f"label {label!r}, expected a non-empty string")
     c = _vec(center, 3, where, "box centre")
     e = _vec(extent, 3, where, "box extent")
+    if rounded_to > 0 and np.all(e >= 0) and np.any(e > 0):
+        e = np.where(e == 0, rounded_to / 2, e)  # a side the tool rounded to 0 is shorter than half a step
     if not np.all(e > 0):
-        raise _err(where, f"box extent {e.tolist()}, expected 3 positive side lengths (a box with non-zero volume)")
+        raise _err(where, f"box extent {e.tolist()}, expected 3 positive side lengths (a box with non-zero volume)"
+                   + (f"; a side rounded to 0 is read as {rounded_to / 2:g} m, not all three" if rounded_to else ""))
     return _Node(scan_id, label.strip(), c, e, R, where)
 
 
@@ -248,10 +256,10 @@ def _read_conceptgraphs(p: Path, scan_id: str) -> list[_Node]:
     data = _load_json(p)
     if isinstance(data, dict) and all(isinstance(v, dict) for v in data.values()):
         items = list(data.items())  # realtime obj_json: {"object_N": {...}}
-        rel_glob = "edge_json_*.json"
+        rel_glob, step = "edge_json_*.json", CG_ROUNDING_M["obj_json"]
     elif isinstance(data, list):
         items = [(f"#{i}", v) for i, v in enumerate(data)]
-        rel_glob = "cfslam_object_relations.json"
+        rel_glob, step = "cfslam_object_relations.json", CG_ROUNDING_M["scene_graph"]
     else:
         raise _err(str(p), "expected a ConceptGraphs scene_graph.json list or an obj_json {\"object_N\": {...}} map")
     nodes: list[_Node] = []
@@ -268,7 +276,7 @@ def _read_conceptgraphs(p: Path, scan_id: str) -> list[_Node]:
         if "bbox_center" not in rec or "bbox_extent" not in rec:
             raise _err(where, "no box (bbox_center, bbox_extent), expected both")
         nodes.append(_box_node(scan_id, rec.get("object_tag"), rec["bbox_center"], rec["bbox_extent"], np.eye(3),
-                               where))
+                               where, rounded_to=step))
         ids[rec["id"]] = nodes[-1]
     # cfslam relations name nodes by their position in scene_graph.json (build_scenegraph's segmentidx into
     # the pruned map, which generate_scenegraph_json writes in order); edge_json by obj_json's id

@@ -205,8 +205,10 @@ HOSTILE = {
                   r"scene_graph\.json: node 7: no box"),
     "cg_nan_box": (lambda r: _cg_session(r, "scan_00", [_node(4, "mug", [0.0, float("nan"), 1.0])]),
                    r"scene_graph\.json: node 4: box centre: .*expected 3 finite numbers"),
-    "cg_zero_volume": (lambda r: _cg_session(r, "scan_00", [_node(5, "mug", [0, 0, 1], [0.1, 0.0, 0.1])]),
-                       r"scene_graph\.json: node 5: box extent .*non-zero volume"),
+    "cg_zero_volume": (lambda r: _cg_session(r, "scan_00", [_node(5, "mug", [0, 0, 1], [0.0, 0.0, 0.0])]),
+                       r"scene_graph\.json: node 5: box extent .*non-zero volume.*not all three"),
+    "cg_negative_extent": (lambda r: _cg_session(r, "scan_00", [_node(6, "mug", [0, 0, 1], [0.1, -0.1, 0.0])]),
+                           r"scene_graph\.json: node 6: box extent \[0\.1, -0\.1, 0\.0\], expected 3 positive"),
     "cg_duplicate_id": (lambda r: _cg_session(r, "scan_00", [_node(3, "mug", [0, 0, 1]), _node(3, "mug", [0, 0, 2])]),
                         r"scene_graph\.json: node 3: duplicate id"),
     "cg_unknown_relation": (lambda r: _cg_session(r, "scan_00", [_node(0, "mug", [0, 0, 1])], [
@@ -408,3 +410,21 @@ def test_hydra_output_folder_reads_the_backend_graph_once(scene: Path, tmp_path:
     with pytest.raises(LabelingError, match=r"scan_00: 2 conceptgraphs scene graphs in one session folder "
                                             r"\(obj_json_run\.json, sg_cache/scene_graph\.json\)"):
         read_any_detections(open_dataset(scene), cg)
+
+
+def test_conceptgraphs_rounded_zero_side_is_half_a_step(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """ConceptGraphs rounds bbox_extent (scene_graph.json to 0.1 m, obj_json to 0.01 m): a side written as 0
+    (a thin book) is read as half a step; Spark-DSG and HOV-SG have no such rounding (zero stays refused)."""
+    root = tmp_path / "cg"
+    _cg_session(root, "scan_00", [_node(0, "mug", [1.0, 0.0, 0.8], [0.2, 0.0, 0.0])])
+    det = read_any_detections(open_dataset(scene), root)
+    np.testing.assert_array_equal(det.box_extent_m, [[0.2, 0.05, 0.05]])
+    rt = tmp_path / "rt" / "scan_00"
+    rt.mkdir(parents=True)
+    (rt / "obj_json_x.json").write_text(json.dumps({"object_1": _node(3, "mug", [1.0, 0.0, 0.8], [0.31, 0.0, 0.02])}))
+    det = read_any_detections(open_dataset(scene), tmp_path / "rt")
+    np.testing.assert_array_equal(det.box_extent_m, [[0.31, 0.005, 0.02]])
+    with pytest.raises(LabelingError, match=r"dsg\.json: node \d+: box extent \[0\.2, 0\.0, 0\.2\], expected 3 positive"):
+        read_any_detections(open_dataset(scene), _spark_file(tmp_path / "h" / "scan_00" / "dsg.json", bbox={
+            "type": "AABB", "dimensions": [0.2, 0.0, 0.2], "world_P_center": [0, 0, 1],
+            "world_R_center": {"w": 1, "x": 0, "y": 0, "z": 0}}).parent.parent)
