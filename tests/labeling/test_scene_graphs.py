@@ -428,3 +428,49 @@ def test_conceptgraphs_rounded_zero_side_is_half_a_step(scene: Path, tmp_path: P
         read_any_detections(open_dataset(scene), _spark_file(tmp_path / "h" / "scan_00" / "dsg.json", bbox={
             "type": "AABB", "dimensions": [0.2, 0.0, 0.2], "world_P_center": [0, 0, 1],
             "world_R_center": {"w": 1, "x": 0, "y": 0, "z": 0}}).parent.parent)
+
+
+def test_class_list_maps_numeric_labels(scene: Path, tmp_path: Path, caplog) -> None:  # noqa: F811
+    """A class list in the mapping (a --class_set file, one class per line, read as ConceptGraphs reads it):
+    numeric labels are its lines; class names then map by name or synonym; the rest is counted and reported."""
+    import logging
+
+    caplog.set_level(logging.INFO, logger="psg_data.labeling._scene_graphs")
+    root = tmp_path / "cg"
+    (tmp_path / "cg").mkdir()
+    (root / "my_classes.txt").write_text("wall\n  coffee mug \n\ntable\nchair\n")  # line 2 empty: ids keep lines
+    _cg_session(root, "scan_00", [_node(0, "1", [1.0, 0.0, 0.8]), _node(1, "3", [1.0, 0.0, 0.5]),
+                                  _node(2, "9", [2.0, 0.0, 0.5]), _node(3, "2", [2.0, 0.0, 0.5]),
+                                  _node(4, "4", [2.0, 0.0, 0.5]), _node(5, "table", [1.0, 1.0, 0.5])])
+    (root / "psg_mapping.json").write_text(json.dumps({"classes": "my_classes.txt",
+                                                       "synonyms": {"coffee mug": "mug"}}))
+    det = read_any_detections(open_dataset(scene), root)
+    assert sorted(zip(det.label.tolist(), det.kind.tolist(), det.box_center_m[:, 1].tolist())) == [
+        ("mug", "object", 0.0), ("table", "receptacle", 0.0), ("table", "receptacle", 1.0)]
+    assert "3 scene-graph nodes with 3 labels that are no dataset object or receptacle" in caplog.text
+    assert "9 = class 9 (not in the class list of 5)" in caplog.text and "4 = chair (1)" in caplog.text
+    assert "2 of 4 classes of the class list name dataset objects or receptacles (coffee mug, table)" in caplog.text
+    # without the class list the numbers are labels of their own: nothing maps but the named table
+    (root / "psg_mapping.json").write_text(json.dumps({"synonyms": {"coffee mug": "mug"}}))
+    assert read_any_detections(open_dataset(scene), root).label.tolist() == ["table"]
+    (root / "psg_mapping.json").write_text(json.dumps({"classes": "missing.txt"}))
+    with pytest.raises(LabelingError, match=r"psg_mapping\.json: classes: cannot read class list .*missing\.txt"):
+        read_any_detections(open_dataset(scene), root)
+
+
+def test_class_list_names_spark_dsg_semantic_labels(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """A Spark-DSG graph without a label space: with a class list, semantic_label i is the list's line i."""
+    G = spark_dsg.DynamicSceneGraph()
+    for i, (sem, z) in enumerate([(2, 0.9), (0, 0.5)]):
+        a = spark_dsg.ObjectNodeAttributes()
+        a.name, a.semantic_label = f"O({i})", sem
+        a.bounding_box = spark_dsg.BoundingBox(np.array([0.2, 0.2, 0.2]), np.array([1.0, 0.0, z]))
+        G.add_node(spark_dsg.DsgLayers.OBJECTS, spark_dsg.NodeSymbol("O", i).value, a)
+    (tmp_path / "hydra" / "scan_01").mkdir(parents=True)
+    G.save(str(tmp_path / "hydra" / "scan_01" / "dsg.json"), include_mesh=False)
+    (tmp_path / "hydra" / "psg_mapping.json").write_text(json.dumps({"classes": ["table", "wall", "mug"]}))
+    det = read_any_detections(open_dataset(scene), tmp_path / "hydra")
+    assert sorted(zip(det.label.tolist(), np.round(det.box_center_m[:, 2], 6).tolist())) == [("mug", 0.9),
+                                                                                              ("table", 0.5)]
+    (tmp_path / "hydra" / "psg_mapping.json").write_text(json.dumps({"synonyms": {"O(0)": "mug"}}))
+    assert read_any_detections(open_dataset(scene), tmp_path / "hydra").label.tolist() == ["mug"]  # by name
