@@ -27,7 +27,11 @@ label}, "classes": class-list file or [names], "transform": 4x4 world-from-graph
 list (the tool's ``--class_set`` file, one class per line), a numeric label ``i`` (a digit string, or a
 Spark-DSG ``semantic_label`` outside the file's label space) is the list's line ``i``. A label is an
 object when it (or its synonym) is a dataset object id or name, a receptacle when it is a receptacle
-id, name or category; other labels are counted and reported, and left out.
+id, name or category; other labels are counted and reported, and left out. ``"relations"``:
+``geometric`` (default: objects go on receptacles by the on-top association, stated ConceptGraphs
+relations are only checked against it and the agreement logged) or ``stated`` (ConceptGraphs only: an
+object is on the receptacle node its "a on b" / "on top of" relation names, which goes to the annotated
+receptacle it matched; an object without such a relation is on no receptacle).
 
 Pickled maps (``.pkl``, ``.pkl.gz``, ``.pickle``) are refused without being opened.
 """
@@ -77,6 +81,9 @@ class SceneGraphMapping:
     transform: NDArray[np.float64] | None = None
     classes: list[str] | None = None
     """The class list the tool was run with: a numeric label ``i`` is ``classes[i]``."""
+    relations: str = "geometric"
+    """``geometric``: objects go on receptacles by the on-top rule (stated relations are only checked
+    against it); ``stated``: on the receptacle a stated relation names (ConceptGraphs)."""
 
 
 @dataclass
@@ -139,7 +146,8 @@ def _load_json(p: Path) -> Any:
     return data
 
 
-_MAPPING_KEYS = ("sessions", "synonyms", "classes", "transform")
+_MAPPING_KEYS = ("sessions", "synonyms", "classes", "transform", "relations")
+RELATIONS = ("geometric", "stated")
 
 
 def load_mapping(path: str | Path) -> SceneGraphMapping:
@@ -152,6 +160,9 @@ def load_mapping(path: str | Path) -> SceneGraphMapping:
     out = SceneGraphMapping()
     if data.get("classes") is not None:
         out.classes = _load_classes(p, data["classes"])
+    out.relations = data.get("relations", "geometric")
+    if out.relations not in RELATIONS:
+        raise _err(f"{p}: relations", f"{out.relations!r}, expected one of {', '.join(RELATIONS)}")
     for key in ("sessions", "synonyms"):
         d = data.get(key, {})
         ok = (lambda v: isinstance(v, str) and v) if key == "synonyms" else (
@@ -626,6 +637,9 @@ def read_scene_graphs(path: str | Path, fmt: str, vocab: Vocabulary, *, mapping:
         mapping = load_mapping(mf) if root.is_dir() and mf.is_file() else SceneGraphMapping()
     if mapping.classes is not None:
         _report_classes(str(root), mapping, vocab)
+    if mapping.relations == "stated" and fmt != "conceptgraphs":
+        raise _err(str(root), f"relations 'stated' in the mapping file: {fmt} scene graphs state no "
+                              "object-on-receptacle relations, expected relations 'geometric'")
     nodes: list[_Node] = []
     for sess, sid in _sessions(root, mapping, vocab.scan_spans):
         nodes += _read_session(sess, sid, fmt, vocab, mapping)
@@ -667,7 +681,20 @@ def _to_detections(path: str, nodes: list[_Node], vocab: Vocabulary, mapping: Sc
     det = Detections(path, np.array([n.scan_id for n in keep], dtype=object), np.array(labels, dtype=object),
                      np.array(kinds, dtype=object), c, c.copy(), np.array([n.extent for n in keep]), R,
                      np.ones(len(keep)), np.arange(len(keep)))
+    if mapping.relations == "stated":
+        det.stated_on = _stated_rows(path, keep, kinds)
     return det
+
+
+def _stated_rows(path: str, kept: list[_Node], kinds: list[str]) -> NDArray[np.int64]:
+    """Per kept node: the row of the first receptacle node a stated relation puts it on (-1: none)."""
+    row = {id(n): i for i, n in enumerate(kept) if kinds[i] == "receptacle"}
+    out = np.array([next((row[id(b)] for b in n.on if id(b) in row), -1) if k == "object" else -1
+                    for n, k in zip(kept, kinds)], np.int64)
+    n_obj = kinds.count("object")
+    log.info("%s: relations 'stated': %d of %d object nodes stated on a receptacle node (the others are on no "
+             "receptacle)", path, int((out >= 0).sum()), n_obj)
+    return out
 
 
 def _report_classes(path: str, mapping: SceneGraphMapping, vocab: Vocabulary) -> None:

@@ -474,3 +474,55 @@ def test_class_list_names_spark_dsg_semantic_labels(scene: Path, tmp_path: Path)
                                                                                               ("table", 0.5)]
     (tmp_path / "hydra" / "psg_mapping.json").write_text(json.dumps({"synonyms": {"O(0)": "mug"}}))
     assert read_any_detections(open_dataset(scene), tmp_path / "hydra").label.tolist() == ["mug"]  # by name
+
+
+@pytest.mark.parametrize("layout", ["scene_graph", "realtime"])
+def test_relations_stated_replace_the_geometric_association(layout: str, scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """The mug stands on the table but ConceptGraphs states it is on the stool; the book stands on the stool
+    with no stated relation. geometric (default): mug-table, book-stool; stated: mug-stool, book on nothing."""
+    from .test_visibility import STOOL, TABLE
+
+    def on_top(r: object, dx: float = 0.0) -> list[float]:
+        b = r.box  # type: ignore[attr-defined]
+        return (b.center_m + [dx, 0, b.extent_m[2] / 2 + 0.05]).tolist()
+
+    nodes = [_node(40, "table", TABLE.box.center_m.tolist(), TABLE.box.extent_m.tolist()),
+             _node(41, "stool", STOOL.box.center_m.tolist(), STOOL.box.extent_m.tolist()),
+             _node(17, "mug", on_top(TABLE)), _node(23, "book", on_top(STOOL))]
+    root = tmp_path / "cg"
+    if layout == "scene_graph":  # cfslam relations name nodes by position
+        _cg_session(root, "scan_00", nodes, [{"object1": {"id": 1}, "object2": {"id": 2}, "object_relation": "b on a"}])
+    else:
+        d = root / "scan_00"
+        d.mkdir(parents=True)
+        (d / "obj_json_x.json").write_text(json.dumps({f"object_{i + 1}": n for i, n in enumerate(nodes)}))
+        (d / "edge_json_x.json").write_text(json.dumps({"edge_0": {"object_1_id": 17, "object_2_id": 41,
+                                                                   "relationship": "on top of"}}))
+    ds = open_dataset(scene)
+    o, r = list(ds.objects), list(ds.receptacles)
+
+    def pairs(relations: str | None) -> list[tuple[str, str]]:
+        if relations is not None:
+            (root / "psg_mapping.json").write_text(json.dumps({"relations": relations}))
+        res = compute_labels(ds, f"detections:{root}", doors=False)
+        a = res.perception.associations[ds.scan_ids.index("scan_00")]
+        assert res.perception.matched[0, r.index("table")] and res.perception.matched[0, r.index("stool")]
+        return sorted((o[i], r[k]) for i, k in zip(*np.nonzero(a)))
+
+    assert pairs(None) == [("book", "stool"), ("mug", "table")]  # the default
+    assert pairs("geometric") == [("book", "stool"), ("mug", "table")]
+    assert pairs("stated") == [("mug", "stool")]
+    res = compute_labels(ds, f"detections:{root}", doors=False)
+    assert res.labels.meta["relations"] == "stated" and res.perception.n_unassociated == 1
+    (root / "psg_mapping.json").write_text(json.dumps({"relations": "llm"}))
+    with pytest.raises(LabelingError, match=r"psg_mapping\.json: relations: 'llm', expected one of geometric, stated"):
+        compute_labels(ds, f"detections:{root}", doors=False)
+
+
+def test_relations_stated_refused_for_formats_without_relations(scene: Path, tmp_path: Path) -> None:  # noqa: F811
+    """Spark-DSG and HOV-SG state no object-on-receptacle relations: 'stated' is one error line."""
+    _spark_file(tmp_path / "hydra" / "scan_00" / "dsg.json")
+    (tmp_path / "hydra" / "psg_mapping.json").write_text(json.dumps({"relations": "stated"}))
+    r = CliRunner().invoke(label_cmd, [str(scene), "--source", f"detections:{tmp_path / 'hydra'}", "--quiet"])
+    assert r.exit_code == 1 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith("error: ") and "spark-dsg scene graphs state no object-on-receptacle" in r.output
