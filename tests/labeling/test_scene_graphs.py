@@ -526,3 +526,25 @@ def test_relations_stated_refused_for_formats_without_relations(scene: Path, tmp
     r = CliRunner().invoke(label_cmd, [str(scene), "--source", f"detections:{tmp_path / 'hydra'}", "--quiet"])
     assert r.exit_code == 1 and r.output.count("\n") == 1, r.output
     assert r.output.startswith("error: ") and "spark-dsg scene graphs state no object-on-receptacle" in r.output
+
+
+def test_psg_eval_same_numbers_from_conceptgraphs_and_table(lab_copy: Path, lab_dets: Detections,
+                                                            tmp_path: Path) -> None:
+    """The acceptance on the small lab: psg-eval -e perpetua_star --labels detections:DIR from a ConceptGraphs
+    export (10 % missed, 5 % spurious detections) gives the numbers of the same detections as a psg-data table
+    (the 84-scan demo: by hand, docs/RAW_FORMATS.md)."""
+    from psg_data.cli.psg_eval_cmd import main
+
+    cg = export_scene_graphs(lab_dets, tmp_path / "cg", "conceptgraphs")
+    table = write_detections_table(representable(lab_dets, "conceptgraphs"), tmp_path / "cg_table.json")
+    out = {}
+    for src in (cg, table):
+        label_dataset(lab_copy, f"detections:{src}")
+        r = CliRunner().invoke(main, ["--dataset", str(lab_copy), "-e", "perpetua_star", "--no-references",
+                                      "--labels", f"detections:{src}", "--out", str(tmp_path / "out" / src.name)])
+        assert r.exit_code == 0, r.output
+        res = json.loads((tmp_path / "out" / src.name / "results.json").read_text())
+        row = res["tables"][0]["rows"][0]
+        assert row["method"] == "perpetua_star" and 0 < row["values"]["mae"]["mean"] < 1
+        out[src.name] = json.dumps(res["tables"]).replace(str(src), "SRC")
+    assert out["cg"] == out["cg_table.json"]
