@@ -548,3 +548,17 @@ def test_psg_eval_same_numbers_from_conceptgraphs_and_table(lab_copy: Path, lab_
         assert row["method"] == "perpetua_star" and 0 < row["values"]["mae"]["mean"] < 1
         out[src.name] = json.dumps(res["tables"]).replace(str(src), "SRC")
     assert out["cg"] == out["cg_table.json"]
+
+
+def test_binary_spark_dsg_without_the_package_is_one_error_line(scene: Path, tmp_path: Path, monkeypatch) -> None:  # noqa: F811
+    """A .sparkdsg needs the spark_dsg package: without it, one line naming the file and the extra."""
+    import sys
+
+    sess = tmp_path / "hydra" / "scan_00"
+    sess.mkdir(parents=True)
+    G = spark_dsg.DynamicSceneGraph()
+    G.save(str(sess / "dsg.sparkdsg"), include_mesh=False)
+    monkeypatch.setitem(sys.modules, "spark_dsg", None)  # import fails as if not installed
+    r = CliRunner().invoke(label_cmd, [str(scene), "--source", f"detections:{tmp_path / 'hydra'}", "--quiet"])
+    assert r.exit_code == 1 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith(f"error: {sess / 'dsg.sparkdsg'}: ") and "psg-data[graph]" in r.output
