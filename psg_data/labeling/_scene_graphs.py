@@ -152,7 +152,8 @@ RELATIONS = ("geometric", "stated")
 
 def load_mapping(path: str | Path) -> SceneGraphMapping:
     """Read a mapping file ``{"sessions": {...}, "synonyms": {...}, "classes": FILE or [...], "transform": 4x4}``
-    (all optional; module docstring)."""
+    (all optional; module docstring).
+    """
     p = Path(path)
     data = _load_json(p)
     if not isinstance(data, dict) or set(data) - set(_MAPPING_KEYS):
@@ -186,7 +187,8 @@ def load_mapping(path: str | Path) -> SceneGraphMapping:
 
 def _load_classes(mapping_file: Path, value: Any) -> list[str]:
     """A class list: a list of names, or a text file with one class per line (relative to the mapping file),
-    read as ConceptGraphs reads its ``--class_set`` file (each line stripped, line ``i`` is class ``i``)."""
+    read as ConceptGraphs reads its ``--class_set`` file (each line stripped, line ``i`` is class ``i``).
+    """
     if isinstance(value, list) and all(isinstance(v, str) for v in value):
         return [v.strip() for v in value]
     if not isinstance(value, str) or not value:
@@ -441,7 +443,8 @@ def _dsg_labelspace(data: dict[str, Any], layer: tuple[int, int]) -> dict[int, s
 
 def _read_spark_dsg(p: Path, scan_id: str | None, vocab: Vocabulary, numeric: bool = False) -> list[_Node]:
     """The OBJECTS layer's nodes; ``numeric``: a ``semantic_label`` outside the file's label space is the label
-    (its number, for the mapping's class list) instead of ``name``."""
+    (its number, for the mapping's class list) instead of ``name``.
+    """
     data = _dsg_json(p)
     if not isinstance(data, dict) or not isinstance(data.get("nodes"), list):
         raise _err(str(p), "expected a Spark-DSG JSON graph with a 'nodes' list")
