@@ -395,6 +395,8 @@ def test_label_help_shows_each_format() -> None:
     for word in ("ConceptGraphs sg_cache", "Spark-DSG dsg.json", "khronos_map.json", "HOV-SG objects",
                  "--detections-format", "conceptgraphs|spark-dsg|hovsg"):
         assert word in out, word
+    flat = " ".join(out.split())
+    assert "relations: geometric (default" in flat and "stated (ConceptGraphs' 'a on b' relations" in flat, flat
 
 
 def test_hydra_output_folder_reads_the_backend_graph_once(scene: Path, tmp_path: Path) -> None:  # noqa: F811
