@@ -24,7 +24,9 @@ __all__ = ["label_cmd"]
 @click.option("--source", "-s", required=True, metavar="SOURCE",
               help="gt | privileged | noisy:P[,P_F] | observed (door states read from the depth) | "
                    "detections:FILE (.parquet or .json) or detections:PATH (ConceptGraphs, Spark-DSG / Khronos or "
-                   "HOV-SG scene graphs: a folder per scan named by its scan_id).")
+                   "HOV-SG scene graphs: a folder per scan named by its scan_id; its psg_mapping.json may set "
+                   "sessions, synonyms, classes (the tool's class list), transform and relations: geometric "
+                   "(default, the on-top association) or stated (ConceptGraphs' 'a on b' relations instead).")
 @click.option("--label-seed", "seed", type=int, default=0, show_default=True,
               help="Seed of the noise (noisy sources); the same option as psg-eval's --label-seed.")
 @old_spelling("--seed", "--label-seed", "old_seed", type=int)

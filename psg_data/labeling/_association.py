@@ -14,6 +14,9 @@ Per scan (paper, "Object Classification and Spatial Association"):
    ``above_m`` over the top face - and the nearest top face wins (ties: the first receptacle in table
    order); rule ``"centroid"`` takes the nearest receptacle centroid within ``max_distance_m``
    (the paper's plain centroid distance). An object without a candidate is not associated.
+   Scene graphs read with ``relations: stated`` (``Detections.stated_on``) replace this rule: an
+   object is on the annotated receptacle its stated receptacle node was matched to in step 1 (if
+   observed), and an object without a stated relation is on none.
 3. Edge history: ``A(o, k) = 1`` if object ``o`` was associated with receptacle ``k`` in any scan.
 4. Codes: for every edge and scan, 1 if the object was associated with the receptacle in that scan,
    0 if the receptacle was observed but the object was not associated with it, -1 if the
@@ -207,6 +210,7 @@ def perception_labels(ds: Any, detections: Detections, params: AssociationParams
     oi = {o: i for i, o in enumerate(obj_ids)}
     matched = np.zeros((S, R), bool)
     assoc = np.zeros((S, O, R), bool)
+    rec_of_node = np.full(len(det), -1, np.int64)  # the annotated receptacle each receptacle node matched
     tally = _Tally()
     scan_of = np.array([si[s] for s in det.scan_id], np.int64) if len(det) else np.zeros(0, np.int64)
     is_rec = det.kind == "receptacle"
@@ -217,10 +221,13 @@ def perception_labels(ds: Any, detections: Detections, params: AssociationParams
             pairs, iou = match_boxes([det.box(int(i)) for i in ridx], rec_boxes, p.min_iou)
             for a, b in pairs:
                 matched[s, b] = True
+                rec_of_node[ridx[a]] = b
                 tally.ious.append(float(iou[a, b]))
             tally.unmatched += ridx.size - len(pairs)
         obs = _observed(matched[s], p, None if receptacle_visible is None else receptacle_visible[s])
-        _associate_scan(det, np.flatnonzero(in_scan & ~is_rec), name_to_id, oi, rec_boxes, obs, p, assoc[s], tally)
+        oidx = np.flatnonzero(in_scan & ~is_rec)
+        stated = None if det.stated_on is None else _stated_receptacles(det, oidx, rec_of_node)
+        _associate_scan(det, oidx, name_to_id, oi, rec_boxes, obs, p, assoc[s], tally, stated)
     observed = _observed(matched, p, receptacle_visible)
     history = assoc.any(axis=0)
     codes = np.full((S, O, R), CODE_MISSING, np.int8)
@@ -232,6 +239,8 @@ def perception_labels(ds: Any, detections: Detections, params: AssociationParams
                  tally.unknown, ", ".join(sorted(tally.unknown_labels)[:5]))
     stamps = np.array([ds.scan(s).start_stamp_ns for s in scan_ids], np.int64)
     grid = LabelGrid(scan_ids, obj_ids, rec_ids, stamps, codes, source, {"association": p.to_dict()})
+    if det.stated_on is not None:
+        grid.meta["relations"] = "stated"
     info = PerceptionInfo(matched, observed, assoc, tally.unknown, tally.unassociated, tally.unmatched,
                           float(np.mean(tally.ious)) if tally.ious else float("nan"), sorted(tally.unknown_labels))
     return grid, info
@@ -279,10 +288,22 @@ def _observed(matched: NDArray[np.bool_], p: AssociationParams, visible: NDArray
     return matched.copy()
 
 
+def _stated_receptacles(det: Detections, oidx: NDArray[np.int64], rec_of_node: NDArray[np.int64]
+                        ) -> NDArray[np.int64]:
+    """For object detections ``oidx``: the annotated receptacle their stated receptacle node matched, else -1."""
+    assert det.stated_on is not None
+    pos = {int(r): i for i, r in enumerate(det.row)}
+    return np.array([rec_of_node[pos[int(r)]] if int(r) in pos else -1 for r in det.stated_on[oidx]], np.int64)
+
+
 def _associate_scan(det: Detections, oidx: NDArray[np.int64], name_to_id: dict[str, str], oi: dict[str, int],
                     rec_boxes: list[Any], obs: NDArray[np.bool_], p: AssociationParams, assoc: NDArray[np.bool_],
-                    tally: _Tally) -> None:
-    """Associate one scan's object detections ``oidx`` with observed receptacles, into ``assoc`` (O, R)."""
+                    tally: _Tally, stated: NDArray[np.int64] | None = None) -> None:
+    """Associate one scan's object detections ``oidx`` with observed receptacles, into ``assoc`` (O, R).
+
+    ``stated``: per detection of ``oidx`` the receptacle a stated relation names (-1 none), used instead of
+    the geometric rule (an object without one is associated with no receptacle).
+    """
     if oidx.size == 0:
         return
     labels = [name_to_id.get(str(lb)) for lb in det.label[oidx]]
@@ -292,6 +313,10 @@ def _associate_scan(det: Detections, oidx: NDArray[np.int64], name_to_id: dict[s
     if not keep.any():
         return
     obj_index = np.array([oi[lb] for lb in labels if lb is not None], np.int64)
-    k = associate_objects(det.centroid_m[oidx[keep]], rec_boxes, obs, p)
+    if stated is None:
+        k = associate_objects(det.centroid_m[oidx[keep]], rec_boxes, obs, p)
+    else:
+        k = stated[keep]
+        k = np.where((k >= 0) & obs[np.maximum(k, 0)], k, -1)
     tally.unassociated += int((k < 0).sum())
     assoc[obj_index[k >= 0], k[k >= 0]] = True

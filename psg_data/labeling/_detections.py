@@ -52,6 +52,8 @@ class Detections:
         box_rotation: (N, 3, 3) world-from-box rotations.
         score: (N,) confidences.
         row: (N,) row of each detection in the file (0-based).
+        stated_on: (N,) for ``relations: stated`` scene graphs, the ``row`` of the receptacle detection a
+            stated relation puts each object on (-1: none); None: associate geometrically.
     """
 
     path: str
@@ -64,6 +66,7 @@ class Detections:
     box_rotation: NDArray[np.float64]
     score: NDArray[np.float64]
     row: NDArray[np.int64]
+    stated_on: NDArray[np.int64] | None = None
 
     def __len__(self) -> int:
         return int(self.row.size)
@@ -76,7 +79,7 @@ class Detections:
         """The detections where ``mask`` is True."""
         return Detections(self.path, self.scan_id[mask], self.label[mask], self.kind[mask], self.centroid_m[mask],
                           self.box_center_m[mask], self.box_extent_m[mask], self.box_rotation[mask], self.score[mask],
-                          self.row[mask])
+                          self.row[mask], None if self.stated_on is None else self.stated_on[mask])
 
 
 def _load_columns(path: Path) -> dict[str, list[Any]]:

@@ -99,7 +99,9 @@ def _cg(d: Detections, i: int) -> dict[str, Any]:
 
 
 def _cg_relations(d: Detections) -> list[dict[str, Any]]:
-    """'a on b' for each object over the first receptacle (the relation file's layout, ids checked on read)."""
+    """One 'a on b': the first object over the first receptacle (the relation file's layout, its ids checked on
+    read; not a true relation, so the exported folder is for relations 'geometric').
+    """
     recs = np.flatnonzero(d.kind == "receptacle")
     objs = np.flatnonzero(d.kind == "object")
     if not recs.size or not objs.size:

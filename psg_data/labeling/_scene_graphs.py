@@ -23,9 +23,15 @@ Sessions map to scans: ``PATH`` is a folder holding one sub-folder per scan name
 ``scan_id`` (each with that session's files as the tool writes them), or a single file / session
 folder named in the mapping file's ``sessions``. A mapping file ``psg_mapping.json`` in ``PATH``
 (or given explicitly) may hold ``{"sessions": {folder: scan_id or time_ns}, "synonyms": {tool label: dataset
-label}, "transform": 4x4 world-from-graph matrix}``. A label is an object when it (or its
-synonym) is a dataset object id or name, a receptacle when it is a receptacle id, name or
-category; other labels are counted and reported, and left out.
+label}, "classes": class-list file or [names], "transform": 4x4 world-from-graph matrix}``. With a class
+list (the tool's ``--class_set`` file, one class per line), a numeric label ``i`` (a digit string, or a
+Spark-DSG ``semantic_label`` outside the file's label space) is the list's line ``i``. A label is an
+object when it (or its synonym) is a dataset object id or name, a receptacle when it is a receptacle
+id, name or category; other labels are counted and reported, and left out. ``"relations"``:
+``geometric`` (default: objects go on receptacles by the on-top association, stated ConceptGraphs
+relations are only checked against it and the agreement logged) or ``stated`` (ConceptGraphs only: an
+object is on the receptacle node its "a on b" / "on top of" relation names, which goes to the annotated
+receptacle it matched; an object without such a relation is on no receptacle).
 
 Pickled maps (``.pkl``, ``.pkl.gz``, ``.pickle``) are refused without being opened.
 """
@@ -60,6 +66,9 @@ MAX_DEPTH = 64
 """Deepest JSON nesting accepted."""
 Y_UP_TO_Z_UP = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
 """HOV-SG's y-up frame to psg-data's z-up frame: (x, y, z) -> (x, -z, y)."""
+CG_ROUNDING_M = {"scene_graph": 0.1, "obj_json": 0.01}
+"""ConceptGraphs' rounding of ``bbox_extent`` (``np.round(extent, 1)`` in ``generate_scenegraph_json``,
+``round(val, 2)`` in ``save_obj_json``): a side written as 0 is read as half a step."""
 _PICKLE_SUFFIXES = (".pkl", ".pickle", ".pkl.gz", ".pickle.gz")
 
 
@@ -70,6 +79,11 @@ class SceneGraphMapping:
     sessions: dict[str, str | int] = field(default_factory=dict)
     synonyms: dict[str, str] = field(default_factory=dict)
     transform: NDArray[np.float64] | None = None
+    classes: list[str] | None = None
+    """The class list the tool was run with: a numeric label ``i`` is ``classes[i]``."""
+    relations: str = "geometric"
+    """``geometric``: objects go on receptacles by the on-top rule (stated relations are only checked
+    against it); ``stated``: on the receptacle a stated relation names (ConceptGraphs)."""
 
 
 @dataclass
@@ -132,13 +146,24 @@ def _load_json(p: Path) -> Any:
     return data
 
 
+_MAPPING_KEYS = ("sessions", "synonyms", "classes", "transform", "relations")
+RELATIONS = ("geometric", "stated")
+
+
 def load_mapping(path: str | Path) -> SceneGraphMapping:
-    """Read a mapping file ``{"sessions": {...}, "synonyms": {...}, "transform": 4x4}`` (all optional)."""
+    """Read a mapping file ``{"sessions": {...}, "synonyms": {...}, "classes": FILE or [...], "transform": 4x4}``
+    (all optional; module docstring).
+    """
     p = Path(path)
     data = _load_json(p)
-    if not isinstance(data, dict) or set(data) - {"sessions", "synonyms", "transform"}:
-        raise _err(str(p), "expected an object with keys sessions, synonyms, transform")
+    if not isinstance(data, dict) or set(data) - set(_MAPPING_KEYS):
+        raise _err(str(p), f"expected an object with keys {', '.join(_MAPPING_KEYS)}")
     out = SceneGraphMapping()
+    if data.get("classes") is not None:
+        out.classes = _load_classes(p, data["classes"])
+    out.relations = data.get("relations", "geometric")
+    if out.relations not in RELATIONS:
+        raise _err(f"{p}: relations", f"{out.relations!r}, expected one of {', '.join(RELATIONS)}")
     for key in ("sessions", "synonyms"):
         d = data.get(key, {})
         ok = (lambda v: isinstance(v, str) and v) if key == "synonyms" else (
@@ -158,6 +183,26 @@ def load_mapping(path: str | Path) -> SceneGraphMapping:
             raise _err(f"{p}: transform", "expected a 4x4 rigid transform (rotation with det +1, last row 0 0 0 1)")
         out.transform = T
     return out
+
+
+def _load_classes(mapping_file: Path, value: Any) -> list[str]:
+    """A class list: a list of names, or a text file with one class per line (relative to the mapping file),
+    read as ConceptGraphs reads its ``--class_set`` file (each line stripped, line ``i`` is class ``i``).
+    """
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return [v.strip() for v in value]
+    if not isinstance(value, str) or not value:
+        raise _err(f"{mapping_file}: classes", "expected a class-list file (one class per line) or a list of names")
+    f = (mapping_file.parent / value) if not Path(value).is_absolute() else Path(value)
+    _refuse_pickle(f)
+    try:
+        if f.stat().st_size > MAX_FILE_BYTES:
+            raise _err(str(f), f"larger than the {MAX_FILE_BYTES // 2**20} MB a class list may have")
+        lines = f.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise _err(f"{mapping_file}: classes", f"cannot read class list {f} ({exc}), expected a UTF-8 text file "
+                                               "with one class per line") from exc
+    return [line.strip() for line in lines]
 
 
 def detect_format(path: str | Path) -> str:
@@ -231,13 +276,18 @@ def _vec(v: Any, n: int, where: str, what: str) -> NDArray[np.float64]:
     return a
 
 
-def _box_node(scan_id: str, label: Any, center: Any, extent: Any, R: NDArray[np.float64], where: str) -> _Node:
+def _box_node(scan_id: str, label: Any, center: Any, extent: Any, R: NDArray[np.float64], where: str,
+              rounded_to: float = 0.0) -> _Node:
+    """One node; ``rounded_to``: the tool's rounding step of the extent (a zero side becomes half of it)."""
     if not isinstance(label, str) or not label.strip():
         raise _err(where, f"label {label!r}, expected a non-empty string")
     c = _vec(center, 3, where, "box centre")
     e = _vec(extent, 3, where, "box extent")
+    if rounded_to > 0 and np.all(e >= 0) and np.any(e > 0):
+        e = np.where(e == 0, rounded_to / 2, e)  # a side the tool rounded to 0 is shorter than half a step
     if not np.all(e > 0):
-        raise _err(where, f"box extent {e.tolist()}, expected 3 positive side lengths (a box with non-zero volume)")
+        raise _err(where, f"box extent {e.tolist()}, expected 3 positive side lengths (a box with non-zero volume)"
+                   + (f"; a side rounded to 0 is read as {rounded_to / 2:g} m, not all three" if rounded_to else ""))
     return _Node(scan_id, label.strip(), c, e, R, where)
 
 
@@ -248,10 +298,10 @@ def _read_conceptgraphs(p: Path, scan_id: str) -> list[_Node]:
     data = _load_json(p)
     if isinstance(data, dict) and all(isinstance(v, dict) for v in data.values()):
         items = list(data.items())  # realtime obj_json: {"object_N": {...}}
-        rel_glob = "edge_json_*.json"
+        rel_glob, step = "edge_json_*.json", CG_ROUNDING_M["obj_json"]
     elif isinstance(data, list):
         items = [(f"#{i}", v) for i, v in enumerate(data)]
-        rel_glob = "cfslam_object_relations.json"
+        rel_glob, step = "cfslam_object_relations.json", CG_ROUNDING_M["scene_graph"]
     else:
         raise _err(str(p), "expected a ConceptGraphs scene_graph.json list or an obj_json {\"object_N\": {...}} map")
     nodes: list[_Node] = []
@@ -268,7 +318,7 @@ def _read_conceptgraphs(p: Path, scan_id: str) -> list[_Node]:
         if "bbox_center" not in rec or "bbox_extent" not in rec:
             raise _err(where, "no box (bbox_center, bbox_extent), expected both")
         nodes.append(_box_node(scan_id, rec.get("object_tag"), rec["bbox_center"], rec["bbox_extent"], np.eye(3),
-                               where))
+                               where, rounded_to=step))
         ids[rec["id"]] = nodes[-1]
     # cfslam relations name nodes by their position in scene_graph.json (build_scenegraph's segmentidx into
     # the pruned map, which generate_scenegraph_json writes in order); edge_json by obj_json's id
@@ -391,7 +441,10 @@ def _dsg_labelspace(data: dict[str, Any], layer: tuple[int, int]) -> dict[int, s
     return {}
 
 
-def _read_spark_dsg(p: Path, scan_id: str | None, vocab: Vocabulary) -> list[_Node]:
+def _read_spark_dsg(p: Path, scan_id: str | None, vocab: Vocabulary, numeric: bool = False) -> list[_Node]:
+    """The OBJECTS layer's nodes; ``numeric``: a ``semantic_label`` outside the file's label space is the label
+    (its number, for the mapping's class list) instead of ``name``.
+    """
     data = _dsg_json(p)
     if not isinstance(data, dict) or not isinstance(data.get("nodes"), list):
         raise _err(str(p), "expected a Spark-DSG JSON graph with a 'nodes' list")
@@ -413,12 +466,12 @@ def _read_spark_dsg(p: Path, scan_id: str | None, vocab: Vocabulary) -> list[_No
             continue
         if "partition" in n and n["partition"] != layer[1]:
             continue
-        nodes += _dsg_node(p, where, a, ver, labels, scan_id, vocab)
+        nodes += _dsg_node(p, where, a, ver, labels, scan_id, vocab, numeric)
     return nodes
 
 
 def _dsg_node(p: Path, where: str, a: dict[str, Any], ver: tuple[int, int, int], labels: dict[int, str],
-              scan_id: str | None, vocab: Vocabulary) -> list[_Node]:
+              scan_id: str | None, vocab: Vocabulary, numeric: bool = False) -> list[_Node]:
     bb = a.get("bounding_box")
     if not isinstance(bb, dict) or bb.get("type", "INVALID") == "INVALID":
         raise _err(where, "no bounding box (type INVALID or missing), expected an AABB / RAABB / OBB")
@@ -430,7 +483,7 @@ def _dsg_node(p: Path, where: str, a: dict[str, Any], ver: tuple[int, int, int],
         ext = _vec(bb["dimensions"], 3, where, "dimensions")
     R = _quat(bb.get("world_R_center"), where) if bb.get("type") != "AABB" else np.eye(3)
     sem = a.get("semantic_label")
-    label = labels.get(sem, a.get("name")) if isinstance(sem, int) else a.get("name")
+    label = labels.get(sem, str(sem) if numeric else a.get("name")) if isinstance(sem, int) else a.get("name")
     node = _box_node(scan_id or "", label, bb.get("world_P_center"), ext, R, where)
     first, last = a.get("first_observed_ns") or [], a.get("last_observed_ns") or []
     if not first and not last:
@@ -514,7 +567,8 @@ def _sessions(root: Path, mapping: SceneGraphMapping, spans: Mapping[str, tuple[
     return out
 
 
-def _read_session(path: Path, scan_id: str | None, fmt: str, vocab: Vocabulary) -> list[_Node]:
+def _read_session(path: Path, scan_id: str | None, fmt: str, vocab: Vocabulary, mapping: SceneGraphMapping
+                  ) -> list[_Node]:
     files = [path] if path.is_file() else _session_files(path)
     for f in files:
         _refuse_pickle(f)
@@ -527,7 +581,7 @@ def _read_session(path: Path, scan_id: str | None, fmt: str, vocab: Vocabulary) 
         return [n for d in dirs for n in _read_hovsg(d, _need_scan(scan_id, d))]
     f = files[0] if path.is_file() else _one_graph(path, files, fmt)
     if fmt == "spark-dsg":
-        return _read_spark_dsg(f, scan_id, vocab)
+        return _read_spark_dsg(f, scan_id, vocab, numeric=mapping.classes is not None)
     if fmt == "conceptgraphs":
         return _read_conceptgraphs(f, _need_scan(scan_id, f))
     raise _err(str(f), f"format {fmt!r} is not a scene-graph format")
@@ -584,9 +638,14 @@ def read_scene_graphs(path: str | Path, fmt: str, vocab: Vocabulary, *, mapping:
     if mapping is None:
         mf = root / MAPPING_FILE
         mapping = load_mapping(mf) if root.is_dir() and mf.is_file() else SceneGraphMapping()
+    if mapping.classes is not None:
+        _report_classes(str(root), mapping, vocab)
+    if mapping.relations == "stated" and fmt != "conceptgraphs":
+        raise _err(str(root), f"relations 'stated' in the mapping file: {fmt} scene graphs state no "
+                              "object-on-receptacle relations, expected relations 'geometric'")
     nodes: list[_Node] = []
     for sess, sid in _sessions(root, mapping, vocab.scan_spans):
-        nodes += _read_session(sess, sid, fmt, vocab)
+        nodes += _read_session(sess, sid, fmt, vocab, mapping)
     det = _to_detections(str(root), nodes, vocab, mapping)
     if receptacle_boxes:
         _line_up_check(det, receptacle_boxes)
@@ -597,19 +656,20 @@ def _to_detections(path: str, nodes: list[_Node], vocab: Vocabulary, mapping: Sc
     keep, kinds, labels = [], [], []
     unmapped: Counter[str] = Counter()
     for n in nodes:
-        lab = mapping.synonyms.get(n.label, n.label)
+        name = _class_name(n.label, mapping.classes)
+        lab = mapping.synonyms.get(name, name)
         if lab in vocab.objects:
             kinds.append("object")
         elif lab in vocab.receptacles:
             kinds.append("receptacle")
         else:
-            unmapped[n.label] += 1
+            unmapped[n.label if name == n.label else f"{n.label} = {name}"] += 1
             continue
         keep.append(n)
         labels.append(lab)
     if unmapped:
         log.warning("%s: %d scene-graph nodes with %d labels that are no dataset object or receptacle (left out; "
-                    "map them with synonyms): %s", path, sum(unmapped.values()), len(unmapped),
+                    "map them with synonyms or a class list): %s", path, sum(unmapped.values()), len(unmapped),
                     ", ".join(f"{k} ({v})" for k, v in unmapped.most_common(10)))
     _check_stated_on(path, keep, kinds)
     if not keep:
@@ -624,7 +684,36 @@ def _to_detections(path: str, nodes: list[_Node], vocab: Vocabulary, mapping: Sc
     det = Detections(path, np.array([n.scan_id for n in keep], dtype=object), np.array(labels, dtype=object),
                      np.array(kinds, dtype=object), c, c.copy(), np.array([n.extent for n in keep]), R,
                      np.ones(len(keep)), np.arange(len(keep)))
+    if mapping.relations == "stated":
+        det.stated_on = _stated_rows(path, keep, kinds)
     return det
+
+
+def _stated_rows(path: str, kept: list[_Node], kinds: list[str]) -> NDArray[np.int64]:
+    """Per kept node: the row of the first receptacle node a stated relation puts it on (-1: none)."""
+    row = {id(n): i for i, n in enumerate(kept) if kinds[i] == "receptacle"}
+    out = np.array([next((row[id(b)] for b in n.on if id(b) in row), -1) if k == "object" else -1
+                    for n, k in zip(kept, kinds)], np.int64)
+    n_obj = kinds.count("object")
+    log.info("%s: relations 'stated': %d of %d object nodes stated on a receptacle node (the others are on no "
+             "receptacle)", path, int((out >= 0).sum()), n_obj)
+    return out
+
+
+def _report_classes(path: str, mapping: SceneGraphMapping, vocab: Vocabulary) -> None:
+    """Log how many classes of the class list name a dataset object or receptacle (after synonyms)."""
+    classes = [c for c in mapping.classes or [] if c]
+    hit = [c for c in classes if mapping.synonyms.get(c, c) in vocab.objects | vocab.receptacles]
+    log.info("%s: %d of %d classes of the class list name dataset objects or receptacles (%s)", path, len(hit),
+             len(classes), ", ".join(hit[:10]))
+
+
+def _class_name(label: str, classes: list[str] | None) -> str:
+    """A numeric label as its name in the class list (``label`` itself without a list, or out of its range)."""
+    if classes is None or not label.isdigit():
+        return label
+    i = int(label)
+    return classes[i] if i < len(classes) and classes[i] else f"class {i} (not in the class list of {len(classes)})"
 
 
 def _line_up_check(det: Detections, boxes: Mapping[str, Any], tol_m: float = 0.5) -> float | None:
