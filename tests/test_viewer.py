@@ -229,15 +229,20 @@ def _signal_masks(pid: int) -> str:
 
 
 @contextlib.contextmanager
-def _web_view(root: Path, port: int, err: Path) -> Iterator[Any]:
-    """``psg-data view ROOT --web --port PORT -q`` as a child process (stderr to ``err``); killed if
-    still running when the block ends, with the Rerun server it started."""
+def _web_view(root: Path, port: int, err: Path, *, grpc_port: int | None = None) -> Iterator[Any]:
+    """``psg-data view ROOT --web --port PORT --grpc-port GRPC -q`` as a child process in a session
+    of its own, as a terminal runs a command (stderr to ``err``); killed if still running when the
+    block ends, with the Rerun server it started."""
     import signal
     import subprocess
 
+    from psg_data.viewer._web import _free_port
+
+    grpc_port = _free_port("127.0.0.1") if grpc_port is None else grpc_port
     with open(err, "wb") as err_file:
         proc = subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", VIEW_CLI, "view", str(root), "--web",
-                                 "--port", str(port), "-q"], stdout=subprocess.PIPE, stderr=err_file, text=True)
+                                 "--port", str(port), "--grpc-port", str(grpc_port), "-q"],
+                                stdout=subprocess.PIPE, stderr=err_file, text=True, start_new_session=True)
     assert proc.stdout is not None
     try:
         yield proc
@@ -245,6 +250,15 @@ def _web_view(root: Path, port: int, err: Path) -> Iterator[Any]:
         if proc.poll() is None:
             _end_with_servers(proc, signal.SIGKILL)
         proc.stdout.close()
+
+
+def _read_until_served(proc: Any) -> list[str]:
+    """The command's lines up to the one saying the recording was sent (the server is then up and fed)."""
+    lines = [proc.stdout.readline()]
+    while lines[-1] and not lines[-1].startswith("sent to the web viewer"):
+        lines.append(proc.stdout.readline())
+    assert lines[-1], f"the command ended early: {lines}"
+    return [ln.rstrip("\n") for ln in lines]
 
 
 def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
@@ -255,20 +269,193 @@ def test_web_viewer_serves_on_localhost_until_ctrl_c(make_dataset: Callable[...,
     from psg_data.viewer._web import _free_port
 
     root = make_dataset(scans=2, frames=1)
-    port = _free_port("127.0.0.1")
+    port, grpc_port = _free_port("127.0.0.1"), _free_port("127.0.0.1")
     err = tmp_path / "stderr.txt"
-    with _web_view(root, port, err) as proc:
-        url = proc.stdout.readline().strip()
-        assert url.startswith(f"web viewer: http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A")
-        sent = proc.stdout.readline()
+    with _web_view(root, port, err, grpc_port=grpc_port) as proc:
+        url, tunnel, sent = _read_until_served(proc)
+        assert url == f"web viewer: http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
+        assert tunnel.startswith(f"from another machine: ssh -L {port}:127.0.0.1:{port} "
+                                 f"-L {grpc_port}:127.0.0.1:{grpc_port} HOST")
         assert sent.startswith("sent to the web viewer (2 scans, 2 frames, ") and "until Ctrl-C" in sent
         with urllib.request.urlopen(url.split(": ", 1)[1], timeout=20) as page:
             assert page.status == 200 and b"<html" in page.read(4096).lower()
         proc.send_signal(signal.SIGINT)
-        assert _wait_or_dump(proc, 30.0, err) == 0
-        assert proc.stdout.read().strip() == "stopped"
-    with socket.socket() as s:  # the server (and the viewer binary it ran) is gone: the port is free again
-        s.bind(("127.0.0.1", port))
+        assert _wait_or_dump(proc, 30.0, err) == 130  # README: 130 interrupted (Ctrl-C)
+        assert proc.stdout.read() == "" and err.read_text().strip().endswith("error: interrupted")
+    for p in (port, grpc_port):  # the server (and the viewer binary it ran) is gone: the ports are free again
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", p))
+
+
+def _stat(pid: int) -> tuple[str, int, int]:
+    """State, parent and process group of ``pid`` from /proc/PID/stat (Linux)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return fields[0], int(fields[1]), int(fields[2])
+
+
+def _processes() -> dict[int, tuple[str, int, int]]:
+    """Every live process: pid -> (state, parent, process group)."""
+    out = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                out[int(d.name)] = _stat(int(d.name))
+    return out
+
+
+def _descendants(pid: int) -> set[int]:
+    procs = _processes()
+    found, todo = set(), [pid]
+    while todo:
+        parent = todo.pop()
+        kids = {p for p, (_, ppid, _) in procs.items() if ppid == parent} - found
+        found |= kids
+        todo += kids
+    return found
+
+
+def _left_in(groups: set[int], pids: set[int], wait_s: float = 15.0) -> list[str]:
+    """The processes (not zombies) still in ``groups`` or among ``pids`` once they had ``wait_s``
+    seconds to end (each as its /proc cmdline); all of them are then killed, so that a failing test
+    leaves nothing behind."""
+    import os
+    import signal
+    import time
+
+    deadline = time.monotonic() + wait_s
+    while True:
+        left = {p for p, (state, _, pgid) in _processes().items() if state != "Z" and (pgid in groups or p in pids)}
+        if not left or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
+    names = []
+    for pid in sorted(left):
+        with contextlib.suppress(OSError):
+            names.append(f"{pid}: {Path(f'/proc/{pid}/cmdline').read_bytes().replace(bytes(1), b' ').decode()[:120]}")
+            os.kill(pid, signal.SIGKILL)
+    return names
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="processes found through /proc")
+@pytest.mark.parametrize("sig, code", [("SIGHUP", 129), ("SIGTERM", 143), ("SIGINT", 130)])
+def test_web_viewer_leaves_no_process_when_stopped_by_a_signal(make_dataset: Callable[..., Path], tmp_path: Path,
+                                                               sig: str, code: int) -> None:
+    """A dropped SSH session or closed terminal (SIGHUP to the command's process group), ``kill``
+    (SIGTERM) and Ctrl-C (SIGINT to the group): the command ends with 128 + the signal's number and
+    no process of its own or of the Rerun server's process group survives; both ports are free."""
+    import os
+    import signal
+    import socket
+
+    from psg_data.viewer._web import _free_port
+
+    root = make_dataset(scans=1, frames=1)
+    port, grpc_port = _free_port("127.0.0.1"), _free_port("127.0.0.1")
+    err = tmp_path / "stderr.txt"
+    with _web_view(root, port, err, grpc_port=grpc_port) as proc:
+        _read_until_served(proc)
+        pids = _descendants(proc.pid)
+        groups = {proc.pid} | {_stat(p)[2] for p in pids}
+        assert len(groups) >= 2, "the Rerun server runs in a process group of its own"
+        number = getattr(signal, sig)
+        if sig == "SIGTERM":
+            os.kill(proc.pid, number)
+        else:
+            os.killpg(proc.pid, number)  # what the terminal does: its (foreground) process group
+        exit_code = _wait_or_dump(proc, 30.0, err)
+        assert _left_in(groups, pids) == []
+        assert exit_code == code
+    for p in (port, grpc_port):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", p))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal: Linux's prctl")
+def test_web_viewer_server_dies_with_a_killed_command(make_dataset: Callable[..., Path], tmp_path: Path) -> None:
+    """SIGKILL (nothing of psg-data runs any more): the kernel ends the server (PR_SET_PDEATHSIG)."""
+    import os
+    import signal
+
+    from psg_data.viewer._web import _free_port
+
+    root = make_dataset(scans=1, frames=1)
+    err = tmp_path / "stderr.txt"
+    with _web_view(root, _free_port("127.0.0.1"), err) as proc:
+        _read_until_served(proc)
+        pids = _descendants(proc.pid)
+        groups = {_stat(p)[2] for p in pids}
+        assert pids
+        os.kill(proc.pid, signal.SIGKILL)
+        assert proc.wait(timeout=30) == -signal.SIGKILL
+        assert _left_in(groups, pids) == []
+
+
+@contextlib.contextmanager
+def _relay(listen: tuple[str, int], target: tuple[str, int]) -> Iterator[None]:
+    """What ``ssh -L PORT:HOST:PORT`` does, without ssh: every connection to ``listen`` is piped to ``target``."""
+    import socket
+    import threading
+
+    def pump(src: socket.socket, dst: socket.socket) -> None:
+        with contextlib.suppress(OSError):
+            while data := src.recv(65536):
+                dst.sendall(data)
+        with contextlib.suppress(OSError):
+            dst.shutdown(socket.SHUT_WR)
+
+    def serve(server: socket.socket) -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                near, _ = server.accept()
+                far = socket.create_connection(target, timeout=30)
+                for a, b in ((near, far), (far, near)):
+                    threading.Thread(target=pump, args=(a, b), daemon=True).start()
+
+    with socket.socket() as server:
+        server.bind(listen)
+        server.listen()
+        threading.Thread(target=serve, args=(server,), daemon=True).start()
+        yield
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="127.0.0.2: a loopback address of its own on Linux")
+def test_web_viewer_page_and_data_reach_a_browser_through_the_printed_tunnel(make_dataset: Callable[..., Path],
+                                                                             tmp_path: Path) -> None:
+    """A browser on another machine, through the tunnel the command prints: ``ssh -L`` is mimicked
+    by one relay per forwarded port, listening on 127.0.0.2 (the "other machine's" localhost, where
+    the server, bound to 127.0.0.1, cannot be reached) under the same port numbers. Through them the
+    printed URL's page loads, and the data endpoint its ``?url=`` names answers the request Rerun's
+    web app makes (gRPC-web ``ReadMessages``) with this recording (its application id).
+    """
+    import re
+    import socket
+    import urllib.request
+    from urllib.parse import parse_qs, urlsplit
+
+    from psg_data.viewer._web import _free_port
+
+    root = make_dataset(scans=1, frames=1)
+    with _web_view(root, _free_port("127.0.0.1"), tmp_path / "stderr.txt") as proc:
+        lines = _read_until_served(proc)
+        url = lines[0].removeprefix("web viewer: ").replace("127.0.0.1", "127.0.0.2")  # as the other machine sees it
+        forwards = re.findall(r"-L (\d+):([^: ]+):(\d+)", next((ln for ln in lines if "ssh " in ln), ""))
+        data = urlsplit(parse_qs(urlsplit(url).query)["url"][0])
+        assert data.hostname == "127.0.0.2" and data.port is not None
+        with pytest.raises(OSError):  # without the tunnel the data port is out of reach
+            socket.create_connection(("127.0.0.2", data.port), timeout=5).close()
+        with contextlib.ExitStack() as tunnel:
+            for near, host, far in forwards:
+                tunnel.enter_context(_relay(("127.0.0.2", int(near)), (host, int(far))))
+            with urllib.request.urlopen(url, timeout=20) as page:
+                assert page.status == 200 and b"<html" in page.read(4096).lower()
+            request = urllib.request.Request(
+                f"http://127.0.0.2:{data.port}/rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages",
+                data=bytes(5), headers={"content-type": "application/grpc-web+proto", "x-grpc-web": "1"})
+            with urllib.request.urlopen(request, timeout=20) as reply:  # empty request: one frame, flag 0, length 0
+                assert reply.headers["content-type"].startswith("application/grpc-web")
+                head = reply.read(5)
+                first = reply.read(int.from_bytes(head[1:5], "big"))
+        assert head[0] == 0 and b"psg-data" in first  # a data frame of the recording (application id)
 
 
 def _tgkill(pid: int, tid: int, sig: int) -> None:
@@ -293,13 +480,12 @@ def test_web_viewer_stops_when_ctrl_c_reaches_another_thread(make_dataset: Calla
     port = _free_port("127.0.0.1")
     err = tmp_path / "stderr.txt"
     with _web_view(root, port, err) as proc:
-        assert proc.stdout.readline().startswith("web viewer: ")
-        assert proc.stdout.readline().startswith("sent to the web viewer")
+        assert _read_until_served(proc)[0].startswith("web viewer: ")
         others = sorted(int(t) for t in os.listdir(f"/proc/{proc.pid}/task") if int(t) != proc.pid)
         assert others, "the viewer process runs no thread besides its main one"
         _tgkill(proc.pid, others[-1], signal.SIGINT)
-        assert _wait_or_dump(proc, 20.0, err) == 0
-        assert proc.stdout.read().strip() == "stopped"
+        assert _wait_or_dump(proc, 20.0, err) == 130
+        assert err.read_text().strip().endswith("error: interrupted")
 
 
 def test_web_viewer_port_in_use_is_one_line(make_dataset: Callable[..., Path]) -> None:
