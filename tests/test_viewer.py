@@ -31,10 +31,11 @@ def _read(path: Path) -> tuple[Counter, dict]:  # type: ignore[type-arg]
 
 
 def _column(batches: list, suffix: str) -> list:  # type: ignore[type-arg]
+    """The values of the column ending with ``suffix`` in those of ``batches`` that have it."""
     out = []
     for b in batches:
-        name = next(n for n in b.schema.names if n.endswith(suffix))
-        out += b.column(name).to_pylist()
+        name = next((n for n in b.schema.names if n.endswith(suffix)), None)
+        out += b.column(name).to_pylist() if name is not None else []
     return out
 
 
@@ -52,7 +53,7 @@ def test_view_saves_a_recording_with_every_scan(make_dataset: Callable[..., Path
     colours = _column(batches["/world/doors"], ":colors")
     assert len({tuple(c) for c in colours}) == 2 and colours[0] == colours[2] != colours[1]
     # label streams: the schedule's present edges and the door, one row per scan
-    assert rows["/labels/gt/redmug/table"] == 3 and rows["/labels/gt/doors/door1"] == 3
+    assert len(_column(batches["/labels/gt/redmug/table"], ":scalars")) == 3  # and one static row: drawn as steps
     assert _column(batches["/labels/gt/doors/door1"], ":scalars") == [[1.0], [0.0], [1.0]]
     ds = open_dataset(root)
     assert _column(batches["/world/camera/depth"], ":meter")[0] == [pytest.approx(1 / ds.cameras["d435"].depth_scale_m)]
@@ -156,8 +157,7 @@ def test_recording_carries_a_blueprint_and_a_scan_timeline(make_dataset: Callabl
                    "/labels/gt/doors/door1"):
         assert {"time", "scan"} <= timelines[entity], entity
     rows, batches = _read(out)
-    scan_col = next(n for n in batches["/labels/gt/redmug/table"][0].schema.names if n == "scan")
-    assert batches["/labels/gt/redmug/table"][0].column(scan_col).to_pylist() == [0, 1, 2]
+    assert _column(batches["/labels/gt/redmug/table"], "scan") == [0, 1, 2]
     (blueprint,) = reader.blueprints()
     parts: dict[str, list] = {}  # type: ignore[type-arg]
     for chunk in reader.store(store=blueprint).stream():
@@ -170,6 +170,93 @@ def test_recording_carries_a_blueprint_and_a_scan_timeline(make_dataset: Callabl
     # the 3D world, colour, depth, one plot per changing object edge (redmug on table and desk, the spoon
     # on the shelf) and one for the door
     assert len(eye) == 1 and len(plots) == 4 and len(views) == 7
+
+
+def _blueprint_parts(path: Path) -> dict[str, dict[str, list]]:  # type: ignore[type-arg]
+    """The saved recording's blueprint: entity path -> column (``Archetype:field``) -> values."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(path))
+    (blueprint,) = reader.blueprints()
+    parts: dict[str, dict[str, list]] = {}  # type: ignore[type-arg]
+    for chunk in reader.store(store=blueprint).stream():
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if ":" in name:
+                parts.setdefault(chunk.entity_path, {}).setdefault(name, []).extend(batch.column(name).to_pylist())
+    return parts
+
+
+@pytest.fixture
+def lab_recording(make_dataset: Callable[..., Path], tmp_path: Path) -> tuple[Path, Path]:
+    """The tiny dataset (its desk lies outside the one room with a floor outline) and its recording."""
+    root = make_dataset(scans=3, frames=1)
+    out = tmp_path / "lab.rrd"
+    assert CliRunner().invoke(main, ["view", str(root), "--save", str(out), "-q"]).exit_code == 0
+    return root, out
+
+
+def test_viewer_opens_paused_on_the_first_scan(lab_recording: tuple[Path, Path]) -> None:
+    """The time panel is paused (Rerun then puts the cursor at the timeline's start, the first scan;
+    playing or following, the default, at its end: the last scan)."""
+    import rerun.blueprint as rrb
+
+    panel = _blueprint_parts(lab_recording[1])["/time_panel"]
+    assert panel["TimePanelBlueprint:timeline"] == [["scan"]]
+    assert panel["TimePanelBlueprint:play_state"] == [[rrb.components.PlayState.Paused.value]]
+
+
+def test_3d_view_shows_every_box_of_the_lab(lab_recording: tuple[Path, Path]) -> None:
+    """Every corner of every receptacle and door box, and every room outline, projects inside the 3D
+    view's opening eye: a pinhole with Rerun's vertical field of view (55 degrees, ``DEFAULT_FOV_Y``
+    in the viewer's ``re_view_spatial/src/eye.rs``) on a view as wide as tall."""
+    root, out = lab_recording
+    ds = open_dataset(root)
+    (eye,) = [v for k, v in _blueprint_parts(out).items() if k.endswith("/EyeControls3D")]
+    position, target, up = (np.array(eye[f"EyeControls3D:{f}"][0][0]) for f in ("position", "look_target", "eye_up"))
+    forward = (target - position) / np.linalg.norm(target - position)
+    right = np.cross(forward, up) / np.linalg.norm(np.cross(forward, up))
+    cam_up = np.cross(right, forward)
+    points = [c for items in (ds.receptacles, ds.doors) for item in items.values() for c in item.box.corners()]
+    points += [np.array([x, y, 0.0]) for room in ds.rooms.values() if room.floor_polygon_m is not None
+               for x, y in room.floor_polygon_m]
+    assert len(points) == 8 * 4 + 4
+    half = np.tan(np.radians(55.0) / 2)
+    for p in points:
+        depth = (p - position) @ forward
+        assert depth > 0 and abs((p - position) @ right) <= half * depth and abs((p - position) @ cam_up) <= half * depth, p
+
+
+def test_label_series_are_drawn_as_steps(lab_recording: tuple[Path, Path]) -> None:
+    """Every label stream (objects and doors) is drawn holding each 0/1 value until the next
+    observation (``SeriesLines`` ``StepAfter``: "hold the previous value until the next data point,
+    then jump"), not as a straight line from one observation to the next."""
+    import rerun as rr
+
+    rows, batches = _read(lab_recording[1])
+    series = sorted(e for e in rows if e.startswith("/labels/"))
+    assert {"/labels/gt/redmug/table", "/labels/gt/doors/door1"} <= set(series)
+    step = rr.components.InterpolationMode.StepAfter.value
+    for entity in series:
+        modes = [v for b in batches[entity] if "SeriesLines:interpolation_mode" in b.schema.names
+                 for v in b.column("SeriesLines:interpolation_mode").to_pylist()]
+        assert modes == [[step]], entity
+
+
+def test_plot_legends_sit_over_an_empty_band_above_the_traces(lab_recording: tuple[Path, Path]) -> None:
+    """0/1 traces run along the whole width at 0 and at 1: a legend in a top corner covers none of
+    them only when the y axis leaves a band above 1 (here at least 0.25 per legend entry, one each)."""
+    import rerun.blueprint as rrb
+
+    parts = _blueprint_parts(lab_recording[1])
+    legends = {k.rsplit("/", 1)[0]: v for k, v in parts.items() if k.endswith("/PlotLegend")}
+    axes = {k.rsplit("/", 1)[0]: v for k, v in parts.items() if k.endswith("/ScalarAxis")}
+    assert len(axes) == 4 and set(legends) == set(axes)
+    top = {rrb.components.Corner2D.LeftTop.value, rrb.components.Corner2D.RightTop.value}
+    for view, legend in legends.items():
+        assert legend["PlotLegend:corner"][0][0] in top and legend["PlotLegend:visible"] == [[True]]
+        low, high = axes[view]["ScalarAxis:range"][0][0]
+        assert low < 0 and high - 1.0 >= 0.25
 
 
 VIEW_CLI = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
