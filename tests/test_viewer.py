@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-import rerun  # noqa: F401  - [dev] installs psg-data[viewer]; a missing extra fails loudly
+import rerun  # [dev] installs psg-data[viewer]; a missing extra fails loudly
 from click.testing import CliRunner
 
 from psg_data.cli.psg_data_cmd import main
@@ -32,7 +32,7 @@ def _read(path: Path) -> tuple[Counter, dict]:  # type: ignore[type-arg]
 
 def _column(batches: list, suffix: str) -> list:  # type: ignore[type-arg]
     """The values of the column ending with ``suffix`` in those of ``batches`` that have it."""
-    out = []
+    out: list[Any] = []
     for b in batches:
         name = next((n for n in b.schema.names if n.endswith(suffix)), None)
         out += b.column(name).to_pylist() if name is not None else []
@@ -116,6 +116,10 @@ def test_psg_eval_rerun_records_every_scored_edge(tmp_path: Path) -> None:
     (blueprint,) = reader.blueprints()  # one panel per edge whose truth changes most
     assert len({c.entity_path for c in reader.store(store=blueprint).stream() if c.entity_path.endswith("/ScalarAxis")}
                ) == 4
+    parts = _blueprint_parts(out)  # legends top left over a band above the traces: last_seen, truth, observations
+    left_top = rerun.blueprint.components.Corner2D.LeftTop.value
+    assert [v["PlotLegend:corner"][0][0] for k, v in parts.items() if k.endswith("/PlotLegend")] == [left_top] * 4
+    assert all(v["ScalarAxis:range"][0][0][1] - 1.0 >= 3 * 0.25 for k, v in parts.items() if k.endswith("/ScalarAxis"))
     r = CliRunner().invoke(eval_main, ["--task", "doors", "--rerun", str(tmp_path / "d.rrd"), "-q"])
     assert r.exit_code == 1 and "--rerun: beliefs are recorded for --task persistence" in r.stderr
 
@@ -392,7 +396,8 @@ def _processes() -> dict[int, tuple[str, int, int]]:
 
 def _descendants(pid: int) -> set[int]:
     procs = _processes()
-    found, todo = set(), [pid]
+    found: set[int] = set()
+    todo = [pid]
     while todo:
         parent = todo.pop()
         kids = {p for p, (_, ppid, _) in procs.items() if ppid == parent} - found

@@ -9,7 +9,8 @@
   timeline's cursor at its start; playing or following, at its end) and the arrow keys step
   scan by scan.
 - :func:`beliefs_blueprint` (``psg-eval --rerun``): one panel per edge whose truth changes most,
-  every estimator's belief beside the ground truth and the observations.
+  every estimator's belief beside the ground truth and the observations, the legend again over
+  a band above the traces.
 """
 
 from __future__ import annotations
@@ -140,8 +141,9 @@ def beliefs_blueprint(traces: Sequence[Any], *, k: int = 4) -> Any:
     truth = {t.edge: t for t in traces if t.seed == seed}
     shown = changing_edges(((e, t.truth[(t.truth == 0) | (t.truth == 1)]) for e, t in truth.items()), k) \
         or list(truth)[:k]
-    y_axis = rrb.ScalarAxis(range=(-0.1, 1.1), zoom_lock=True)
-    panels = [rrb.TimeSeriesView(name=f"{e[0]} on {e[1]}", origin=edge_path("beliefs", e), axis_y=y_axis)
+    entries = len({t.estimator for t in traces}) + 2  # the estimators, the ground truth, the observations
+    panels = [rrb.TimeSeriesView(name=f"{e[0]} on {e[1]}", origin=edge_path("beliefs", e),
+                                 **_legend_above(rrb, entries))
               for e in shown]
     return rrb.Blueprint(rrb.Grid(*panels) if panels else rrb.Vertical(), rrb.TimePanel(state="expanded"),
                          rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
