@@ -166,8 +166,7 @@ def test_recording_carries_a_blueprint_and_a_scan_timeline(make_dataset: Callabl
     parts: dict[str, list] = {}  # type: ignore[type-arg]
     for chunk in reader.store(store=blueprint).stream():
         parts.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
-    panel = parts["/time_panel"][0]
-    assert panel.column(next(n for n in panel.schema.names if n.endswith(":timeline"))).to_pylist() == [["scan"]]
+    assert _column(parts["/time_panel"], ":timeline") == [["scan"]]
     views = {p.rsplit("/", 1)[0] for p in parts if p.startswith("/view/") and p.count("/") == 3}
     plots = {p.rsplit("/", 1)[0] for p in parts if p.endswith("/ScalarAxis")}
     eye = [p for p in parts if p.endswith("/EyeControls3D")]
