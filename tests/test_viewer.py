@@ -591,3 +591,13 @@ def test_web_viewer_port_in_use_is_one_line(make_dataset: Callable[..., Path]) -
         port = s.getsockname()[1]
         line = assert_one_error(CliRunner().invoke(main, ["view", str(root), "--web", "--port", str(port), "-q"]))
     assert f"--port {port}: cannot listen on 127.0.0.1:{port}" in line
+    with socket.socket() as s:  # the data port too, named by its own option
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        taken = s.getsockname()[1]
+        line = assert_one_error(CliRunner().invoke(main, ["view", str(root), "--web", "--port", str(port),
+                                                          "--grpc-port", str(taken), "-q"]))
+    assert f"--grpc-port {taken}: cannot listen on 127.0.0.1:{taken}" in line and "choose another port" in line
+    line = assert_one_error(CliRunner().invoke(main, ["view", str(root), "--web", "--port", str(port),
+                                                      "--grpc-port", str(port), "-q"]))
+    assert line == f"error: --grpc-port {port}: the same as --port; choose two different ports"
