@@ -5,9 +5,10 @@
   scan's colour and depth images beside it; under them one panel per informative edge (the
   object edges whose ground truth changes most, every label source in one panel) and one with
   the doors, each with its legend over a band above the traces; the time panel on the ``scan``
-  timeline, paused, so that the viewer opens on the first scan (Rerun >= 0.32 places a paused
-  timeline's cursor at its start; playing or following, at its end) and the arrow keys step
-  scan by scan.
+  timeline, paused, so that the viewer opens on the first scan (the viewer puts a paused
+  timeline's cursor at its start, a playing or following one's at its end: Rerun's
+  ``time_control`` since "Respect play state from blueprint", May 2026; rerun-sdk 0.41 here) and
+  the arrow keys step scan by scan.
 - :func:`beliefs_blueprint` (``psg-eval --rerun``): one panel per edge whose truth changes most,
   every estimator's belief beside the ground truth and the observations, the legend again over
   a band above the traces.
@@ -50,9 +51,9 @@ def _extent(ds: Any) -> NDArray[np.float64]:
     pts = [np.column_stack([r.floor_polygon_m, np.zeros(len(r.floor_polygon_m))])
            for r in (ds.rooms.values() if ds.has_table("rooms") else ())
            if r.floor_polygon_m is not None and len(r.floor_polygon_m)]
-    for table, items in (("receptacles", "receptacles"), ("doors", "doors")):
+    for table in ("receptacles", "doors"):
         if ds.has_table(table):
-            pts += [b.box.corners() for b in getattr(ds, items).values()]
+            pts += [item.box.corners() for item in getattr(ds, table).values()]
     return np.concatenate(pts) if pts else np.zeros((1, 3))
 
 
