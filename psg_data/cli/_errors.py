@@ -10,6 +10,8 @@ code    meaning
 2       bad command line: unknown option, missing argument, an option value of the wrong type or
         out of range (one line, and where to find the help)
 130     interrupted (Ctrl-C); "rerun ... to resume" is said only where a rerun resumes (convert)
+129     ``view --web`` ended by SIGHUP (its terminal or SSH session gone), silently; 143: by SIGTERM
+        (``kill``); its Rerun server ends with it in every case (``psg_data/viewer/_child.py``)
 ======  ==========================================================================================
 
 A reader that leaves early (``psg-eval ... | head``, quitting ``less``) does not stop a command: the

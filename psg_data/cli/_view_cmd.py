@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import click
 
@@ -23,16 +24,19 @@ __all__ = ["view_cmd"]
                    "runs until Ctrl-C.")
 @click.option("--port", type=click.IntRange(1, 65535), default=9090, show_default=True,
               help="--web: port of the web viewer.")
+@click.option("--grpc-port", type=click.IntRange(1, 65535), default=9876, show_default=True,
+              help="--web: port the viewer page reads the recording from (forward it too).")
 @click.option("--bind", default="127.0.0.1", show_default=True, metavar="ADDR",
               help="--web: address to listen on (0.0.0.0: every interface; the default is reached from another "
-                   "machine through an SSH tunnel: ssh -L 9090:127.0.0.1:9090 HOST).")
+                   "machine through an SSH tunnel of both ports: "
+                   "ssh -L 9090:127.0.0.1:9090 -L 9876:127.0.0.1:9876 HOST).")
 @click.option("--frame-stride", type=click.IntRange(1), default=1, show_default=True,
               help="Log every N-th frame of a scan.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save file.")
 @quiet_option
 @handle_errors
-def view_cmd(dataset: str, scans: tuple[str, ...], save: Path | None, web: bool, port: int, bind: str,
-             frame_stride: int, overwrite: bool, quiet: bool) -> None:
+def view_cmd(dataset: str, scans: tuple[str, ...], save: Path | None, web: bool, port: int, grpc_port: int,
+             bind: str, frame_stride: int, overwrite: bool, quiet: bool) -> None:
     """Look at DATASET in Rerun (needs psg-data[viewer]): a viewer window, --web, or --save FILE.rrd.
 
     Logs per scan the RGB and depth images, the camera trajectory and frustum, the fused point
@@ -67,7 +71,7 @@ def view_cmd(dataset: str, scans: tuple[str, ...], save: Path | None, web: bool,
                            f"{', '.join(ds.scan_ids[:5])}{', ...' if len(ds.scan_ids) > 5 else ''}")
     ids = list(dict.fromkeys(scans)) or ds.scan_ids
     if web:
-        _serve(ds, ids, port, bind, frame_stride, quiet)
+        _serve(ds, ids, WebOptions(port, grpc_port, bind), frame_stride, quiet)
         return
     counts = _log(ds, ids, save, None, frame_stride, overwrite, quiet)
     what = _what(counts)
@@ -89,22 +93,35 @@ def _what(counts: dict[str, int]) -> str:
             f"{counts['label_streams']} label streams")
 
 
-def _serve(ds: Any, ids: list[str], port: int, bind: str, frame_stride: int, quiet: bool) -> None:
-    """Start the web viewer, stream the recording into it, print the URL and serve until Ctrl-C."""
+class WebOptions(NamedTuple):
+    """Where ``--web`` serves."""
+
+    port: int
+    grpc_port: int
+    bind: str
+
+
+def _serve(ds: Any, ids: list[str], where: WebOptions, frame_stride: int, quiet: bool) -> None:
+    """Start the web viewer, stream the recording into it, print the URL and serve until Ctrl-C.
+
+    Ctrl-C ends the command as every interrupted one (exit 130); SIGHUP (the terminal or the SSH
+    session is gone) and SIGTERM end it with 128 + the signal's number, silently; the server goes
+    with it in every case (``psg_data/viewer/_child.py``).
+    """
     import tempfile
 
     from psg_data.viewer import WebViewer
-    from psg_data.viewer._web import url_host
+    from psg_data.viewer._child import Stopped
 
-    with tempfile.TemporaryDirectory(prefix="psg-view-") as tmp:
-        server = WebViewer(port=port, bind=bind, log=Path(tmp) / "rerun.log")
-        server.start()
-        try:
+    try:
+        with tempfile.TemporaryDirectory(prefix="psg-view-") as tmp, \
+                WebViewer(port=where.port, grpc_port=where.grpc_port, bind=where.bind,
+                          log=Path(tmp) / "rerun.log") as server:
             click.echo(f"web viewer: {server.url}")
+            click.echo(f"from another machine: {server.ssh_tunnel}, then open the URL there (the page comes "
+                       f"from port {server.port}, its data from port {server.grpc_port})")
             counts = _log(ds, ids, None, server, frame_stride, False, quiet)
-            click.echo(f"sent to the web viewer ({_what(counts)}); serving on {url_host(bind)}:{port} until Ctrl-C")
+            click.echo(f"sent to the web viewer ({_what(counts)}); serving until Ctrl-C")
             server.wait()
-        except KeyboardInterrupt:
-            click.echo("stopped")
-        finally:
-            server.stop()
+    except Stopped as exc:
+        sys.exit(128 + exc.signum)

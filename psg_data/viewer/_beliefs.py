@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from psg_data.viewer._dataset_log import TIMELINE, edge_path, timestamps
+from psg_data.viewer._dataset_log import TIMELINE, edge_path, step_lines, timestamps
 from psg_data.viewer._recording import import_rerun
 
 __all__ = ["log_beliefs", "log_graph"]
@@ -17,7 +17,7 @@ def log_beliefs(rec: Any, traces: Sequence[Any], *, seed: int | None = None) -> 
     """Log each :class:`~psg_data.evaluation.PredictionTrace` of one seed as time series.
 
     Per edge ``beliefs/OBJECT/RECEPTACLE``: one child per estimator (its belief at every evaluation
-    time), ``ground_truth`` (1/0 where scored) and ``observations`` (the test observations), all
+    time), ``ground_truth`` (1/0 where scored, drawn as steps) and ``observations`` (the test observations), all
     on the ``time`` timeline, so the viewer plots them in one panel per edge.
 
     Args:
@@ -44,6 +44,7 @@ def log_beliefs(rec: Any, traces: Sequence[Any], *, seed: int | None = None) -> 
         ok = (tr.truth == 0) | (tr.truth == 1)
         rec.send_columns(f"{base}/ground_truth", indexes=[rr.TimeColumn(TIMELINE, timestamp=timestamps(tr.t_s[ok]))],
                          columns=rr.Scalars.columns(scalars=tr.truth[ok].astype(np.float64)))
+        rec.log(f"{base}/ground_truth", step_lines(rr), static=True)
         if len(tr.obs_t_s):
             rec.send_columns(f"{base}/observations",
                              indexes=[rr.TimeColumn(TIMELINE, timestamp=timestamps(tr.obs_t_s))],

@@ -14,7 +14,8 @@ scan's index in the dataset, 0 for its first scan: one step per scan):
 - ``world/points``: the scan's fused, coloured point cloud, at its end.
 - ``labels/SOURCE/OBJECT/RECEPTACLE``: 1/0 observations of each object edge that is ever present
   (``gt``: from the schedule; every source of the ``labels`` table); ``labels/SOURCE/doors/DOOR``:
-  1 open / 0 closed (``gt``: the ``door_states`` table).
+  1 open / 0 closed (``gt``: the ``door_states`` table). Drawn as steps: each value holds until the
+  next observation (:func:`step_lines`).
 """
 
 from __future__ import annotations
@@ -27,13 +28,20 @@ from numpy.typing import NDArray
 
 from psg_data.viewer._recording import import_rerun
 
-__all__ = ["TIMELINE", "SCAN_TIMELINE", "log_dataset", "edge_path", "timestamps"]
+__all__ = ["TIMELINE", "SCAN_TIMELINE", "log_dataset", "edge_path", "timestamps", "step_lines"]
 
 TIMELINE = "time"
 """The timeline every entity is logged on: UTC timestamps."""
 SCAN_TIMELINE = "scan"
 """The sequence timeline of a dataset recording: the scan's index in the dataset (steps scan by scan)."""
 _OCCUPIED, _EMPTY, _OPEN, _CLOSED = (255, 140, 0), (150, 150, 150), (40, 180, 60), (220, 40, 40)
+
+
+def step_lines(rr: Any) -> Any:
+    """How a 0/1 series is drawn: a step that holds each value until the next sample, then jumps
+    (``SeriesLines`` ``interpolation_mode="StepAfter"``), not a straight line from one to the next.
+    """
+    return rr.SeriesLines(interpolation_mode="StepAfter")
 
 
 def timestamps(t_s: Any) -> NDArray[np.datetime64]:
@@ -200,6 +208,7 @@ def _log_label_streams(rec: Any, rr: Any, ds: Any, gt: Any, doors: dict[str, dic
         rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, timestamp=t),
                                         rr.TimeColumn(SCAN_TIMELINE, sequence=scan_of(t.astype(np.int64)))],
                          columns=rr.Scalars.columns(scalars=s.y.astype(np.float64)))
+        rec.log(path, step_lines(rr), static=True)
         n += 1
     starts = {sc: ds.scan(sc).start_stamp_ns for sc in doors if sc in set(ds.scan_ids)}
     for did in sorted({d for st in doors.values() for d in st}):
@@ -209,5 +218,6 @@ def _log_label_streams(rec: Any, rr: Any, ds: Any, gt: Any, doors: dict[str, dic
                          indexes=[rr.TimeColumn(TIMELINE, timestamp=t),
                                   rr.TimeColumn(SCAN_TIMELINE, sequence=scan_of(t.astype(np.int64)))],
                          columns=rr.Scalars.columns(scalars=np.array([float(r[1]) for r in rows])))
+        rec.log(edge_path("labels/gt", ("doors", did)), step_lines(rr), static=True)
         n += 1
     return n
