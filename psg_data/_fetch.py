@@ -132,9 +132,23 @@ def ensure_source(source: RemoteSource, cache: Path, *, offline_root: Path | Non
     root = cache / source.name
     root.mkdir(parents=True, exist_ok=True)
     with _lock(cache / f".{source.name}.lock"):
-        for f in source.files:
-            _ensure_file(source, f, root, progress, timeout_s)
+        try:
+            for f in source.files:
+                _ensure_file(source, f, root, progress, timeout_s)
+        except BaseException:
+            _prune_empty(root)  # a failed first download leaves no empty folders (a partial file stays)
+            raise
     return root
+
+
+def _prune_empty(root: Path) -> None:
+    """Remove the empty folders under ``root`` and ``root`` itself if it ends up empty (``rmdir`` only
+    removes an empty folder: nothing with a file in it is touched)."""
+    for d in sorted((p for p in root.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+        with contextlib.suppress(OSError):
+            d.rmdir()
+    with contextlib.suppress(OSError):
+        root.rmdir()
 
 
 # -- offline copies --------------------------------------------------------------------------------
