@@ -143,7 +143,8 @@ def ensure_source(source: RemoteSource, cache: Path, *, offline_root: Path | Non
 
 def _prune_empty(root: Path) -> None:
     """Remove the empty folders under ``root`` and ``root`` itself if it ends up empty (``rmdir`` only
-    removes an empty folder: nothing with a file in it is touched)."""
+    removes an empty folder: nothing with a file in it is touched).
+    """
     for d in sorted((p for p in root.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
         with contextlib.suppress(OSError):
             d.rmdir()
