@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from psg_data.errors import EstimatorError, PsgDataError
 from psg_data.estimators._base import EdgeKey
 from psg_data.estimators._common import BaseFilter
+from psg_data.estimators._process_oracle import _EntityData, _Tracker
 from psg_data.schemas._generator_model import EntityProcess, StepProcess
 
 __all__ = ["ForwardBelief", "observation_likelihood", "ProcessOracleFilter", "reference_filter"]
