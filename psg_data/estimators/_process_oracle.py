@@ -213,6 +213,10 @@ class ProcessOracleFilter(BaseFilter):
         self._fc_belief: Any = None
         self._chain: list[Any] | None = None  # snapshots of the forecast belief at steps b.n, b.n + 1, ...
         self._likelihoods: dict[tuple[str, int], NDArray[np.float64]] = {}
+        # with a tracker: the belief at earlier update times (time, snapshot, own and sibling-tracker
+        # observations up to it), from which a sibling's late observation is absorbed again
+        self._checkpoints: list[tuple[float, Any, int, int]] = []
+        self._tainted = False  # the belief skipped an own observation at its own time: no checkpoint
 
     def __deepcopy__(self, memo: dict[int, Any]) -> ProcessOracleFilter:
         out = copy.copy(self)  # the model and the training data are read-only: shared
@@ -220,9 +224,12 @@ class ProcessOracleFilter(BaseFilter):
         out._tracker = copy.deepcopy(self._tracker, memo)
         out._belief = None if self._belief is None else self._belief.copy()
         out._fc, out._fc_belief, out._chain = None, None, None
+        out._checkpoints = list(self._checkpoints)  # snapshots are never changed in place: shared
         return out
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
+        if self._belief is not None and t[0] <= self._belief_h:  # at the belief's own time: not absorbed
+            self._tainted = True  # (until the belief is computed again from the start)
         self._own_t.extend(t.tolist())
         self._own_y.extend(int(v) for v in y)
         if self._tracker is not None:
@@ -284,6 +291,30 @@ class ProcessOracleFilter(BaseFilter):
             b.restore(ch[min(n - b.n, len(ch) - 1)])
         b.advance_to(n)
 
+    def _counts(self, tau: float) -> tuple[int, int]:
+        """How many own observations, and sibling observations of the tracker, have t <= tau."""
+        own = bisect.bisect_right(self._own_t, tau) if self._own_sorted else \
+            int(np.count_nonzero(np.asarray(self._own_t, np.float64) <= tau))
+        tr = self._tracker
+        if tr is None or not tr.t:
+            return own, 0
+        m = (np.asarray(tr.t, np.float64) <= tau) & (np.asarray(tr.label, dtype=object) != self.edge[1])
+        return own, int(np.count_nonzero(m))
+
+    def _restart(self) -> None:
+        """Go back to the latest checkpoint whose observations are all still the ones up to its time (its
+        state is then the one a computation from the start reaches there), or to no belief (the start).
+        """
+        while self._checkpoints:
+            tau, snap, own, tr = self._checkpoints[-1]
+            if self._counts(tau) == (own, tr):
+                self._belief.restore(snap)
+                self._belief_h, self._tainted = tau, False
+                self._fc, self._chain = None, None
+                return
+            self._checkpoints.pop()
+        self._belief = None
+
     def _current(self) -> Any:
         """The forward belief at the step of the last update, with every allowed observation absorbed."""
         from psg_data.synth._process import ForwardBelief
@@ -293,13 +324,15 @@ class ProcessOracleFilter(BaseFilter):
         if self._belief is not None and tracker_n > self._seen_tracker:
             new_t = np.asarray(self._tracker.t[self._seen_tracker:], np.float64)  # type: ignore[union-attr]
             if np.any(new_t <= self._belief_h):  # a sibling reported an observation we have passed
-                self._belief = None
+                self._restart()
         self._seen_tracker = tracker_n
         if self._belief is None:
             self._belief, self._belief_h = ForwardBelief(self._process, self._entity).start(), -np.inf
-            self._fc, self._chain = None, None
+            self._fc, self._chain, self._checkpoints, self._tainted = None, None, [], False
         if H is None or H <= self._belief_h:
             return self._belief
+        if self._tracker is not None and not self._tainted and self._belief_h > -np.inf:
+            self._checkpoints.append((self._belief_h, self._belief.snapshot(), *self._counts(self._belief_h)))
         t, labels, y = self._window(self._belief_h, H)
         b = self._belief
         try:
@@ -310,7 +343,7 @@ class ProcessOracleFilter(BaseFilter):
                 b.observe(self._likelihood(lab, yy))
             self._advance(b, steps[-1])
         except PsgDataError as exc:
-            self._belief = None
+            self._belief, self._checkpoints = None, []
             raise EstimatorError(f"process_oracle: edge {self.edge}: {exc}") from None
         finally:
             self._fc, self._chain = None, None

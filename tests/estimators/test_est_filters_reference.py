@@ -26,14 +26,19 @@ from tests.synth.test_process_mutants import _regime_process
 H = 3600.0
 
 
-def _replay(f: Any, hist: tuple[np.ndarray, np.ndarray], steps: list[tuple[str, Any]]) -> list[np.ndarray]:
-    """Feed the history, then the steps (("update", (t, y)) or ("predict", times)); the predictions."""
+def _replay(f: Any, hist: tuple[np.ndarray, np.ndarray], steps: list[tuple[str, Any]],
+            sibling: Any = None) -> list[np.ndarray]:
+    """Feed the history, then the steps (("update", (t, y)), ("predict", times) or ("sibling", (t, y)):
+    an update of ``sibling``); the predictions.
+    """
     if hist[0].size:
         f.update_many(*hist)
     out = []
     for kind, arg in steps:
         if kind == "update":
             f.update(*arg)
+        elif kind == "sibling":
+            sibling.update(*arg)
         else:
             out.append(np.asarray(f.predict(arg)))
     return out
@@ -105,7 +110,7 @@ def _oracle_case(draw: Callable[..., Any]) -> tuple[Any, ...]:
     proc = _regime_process(seed, start_day=draw(st.integers(0, 2))) if draw(st.booleans()) else tiny_process(seed)
     proc.days = 6
     ent = proc.entities["obj"]
-    t0 = proc.clock.step_start_s(0) + 60.0
+    t0 = proc.clock.step_start_s(2 * proc.n_slots) + 60.0  # the training data end a day later
     labels = [s for s in ent.states if s is not None]
     train = []
     for lab in labels:  # the siblings' training observations: one per step for a day and a half
@@ -113,11 +118,21 @@ def _oracle_case(draw: Callable[..., Any]) -> tuple[Any, ...]:
         train.append(EdgeStream(("obj", lab), tt, np.asarray(draw(st.lists(st.integers(0, 1), min_size=tt.size,
                                                                               max_size=tt.size)), np.int8)))
     noise = draw(st.sampled_from([0.0, 0.1]))
-    return (proc, train, draw(st.sampled_from(labels)), draw(_online(t0, 30.0)), noise,
-            draw(st.booleans()), draw(st.sampled_from(["probability", "median"])))
+    hist, steps = draw(_online(t0, 30.0))
+    share = draw(st.booleans())
+    if share:  # a sibling reports observations, often earlier than the filter's last update
+        last, mixed = (float(hist[0][-1]) + 1800.0 if hist[0].size else -np.inf), []  # after its history
+        for kind, arg in steps:
+            if kind == "update" and draw(st.booleans()):
+                last = max(last, arg[0] - draw(st.sampled_from([0.0, 0.5, 3.0, 12.0])) * H)
+                mixed.append(("sibling", (last, draw(st.integers(0, 1)))))
+            mixed.append((kind, arg))
+        steps = mixed
+    return (proc, train, draw(st.sampled_from(labels)), (hist, steps), noise, share,
+            draw(st.sampled_from(["probability", "median"])))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(case=_oracle_case())
 def test_process_oracle_filter_predicts_bit_equal_to_the_reference(case: tuple[Any, ...]) -> None:
     proc, train, label, (hist, steps), noise, share, output = case
@@ -128,9 +143,11 @@ def test_process_oracle_filter_predicts_bit_equal_to_the_reference(case: tuple[A
     sibling = next(s.edge for s in train if s.edge[1] != label) if len(train) > 1 else None
     got, want = [], []
     for make, out in ((new.make_filter, got), (lambda e: ref_oracle.reference_filter(old, e), want)):
-        if share and sibling is not None and hist[0].size:  # a sibling reports observations through the tracker
-            make(sibling).update_many(hist[0] + 1800.0, 1 - hist[1])
-        out.extend(_replay(make(("obj", label)), hist, steps))
+        sib = make(sibling) if sibling is not None else None
+        if share and sib is not None and hist[0].size:  # the sibling's history goes to the tracker too
+            sib.update_many(hist[0] + 1800.0, 1 - hist[1])
+        out.extend(_replay(make(("obj", label)), hist, [x for x in steps if sib is not None or x[0] != "sibling"],
+                           sib))
     _assert_same(got, want, "process_oracle")
 
 
