@@ -217,6 +217,8 @@ class ProcessOracleFilter(BaseFilter):
         # observations up to it), from which a sibling's late observation is absorbed again
         self._checkpoints: list[tuple[float, Any, int, int]] = []
         self._tainted = False  # the belief skipped an own observation at its own time: no checkpoint
+        self._inherited = False  # the belief was handed over by a deepcopy and not used yet
+        self._warm_cache: tuple[tuple[int, int, float | None], tuple[Any, float, int]] | None = None
 
     def __deepcopy__(self, memo: dict[int, Any]) -> ProcessOracleFilter:
         out = copy.copy(self)  # the model and the training data are read-only: shared
@@ -225,11 +227,35 @@ class ProcessOracleFilter(BaseFilter):
         out._belief = None if self._belief is None else self._belief.copy()
         out._fc, out._fc_belief, out._chain = None, None, None
         out._checkpoints = list(self._checkpoints)  # snapshots are never changed in place: shared
+        out._warm_cache = None
+        if self._belief is None and self._last_t is not None:  # hand the copy the belief it would compute
+            warm = self._warm()
+            if warm is not None:
+                out._belief, out._belief_h, out._seen_tracker = warm[0].copy(), warm[1], warm[2]
+                out._inherited = True
         return out
+
+    def _warm(self) -> tuple[Any, float, int] | None:
+        """The belief a copy of this filter computes at its first prediction if nothing changes before,
+        computed once per state of this filter (kept for its next copies; its own belief stays unset).
+        """
+        key = (len(self._own_t), len(self._tracker.t) if self._tracker is not None else 0, self._last_t)
+        if self._warm_cache is None or self._warm_cache[0] != key:
+            tmp = copy.copy(self)
+            tmp._checkpoints = []
+            try:
+                tmp._current()
+            except EstimatorError:  # the copy meets the error itself, at its prediction
+                return None
+            self._warm_cache = (key, (tmp._belief, tmp._belief_h, tmp._seen_tracker))
+        return self._warm_cache[1]
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
         if self._belief is not None and t[0] <= self._belief_h:  # at the belief's own time: not absorbed
-            self._tainted = True  # (until the belief is computed again from the start)
+            if self._inherited:  # a copy's warm belief: its first prediction computes from the start
+                self._belief, self._inherited = None, False
+            else:
+                self._tainted = True  # (until the belief is computed again from the start)
         self._own_t.extend(t.tolist())
         self._own_y.extend(int(v) for v in y)
         if self._tracker is not None:
@@ -320,6 +346,7 @@ class ProcessOracleFilter(BaseFilter):
         from psg_data.synth._process import ForwardBelief
 
         H = self._last_t
+        self._inherited = False
         tracker_n = len(self._tracker.t) if self._tracker is not None else 0
         if self._belief is not None and tracker_n > self._seen_tracker:
             new_t = np.asarray(self._tracker.t[self._seen_tracker:], np.float64)  # type: ignore[union-attr]

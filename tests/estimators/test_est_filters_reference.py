@@ -6,6 +6,7 @@ psg-eval runs them."""
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -28,8 +29,8 @@ H = 3600.0
 
 def _replay(f: Any, hist: tuple[np.ndarray, np.ndarray], steps: list[tuple[str, Any]],
             sibling: Any = None) -> list[np.ndarray]:
-    """Feed the history, then the steps (("update", (t, y)), ("predict", times) or ("sibling", (t, y)):
-    an update of ``sibling``); the predictions.
+    """Feed the history, then the steps (("update", (t, y)), ("predict", times), ("sibling", (t, y)): an
+    update of ``sibling``, or ("copy", None): go on with deep copies of both); the predictions.
     """
     if hist[0].size:
         f.update_many(*hist)
@@ -39,6 +40,8 @@ def _replay(f: Any, hist: tuple[np.ndarray, np.ndarray], steps: list[tuple[str, 
             f.update(*arg)
         elif kind == "sibling":
             sibling.update(*arg)
+        elif kind == "copy":  # as the navigation protocol copies an object's filters (one tracker)
+            f, sibling = copy.deepcopy((f, sibling))
         else:
             out.append(np.asarray(f.predict(arg)))
     return out
@@ -127,6 +130,8 @@ def _oracle_case(draw: Callable[..., Any]) -> tuple[Any, ...]:
                 last = max(last, arg[0] - draw(st.sampled_from([0.0, 0.5, 3.0, 12.0])) * H)
                 mixed.append(("sibling", (last, draw(st.integers(0, 1)))))
             mixed.append((kind, arg))
+            if draw(st.integers(0, 4)) == 0:
+                mixed.append(("copy", None))
         steps = mixed
     return (proc, train, draw(st.sampled_from(labels)), (hist, steps), noise, share,
             draw(st.sampled_from(["probability", "median"])))
