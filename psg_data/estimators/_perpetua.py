@@ -23,6 +23,8 @@ switching time is found with one vectorised pass.
 
 from __future__ import annotations
 
+import copy
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -46,6 +48,67 @@ from psg_data.estimators._survival import SurvivalMixture
 __all__ = ["PerpetuaEstimator", "PerpetuaFilter"]
 
 
+class _Terms:
+    """What :meth:`MixtureFilter.predict` needs of a mixture's state, computed once per state.
+
+    ``k`` and ``e`` are the dominant component and its log evidence; the state is recognised by its
+    lists and arrays (the mixture replaces them at every change, never edits them in place; holding
+    them here keeps their identities from being reused) and its floats.
+    """
+
+    __slots__ = ("key", "floats", "k", "e", "p1", "p2")
+
+    def __init__(self, m: MixtureFilter) -> None:
+        self.key = (m.ly, m.lsf, m.log_prior)
+        self.floats = (m.l, m.origin, m.tau)
+        self.k = m.dominant()
+        self.e = float(m.component_log_evidence()[self.k])
+        self.p1, self.p2 = m.survival.p1[self.k], m.survival.p2[self.k]
+
+    def holds(self, m: MixtureFilter) -> bool:
+        a, b, c = self.key
+        return a is m.ly and b is m.lsf and c is m.log_prior and self.floats == (m.l, m.origin, m.tau)
+
+
+def _mixture_predict(m: MixtureFilter, terms: _Terms | None, t: NDArray[np.float64]) -> tuple[
+        NDArray[np.float64], _Terms | None]:
+    """``m.predict(t)`` (the same operations), with the state's terms cached; returns (prediction, terms)."""
+    if m.origin is None:
+        return (np.zeros_like(t) if m.emergence else np.ones_like(t)), terms
+    if terms is None or not terms.holds(m):
+        terms = _Terms(m)
+    tau = np.maximum(t - m.origin, m.tau)
+    if m.survival.family == "lognormal":  # SurvivalMixture.log_sf_one's operations for one component
+        from scipy.special import log_ndtr
+
+        with np.errstate(divide="ignore"):
+            lt = np.log(np.maximum(tau, 0.0))
+        lsf = log_ndtr((terms.p1 - lt) / terms.p2)
+    else:
+        lsf = m.survival.log_sf_one(tau, terms.k)
+    p = np.exp(np.minimum(m.l + lsf - terms.e, 0.0))
+    return (1.0 - p if m.emergence else p), terms
+
+
+def _mixture_predict_one(m: MixtureFilter, terms: _Terms | None, x: float) -> tuple[float, _Terms | None]:
+    """``m.predict([x])[0]`` for a log-normal mixture, as floats (IEEE arithmetic and numpy's own log and
+    exp, which are what the array form computes element by element).
+    """
+    from scipy.special import log_ndtr
+
+    if m.origin is None:
+        return (0.0 if m.emergence else 1.0), terms
+    if terms is None or not terms.holds(m):
+        terms = _Terms(m)
+    tau = x - m.origin
+    if tau < m.tau:
+        tau = m.tau
+    lt = float(np.log(tau)) if tau > 0.0 else -math.inf  # np.log(0.0) = -inf
+    v = m.l + float(log_ndtr((terms.p1 - lt) / terms.p2)) - terms.e
+    p = float(np.exp(v if v < 0.0 else 0.0))
+    return (1.0 - p if m.emergence else p), terms
+
+
 class PerpetuaFilter(BaseFilter):
     def __init__(self, edge: EdgeKey, per: SurvivalMixture, emg: SurvivalMixture, p_m: float, p_f: float, *,
                  delta_low: float, delta_high: float, eps: float, num_steps: int, escape: float = ESCAPE,
@@ -59,6 +122,7 @@ class PerpetuaFilter(BaseFilter):
         self.num_steps = int(num_steps)
         self.active = "per"
         self._name = name
+        self._terms: dict[str, _Terms | None] = {"per": None, "emg": None}
 
     def _reset_weights(self, m: MixtureFilter) -> NDArray[np.float64]:
         w0 = m.survival.weights
@@ -78,30 +142,54 @@ class PerpetuaFilter(BaseFilter):
             self.per.log_prior = lp
             self.active = "per"
 
-    def _crossed(self, m: MixtureFilter, t: NDArray[np.float64]) -> NDArray[np.bool_]:
-        p = m.predict(t)
+    def _active_predict(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The active mixture's prediction at ``t`` (its terms cached while its state lasts)."""
+        which = self.active
+        p, self._terms[which] = _mixture_predict(self.per if which == "per" else self.emg, self._terms[which], t)
+        return p
+
+    def _crossed(self, t: NDArray[np.float64]) -> NDArray[np.bool_]:
+        p = self._active_predict(t)
         return p <= self.delta_low if self.active == "per" else p >= self.delta_high
 
     def _simulate(self, grid: NDArray[np.float64]) -> None:
         """Advance the state machine over sorted times (no observations)."""
         i = 0
         while i < grid.size:
-            m = self.per if self.active == "per" else self.emg
-            hit = np.flatnonzero(self._crossed(m, grid[i:]))
+            hit = np.flatnonzero(self._crossed(grid[i:]))
             if hit.size == 0:
                 return
             self._switch(float(grid[i + hit[0]]))
             i += int(hit[0]) + 1
 
+    def _simulate_each(self, times: list[float]) -> None:
+        """:meth:`_simulate` one time after the other (floats: cheaper for the few times of an update)."""
+        if self.per.survival.family != "lognormal" or self.emg.survival.family != "lognormal":
+            self._simulate(np.asarray(times, np.float64))
+            return
+        for x in times:
+            which = self.active
+            m = self.per if which == "per" else self.emg
+            p, self._terms[which] = _mixture_predict_one(m, self._terms[which], x)
+            if (p <= self.delta_low) if which == "per" else (p >= self.delta_high):
+                self._switch(x)
+
+    def _sub_steps(self, a: float, b: float) -> list[float]:
+        """``np.linspace(a, b, num_steps + 2)[1:-1]`` (the same operations: ``i * step + a``)."""
+        div = self.num_steps + 1
+        step = (b - a) / div
+        if step == 0.0:  # denormal span: linspace's own handling
+            return np.linspace(a, b, self.num_steps + 2)[1:-1].tolist()  # type: ignore[no-any-return]
+        return [i * step + a for i in range(1, div)]
+
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
         for ti, yi in zip(t.tolist(), y.tolist()):
             if self._last_t is not None and ti > self._last_t and self.num_steps > 0:
-                sub = np.linspace(self._last_t, ti, self.num_steps + 2)[1:-1]
-                self._simulate(sub)
+                self._simulate_each(self._sub_steps(self._last_t, ti))
             self.per.update(ti, yi)
             if self.emg.started:
                 self.emg.update(ti, yi)
-            self._simulate(np.array([ti]))
+            self._simulate_each([ti])
             self._last_t = ti
 
     def start(self, t_s: float) -> None:
@@ -110,6 +198,20 @@ class PerpetuaFilter(BaseFilter):
         self.per.reset(float(t_s))
         self.active = "per"
 
+    def _grid(self, t0: float, ts: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The simulation grid: query times plus ``num_steps`` sub-steps between consecutive distinct times."""
+        if ts.size == 1:  # one query time x >= t0: the same sums as below, on floats
+            x, n = float(ts[0]), self.num_steps
+            if x == t0 or n == 0:
+                return np.array(sorted({t0, x}))
+            return np.array(sorted({t0, x, *[t0 + (x - t0) * (j / (n + 1)) for j in range(1, n + 1)]}))
+        knots = np.unique(np.concatenate([[t0], ts]))
+        if self.num_steps > 0 and knots.size > 1:
+            frac = np.arange(1, self.num_steps + 1) / (self.num_steps + 1)
+            sub = (knots[:-1, None] + np.diff(knots)[:, None] * frac).reshape(-1)
+            return np.unique(np.concatenate([knots, sub]))
+        return knots
+
     def _predict(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         t0 = self._last_t if self._last_t is not None else self.per.origin
         if t0 is None:  # never started: the present state
@@ -117,29 +219,23 @@ class PerpetuaFilter(BaseFilter):
         t = np.maximum(t, t0)
         order = np.argsort(t, kind="stable")
         ts = t[order]
-        # simulation grid: query times plus num_steps sub-steps between consecutive distinct times
-        knots = np.unique(np.concatenate([[t0], ts]))
-        if self.num_steps > 0 and knots.size > 1:
-            frac = np.arange(1, self.num_steps + 1) / (self.num_steps + 1)
-            sub = (knots[:-1, None] + np.diff(knots)[:, None] * frac).reshape(-1)
-            grid = np.unique(np.concatenate([knots, sub]))
-        else:
-            grid = knots
-        sim = self._copy()
+        grid = self._grid(t0, ts)
+        sim = self  # copied at the first switch: until then the walk only reads the state
         out_sorted = np.empty(ts.size)
         # walk the grid phase by phase; queries are answered by the model active at their time
         i = 0
         q = 0
         while q < ts.size:
-            m = sim.per if sim.active == "per" else sim.emg
-            hit = np.flatnonzero(sim._crossed(m, grid[i:]))
+            hit = np.flatnonzero(sim._crossed(grid[i:]))
             end = grid[i + hit[0]] if hit.size else np.inf
             # queries strictly before the switch time use the current model
             qe = int(np.searchsorted(ts, end, side="left"))
-            out_sorted[q:qe] = m.predict(ts[q:qe])
+            out_sorted[q:qe] = sim._active_predict(ts[q:qe])
             q = qe
             if hit.size == 0:
                 break
+            if sim is self:
+                sim = self._copy()
             sim._switch(float(end))
             i += int(hit[0]) + 1
         out = np.empty(ts.size)
@@ -147,14 +243,10 @@ class PerpetuaFilter(BaseFilter):
         return out
 
     def _copy(self) -> PerpetuaFilter:
-        c = PerpetuaFilter(self.edge, self.per.survival, self.emg.survival, self.per.p_m, self.per.p_f,
-                           delta_low=self.delta_low, delta_high=self.delta_high, eps=self.eps,
-                           num_steps=self.num_steps, escape=self.per.escape, escape_first=self.per.escape_first,
-                           name=self._name)
-        c.per.set_state(self.per.get_state())
-        c.emg.set_state(self.emg.get_state())
-        c.active = self.active
-        c._last_t = self._last_t
+        """A copy to simulate on: the mixtures' states are replaced, never edited, so shallow copies do."""
+        c = copy.copy(self)
+        c.per, c.emg = copy.copy(self.per), copy.copy(self.emg)
+        c._terms = dict(self._terms)
         return c
 
     def get_state(self) -> dict[str, Any]:

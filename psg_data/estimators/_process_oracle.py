@@ -43,6 +43,7 @@ Observations are noise-free by default (ground-truth and privileged labels); dec
 
 from __future__ import annotations
 
+import bisect
 import copy
 import logging
 from collections.abc import Mapping, Sequence
@@ -183,6 +184,7 @@ class ProcessOracleEstimator(BaseEstimator):
         if t.size:
             f._own_t.extend(t.tolist())
             f._own_y.extend(y.tolist())
+            f._own_sorted = bool(np.all(np.diff(t) >= 0))
             f._last_t = float(t[-1])
         return f
 
@@ -202,22 +204,58 @@ class ProcessOracleFilter(BaseFilter):
         self._p_m, self._p_f = p_m, p_f
         self._own_t: list[float] = []
         self._own_y: list[int] = []
+        self._own_sorted = True  # own times non-decreasing (update_many checks it; a restored state may not be)
         self._belief: Any = None
         self._belief_h: float = -np.inf
         self._seen_tracker = 0
         self._index = self._entity.state_index(edge[1])
-        self._fc: list[NDArray[np.float64]] | None = None  # state marginals at steps b.n, b.n + 1, ...
+        self._fc: list[float] | None = None  # P(state = edge's label) at steps b.n, b.n + 1, ...
         self._fc_belief: Any = None
+        self._chain: list[Any] | None = None  # snapshots of the forecast belief at steps b.n, b.n + 1, ...
+        self._likelihoods: dict[tuple[str, int], NDArray[np.float64]] = {}
+        # with a tracker: the belief at earlier update times (time, snapshot, own and sibling-tracker
+        # observations up to it), from which a sibling's late observation is absorbed again
+        self._checkpoints: list[tuple[float, Any, int, int]] = []
+        self._tainted = False  # the belief skipped an own observation at its own time: no checkpoint
+        self._inherited = False  # the belief was handed over by a deepcopy and not used yet
+        self._warm_cache: tuple[tuple[int, int, float | None], tuple[Any, float, int]] | None = None
 
     def __deepcopy__(self, memo: dict[int, Any]) -> ProcessOracleFilter:
         out = copy.copy(self)  # the model and the training data are read-only: shared
         out._own_t, out._own_y = list(self._own_t), list(self._own_y)
         out._tracker = copy.deepcopy(self._tracker, memo)
         out._belief = None if self._belief is None else self._belief.copy()
-        out._fc, out._fc_belief = None, None
+        out._fc, out._fc_belief, out._chain = None, None, None
+        out._checkpoints = list(self._checkpoints)  # snapshots are never changed in place: shared
+        out._warm_cache = None
+        if self._belief is None and self._last_t is not None:  # hand the copy the belief it would compute
+            warm = self._warm()
+            if warm is not None:
+                out._belief, out._belief_h, out._seen_tracker = warm[0].copy(), warm[1], warm[2]
+                out._inherited = True
         return out
 
+    def _warm(self) -> tuple[Any, float, int] | None:
+        """The belief a copy of this filter computes at its first prediction if nothing changes before,
+        computed once per state of this filter (kept for its next copies; its own belief stays unset).
+        """
+        key = (len(self._own_t), len(self._tracker.t) if self._tracker is not None else 0, self._last_t)
+        if self._warm_cache is None or self._warm_cache[0] != key:
+            tmp = copy.copy(self)
+            tmp._checkpoints = []
+            try:
+                tmp._current()
+            except EstimatorError:  # the copy meets the error itself, at its prediction
+                return None
+            self._warm_cache = (key, (tmp._belief, tmp._belief_h, tmp._seen_tracker))
+        return self._warm_cache[1]
+
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:
+        if self._belief is not None and t[0] <= self._belief_h:  # at the belief's own time: not absorbed
+            if self._inherited:  # a copy's warm belief: its first prediction computes from the start
+                self._belief, self._inherited = None, False
+            else:
+                self._tainted = True  # (until the belief is computed again from the start)
         self._own_t.extend(t.tolist())
         self._own_y.extend(int(v) for v in y)
         if self._tracker is not None:
@@ -226,61 +264,116 @@ class ProcessOracleFilter(BaseFilter):
             self._tracker.label.extend([self.edge[1]] * int(late.sum()))
             self._tracker.y.extend(int(v) for v in y[late])
 
+    def _own_window(self, lo: float, hi: float) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
+        """The own observations with lo < t <= hi, in the order they came."""
+        if self._own_sorted:  # a slice: the same elements as the mask below
+            a, b = bisect.bisect_right(self._own_t, lo), bisect.bisect_right(self._own_t, hi)
+            return np.asarray(self._own_t[a:b], np.float64), np.asarray(self._own_y[a:b], np.int8)
+        own_t = np.asarray(self._own_t, np.float64)
+        m = (own_t > lo) & (own_t <= hi)
+        return own_t[m], np.asarray(self._own_y, np.int8)[m]
+
     def _window(self, lo: float, hi: float) -> tuple[NDArray[np.float64], list[str], NDArray[np.int8]]:
         """Observations of the entity with lo < t <= hi: siblings from the training data and the
-        tracker, the own edge from the filter's updates.
+        tracker, the own edge from the filter's updates (time order; at equal times in that order).
         """
         d = self._data
         a, b = np.searchsorted(d.t, lo, side="right"), np.searchsorted(d.t, hi, side="right")
+        own_t, own_y = self._own_window(lo, hi)
+        tracked = self._tracker is not None and bool(self._tracker.t)
+        if a == b and not tracked and self._own_sorted:  # own observations only, already in time order
+            return own_t, [self.edge[1]] * own_t.size, own_y
         sib = d.label[a:b] != self.edge[1]
-        ts = [d.t[a:b][sib]]
-        labels = list(d.label[a:b][sib])
-        ys = [d.y[a:b][sib]]
-        own_t = np.asarray(self._own_t, np.float64)
-        m = (own_t > lo) & (own_t <= hi)
-        ts.append(own_t[m])
-        labels += [self.edge[1]] * int(m.sum())
-        ys.append(np.asarray(self._own_y, np.int8)[m])
-        if self._tracker is not None and self._tracker.t:
-            tt = np.asarray(self._tracker.t, np.float64)
-            tl = np.asarray(self._tracker.label, dtype=object)
+        ts = [d.t[a:b][sib], own_t]
+        labels = list(d.label[a:b][sib]) + [self.edge[1]] * own_t.size
+        ys = [d.y[a:b][sib], own_y]
+        if tracked:
+            tt = np.asarray(self._tracker.t, np.float64)  # type: ignore[union-attr]
+            tl = np.asarray(self._tracker.label, dtype=object)  # type: ignore[union-attr]
             m = (tt > lo) & (tt <= hi) & (tl != self.edge[1])
             ts.append(tt[m])
             labels += list(tl[m])
-            ys.append(np.asarray(self._tracker.y, np.int8)[m])
+            ys.append(np.asarray(self._tracker.y, np.int8)[m])  # type: ignore[union-attr]
         t = np.concatenate(ts)
         y = np.concatenate(ys).astype(np.int8)
         order = np.argsort(t, kind="stable")
         return t[order], [labels[i] for i in order], y[order]
 
+    def _likelihood(self, label: str, y: int) -> NDArray[np.float64]:
+        from psg_data.synth._process import observation_likelihood
+
+        out = self._likelihoods.get((label, y))
+        if out is None:
+            lik = observation_likelihood(self._entity, label, y, self._p_m, self._p_f)
+            out = self._likelihoods[(label, y)] = np.asarray(lik, np.float64)[None, :, None]
+        return out
+
+    def _advance(self, b: Any, n: int) -> None:
+        """``b.advance_to(n)``, taking the steps the forecast chain has already computed from ``b``'s
+        state (the same operations: the chain started from it and nothing was observed since).
+        """
+        ch = self._chain
+        if ch is not None and n > b.n and ch[0][0] == b.n:
+            b.restore(ch[min(n - b.n, len(ch) - 1)])
+        b.advance_to(n)
+
+    def _counts(self, tau: float) -> tuple[int, int]:
+        """How many own observations, and sibling observations of the tracker, have t <= tau."""
+        own = bisect.bisect_right(self._own_t, tau) if self._own_sorted else \
+            int(np.count_nonzero(np.asarray(self._own_t, np.float64) <= tau))
+        tr = self._tracker
+        if tr is None or not tr.t:
+            return own, 0
+        m = (np.asarray(tr.t, np.float64) <= tau) & (np.asarray(tr.label, dtype=object) != self.edge[1])
+        return own, int(np.count_nonzero(m))
+
+    def _restart(self) -> None:
+        """Go back to the latest checkpoint whose observations are all still the ones up to its time (its
+        state is then the one a computation from the start reaches there), or to no belief (the start).
+        """
+        while self._checkpoints:
+            tau, snap, own, tr = self._checkpoints[-1]
+            if self._counts(tau) == (own, tr):
+                self._belief.restore(snap)
+                self._belief_h, self._tainted = tau, False
+                self._fc, self._chain = None, None
+                return
+            self._checkpoints.pop()
+        self._belief = None
+
     def _current(self) -> Any:
         """The forward belief at the step of the last update, with every allowed observation absorbed."""
-        from psg_data.synth._process import ForwardBelief, observation_likelihood
+        from psg_data.synth._process import ForwardBelief
 
         H = self._last_t
+        self._inherited = False
         tracker_n = len(self._tracker.t) if self._tracker is not None else 0
         if self._belief is not None and tracker_n > self._seen_tracker:
             new_t = np.asarray(self._tracker.t[self._seen_tracker:], np.float64)  # type: ignore[union-attr]
             if np.any(new_t <= self._belief_h):  # a sibling reported an observation we have passed
-                self._belief = None
+                self._restart()
         self._seen_tracker = tracker_n
         if self._belief is None:
             self._belief, self._belief_h = ForwardBelief(self._process, self._entity).start(), -np.inf
-            self._fc = None
+            self._fc, self._chain, self._checkpoints, self._tainted = None, None, [], False
         if H is None or H <= self._belief_h:
             return self._belief
-        self._fc = None
+        if self._tracker is not None and not self._tainted and self._belief_h > -np.inf:
+            self._checkpoints.append((self._belief_h, self._belief.snapshot(), *self._counts(self._belief_h)))
         t, labels, y = self._window(self._belief_h, H)
         b = self._belief
         try:
-            steps = self._process.clock.step_of(t)
-            for n, lab, yy in zip(steps, labels, y):
-                b.advance_to(int(n))
-                b.observe(observation_likelihood(self._entity, lab, int(yy), self._p_m, self._p_f))
-            b.advance_to(int(self._process.clock.step_of(np.array([H]))[0]))
+            steps = self._process.clock.step_of(np.append(t, H)).tolist()
+            for n, lab, yy in zip(steps, labels, y.tolist()):
+                self._advance(b, n)
+                self._chain = None  # the belief now differs from the chain's start
+                b.observe(self._likelihood(lab, yy))
+            self._advance(b, steps[-1])
         except PsgDataError as exc:
-            self._belief = None
+            self._belief, self._checkpoints = None, []
             raise EstimatorError(f"process_oracle: edge {self.edge}: {exc}") from None
+        finally:
+            self._fc, self._chain = None, None
         self._belief_h = H
         return b
 
@@ -290,11 +383,15 @@ class ProcessOracleFilter(BaseFilter):
         b = self._current()
         steps = np.maximum(self._process.clock.step_of(t), b.n) - b.n
         if self._fc is None:
-            self._fc, self._fc_belief = [b.state_marginal()], b.copy()
-        while len(self._fc) <= int(steps.max(initial=0)):  # extend the cached forecast to the furthest step
+            self._fc_belief = b.copy()
+            self._fc, self._chain = [float(b.state_marginal()[self._index])], [self._fc_belief.snapshot()]
+        fc, chain = self._fc, self._chain
+        assert chain is not None
+        while len(fc) <= int(steps.max(initial=0)):  # extend the cached forecast to the furthest step
             self._fc_belief.advance()
-            self._fc.append(self._fc_belief.state_marginal())
-        p = np.asarray(self._fc)[steps, self._index]
+            chain.append(self._fc_belief.snapshot())
+            fc.append(float(self._fc_belief.state_marginal()[self._index]))
+        p = np.asarray(fc)[steps]
         return (p >= 0.5).astype(np.float64) if self._median else p
 
     def get_state(self) -> dict[str, Any]:

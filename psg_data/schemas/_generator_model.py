@@ -247,7 +247,7 @@ class StepClock:
     def step_of(self, t_s: ArrayLike) -> NDArray[np.int64]:
         """Step holding each time (after the last slot of a day: that slot; before step 0: step 0)."""
         t = np.asarray(t_s, np.float64)
-        if t.size:
+        if t.size and not (self._starts.size and t.max() < self._starts[-1]):  # else the table covers t already
             span = float(np.max(t)) - (self._starts[0] if self._starts.size else 0.0)
             need = int(math.ceil(max(span, 0.0) / 86400.0)) + 2 if self._starts.size else 32
             self._extend(need)

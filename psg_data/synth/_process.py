@@ -97,6 +97,16 @@ def sample_entity(process: StepProcess, entity: EntityProcess, n_steps: int, rng
 # -- exact inference ------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class _SlotKernel:
+    """Constants of the one-step kernel into slot ``k`` for one entity model."""
+
+    rho: NDArray[np.float64]  # (P, 1) routine strength
+    one_minus_rho: NDArray[np.float64]  # (P, 1, 1)
+    rows: NDArray[np.int64]  # (P,) rows p * S + routine[p, k] of the (P * S, R) view
+    u_routine: NDArray[np.float64]  # (P, R) fresh-dwell pmf of the routine state
+
+
 class ForwardBelief:
     """Exact filtering and forecasting for one entity: the belief over (pattern, state, dwell).
 
@@ -113,13 +123,27 @@ class ForwardBelief:
         self.n = -1
         self.alpha = np.zeros((entity.n_patterns, entity.n_states, entity.max_dwell))
         self.log_evidence = 0.0
+        self._slots: dict[int, _SlotKernel] = {}  # constants of the current entity's kernel, per slot
+        self._days: dict[int, NDArray[np.float64]] = {}  # day matrices (a function of the day alone), shared
 
     def copy(self) -> ForwardBelief:
         """An independent copy of the belief (same process, own state)."""
         out = ForwardBelief.__new__(ForwardBelief)
         out.process, out.entity, out.U, out._base = self.process, self.entity, self.U, self._base
         out.n, out.alpha, out.log_evidence = self.n, self.alpha.copy(), self.log_evidence
+        out._slots, out._days = self._slots, self._days  # read-only constants of the same model
         return out
+
+    def snapshot(self) -> tuple[int, NDArray[np.float64], EntityProcess, NDArray[np.float64], dict[int, _SlotKernel]]:
+        """The belief's state as it is now (arrays shared: the belief never changes them in place);
+        :meth:`restore` puts it back, on this belief or a copy of it.
+        """
+        return self.n, self.alpha, self.entity, self.U, self._slots
+
+    def restore(self, state: tuple[int, NDArray[np.float64], EntityProcess, NDArray[np.float64],
+                                   dict[int, _SlotKernel]]) -> None:
+        """Take back a :meth:`snapshot` (of this belief or of a copy; the log evidence is kept)."""
+        self.n, self.alpha, self.entity, self.U, self._slots = state
 
     def start(self) -> ForwardBelief:
         """The belief at step 0 (no observation)."""
@@ -130,17 +154,37 @@ class ForwardBelief:
         self.n = 0
         return self
 
+    def _slot(self, k: int) -> _SlotKernel:
+        c = self._slots.get(k)
+        if c is None:
+            e = self.entity
+            idx = np.arange(e.n_patterns)
+            rk = e.routine[:, k]
+            rho = e.routine_strength[:, k][:, None, None]
+            c = self._slots[k] = _SlotKernel(rho[:, :, 0], 1.0 - rho, idx * e.n_states + rk, self.U[idx, rk, :])
+        return c
+
     def _hour_kernel(self, beta: NDArray[np.float64], k: int) -> NDArray[np.float64]:
-        e = self.entity
-        rho = e.routine_strength[:, k][:, None, None]
+        """``rho * routine + (1 - rho) * (hold + jumped * U)``, the routine term added only where it is
+        not zero (the same floating-point operations on every element as the full expression).
+        """
+        c = self._slot(k)
         tot = beta.sum(axis=(1, 2))
-        routine = np.zeros_like(beta)
-        idx = np.arange(e.n_patterns)
-        routine[idx, e.routine[:, k], :] = tot[:, None] * self.U[idx, e.routine[:, k], :]
-        hold = np.zeros_like(beta)
-        hold[:, :, :-1] = beta[:, :, 1:]
-        jumped = np.einsum("ps,pst->pt", beta[:, :, 0], e.jump)
-        return rho * routine + (1.0 - rho) * (hold + jumped[:, :, None] * self.U)
+        out = np.empty_like(beta)
+        out[:, :, :-1] = beta[:, :, 1:]
+        out[:, :, -1] = 0.0
+        jumped = np.einsum("ps,pst->pt", beta[:, :, 0], self.entity.jump)
+        out += jumped[:, :, None] * self.U
+        out *= c.one_minus_rho
+        flat = out.reshape(-1, out.shape[2])  # a view: (pattern, state) rows
+        flat[c.rows] += c.rho * (tot[:, None] * c.u_routine)
+        return out
+
+    def _day_matrix(self, day: int) -> NDArray[np.float64]:
+        m = self._days.get(day)
+        if m is None:
+            m = self._days[day] = self.process.day_matrix(self.entity, day)
+        return m
 
     def advance(self) -> None:
         """Move the belief one step ahead (no observation); at a regime's first day the regime's model
@@ -153,8 +197,8 @@ class ForwardBelief:
             if self.process.regimes:
                 e = self.process.entity_on(self._base.entity_id, day, self._base)
                 if e is not self.entity:
-                    self.entity, self.U = e, e.dwell_pmf()
-            beta = np.einsum("psr,pq->qsr", beta, self.process.day_matrix(self.entity, day))
+                    self.entity, self.U, self._slots = e, e.dwell_pmf(), {}
+            beta = np.einsum("psr,pq->qsr", beta, self._day_matrix(day))
         self.alpha = self._hour_kernel(beta, k)
         self.n = n
 
@@ -170,12 +214,13 @@ class ForwardBelief:
             self.advance()
 
     def observe(self, likelihood: NDArray[np.float64]) -> None:
-        """Absorb an observation at the current step given its likelihood per state, (S,).
+        """Absorb an observation at the current step given its likelihood per state, (S,) (or (1, S, 1)).
 
         Raises:
             PsgDataError: the observation is impossible under the model (zero evidence).
         """
-        a = self.alpha * np.asarray(likelihood, np.float64)[None, :, None]
+        lik = likelihood if getattr(likelihood, "ndim", 1) == 3 else np.asarray(likelihood, np.float64)[None, :, None]
+        a = self.alpha * lik
         z = float(a.sum())
         if not z > 0.0:
             raise PsgDataError(f"{self.entity.entity_id}: observation at step {self.n} is impossible under the "
