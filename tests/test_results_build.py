@@ -178,6 +178,14 @@ def test_a_failing_run_leaves_the_previous_one(tmp_path: Path, monkeypatch: pyte
     assert json.loads((tmp_path / "s" / "results.json").read_text()) == {"v": 1}
 
 
+def test_a_commit_of_other_files_during_a_run_is_fine(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """HEAD moving while a run runs (a commit of RESULTS.md or the manifest) keeps the run: only the code counts;
+    run.json names the revision the run started at."""
+    monkeypatch.setattr(build, "code_state", lambda: {**CLEAN, "revision": "b" * 40})
+    folder = build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    assert json.loads((folder / "run.json").read_text())["revision"] == "a" * 40
+
+
 @pytest.mark.slow
 def test_quick_form_renders_every_block_from_real_runs(tmp_path: Path) -> None:
     """CI's quick form: the tiny runs made for real, every block with a quick run rendered from them."""
