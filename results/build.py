@@ -9,7 +9,8 @@ A document holds its generated parts between markers; everything outside them is
 
     <!-- results:table main-job format=text -->...<!-- /results -->      a table of a run's results.json
     <!-- results:columns RUN1,RUN2 labels="gt|privileged" metrics=balanced_accuracy extra=mae,f1 -->...<!-- /results -->
-                                       several runs' tables side by side (interval=yes: the interval's ends too)
+                                       several runs' tables side by side (rows=RUN: only that run's rows;
+                                       interval=yes: the interval's ends after each cell)
     <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
     <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
     <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
@@ -284,7 +285,7 @@ class Renderer:
 
     def _columns(self, pos: list[str], opts: dict[str, str]) -> str:
         """Several runs' tables side by side (``RUN1,RUN2``): one row per method (the first run's order, then
-        rows only later runs have), each run's metric columns after the last's, headed ``LABEL: metric``
+        rows only later runs have; ``rows=RUN``: only that run's rows), each run's metric columns after the last's, headed ``LABEL: metric``
         (``labels=A|B``; default the run ids); ``metrics=a,b``: only these; ``extra=mae,f1``: those metrics'
         estimates in brackets after each cell; ``interval=yes``: the interval's ends after each cell (for a
         table whose ± is a spread). Bold: each column's best non-ceiling value, as in a run's own table.
@@ -295,12 +296,15 @@ class Renderer:
         labels = opts["labels"].split("|") if "labels" in opts else ids
         if len(labels) != len(ids):
             raise BuildError(f"{len(ids)} runs but {len(labels)} labels")
+        if opts.get("rows", ids[0]) not in ids:
+            raise BuildError(f"rows={opts['rows']}: expected one of the block's runs {ids}")
         header, runs, roles = ["Method", "ref"], [], {}
         for rid, label in zip(ids, labels):
             names, cells = self._run_columns(rid, opts)
             header += [f"{label}: {n}" for n in names]
             runs.append((cells, len(names)))
-            roles.update({m: role for m, (role, _) in cells.items() if m not in roles})
+            if "rows" not in opts or opts["rows"] == rid:
+                roles.update({m: role for m, (role, _) in cells.items() if m not in roles})
         lines = ["| " + " | ".join(md_escape(h) for h in header) + " |", "|---|---|" + "---:|" * (len(header) - 2)]
         for method, role in roles.items():
             row = [md_escape(method), "" if role == "method" else role]

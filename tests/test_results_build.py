@@ -120,7 +120,9 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     one = build.render_text("<!-- results:columns b interval=yes -->?<!-- /results -->", r, "DOC.md")
     assert "| b: MAE ↓ | b: B-Acc ↑ |" in one
     assert "| perpetua\\_star |  | **0.220 ± 0.010** [0.210, 0.230] | **0.580 ± 0.020** [0.560, 0.600] |" in one
-    for bad, message in (('labels="x"', "2 runs but 1 labels"), ("metrics=f1", "no metric ['f1']"),
+    only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
+    assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
+    for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"), ("metrics=f1", "no metric ['f1']"),
                          ("extra=rmse", "no metric ['rmse']")):
         with pytest.raises(build.BuildError, match=re.escape(message)):
             build.render_text(f"<!-- results:columns a,b {bad} -->?<!-- /results -->", r, "DOC.md")
