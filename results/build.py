@@ -286,7 +286,7 @@ class Renderer:
     def _columns(self, pos: list[str], opts: dict[str, str]) -> str:
         """Several runs' tables side by side (``RUN1,RUN2``): one row per method (the first run's order, then
         rows only later runs have; ``rows=RUN``: only that run's rows), each run's metric columns after the last's, headed ``LABEL: metric``
-        (``labels=A|B``; default the run ids); ``metrics=a,b``: only these; ``extra=mae,f1``: those metrics'
+        (``labels=A|B``; default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those metrics'
         estimates in brackets after each cell; ``interval=yes``: the interval's ends after each cell (for a
         table whose ± is a spread). Bold: each column's best non-ceiling value, as in a run's own table.
         """
@@ -301,7 +301,7 @@ class Renderer:
         header, runs, roles = ["Method", "ref"], [], {}
         for rid, label in zip(ids, labels):
             names, cells = self._run_columns(rid, opts)
-            header += [f"{label}: {n}" for n in names]
+            header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
             runs.append((cells, len(names)))
             if "rows" not in opts or opts["rows"] == rid:
                 roles.update({m: role for m, (role, _) in cells.items() if m not in roles})

@@ -118,7 +118,7 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
                     "| fremen |  | **0.600 ± 0.020** (0.200) | 0.500 ± 0.020 (0.250) |",
                     "| perpetua\\_star |  | - | **0.580 ± 0.020** (0.220) |"]
     one = build.render_text("<!-- results:columns b interval=yes -->?<!-- /results -->", r, "DOC.md")
-    assert "| b: MAE ↓ | b: B-Acc ↑ |" in one
+    assert "| Method | ref | MAE ↓ | B-Acc ↑ |" in one  # one run, no labels: the metric names alone
     assert "| perpetua\\_star |  | **0.220 ± 0.010** [0.210, 0.230] | **0.580 ± 0.020** [0.560, 0.600] |" in one
     only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
     assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
