@@ -10,7 +10,7 @@ A document holds its generated parts between markers; everything outside them is
     <!-- results:table main-job format=text -->...<!-- /results -->      a table of a run's results.json
     <!-- results:columns RUN1,RUN2 labels="gt|privileged" metrics=balanced_accuracy extra=mae,f1 -->...<!-- /results -->
                                        several runs' tables side by side (rows=RUN: only that run's rows;
-                                       interval=yes: the interval's ends after each cell)
+                                       spread=std: ± the std across draws; interval=yes: the interval's ends)
     <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
     <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
     <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
@@ -287,8 +287,8 @@ class Renderer:
         """Several runs' tables side by side (``RUN1,RUN2``): one row per method (the first run's order, then
         rows only later runs have; ``rows=RUN``: only that run's rows), each run's metric columns after the last's, headed ``LABEL: metric``
         (``labels=A|B``; default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those metrics'
-        estimates in brackets after each cell; ``interval=yes``: the interval's ends after each cell (for a
-        table whose ± is a spread). Bold: each column's best non-ceiling value, as in a run's own table.
+        estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation (across
+        scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after each cell. Bold: each column's best non-ceiling value, as in a run's own table.
         """
         from psg_data.evaluation._table_formats import md_escape
 
@@ -324,11 +324,14 @@ class Renderer:
         extra = [k for k in opts.get("extra", "").split(",") if k]
         if set(want + extra) - set(keys):
             raise BuildError(f"run {rid}: no metric {sorted(set(want + extra) - set(keys))} (metrics: {keys})")
+        spread = opts.get("spread", table.spread)
+        if spread not in ("interval", "std"):
+            raise BuildError(f"spread={spread}: expected interval or std")
         metrics = [m for m in table.metrics if m.key in want]
         rows = ordered_rows(table.rows)
         out = {}
         for r, marks in zip(rows, best_marks(table, rows)):
-            out[r.method] = (r.role, [_cell(cell_text(r.values.get(m.key), m.scale, m.digits, table.spread),
+            out[r.method] = (r.role, [_cell(cell_text(r.values.get(m.key), m.scale, m.digits, spread),
                                             marks[keys.index(m.key)],
                                             _after(r, table, m.key, extra, opts.get("interval") == "yes"))
                                       for m in metrics])

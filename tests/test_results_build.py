@@ -91,12 +91,12 @@ def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() ->
 
 def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
     """A results.json written by psg-data's own writer: one table, MAE and B-Acc, per method (role, mae, bacc);
-    each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc)."""
+    each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc), its std 0.05 (MAE) and 0 (B-Acc)."""
     from psg_data.evaluation import EvalResults, MetricInfo, ResultRow, ResultTable, Summary, save_results
 
     metrics = [MetricInfo("mae", "MAE", "lower", "mean absolute error"),
                MetricInfo("balanced_accuracy", "B-Acc", "higher", "balanced accuracy")]
-    out = [ResultRow(m, role, {"mae": Summary(mae, 0.0, mae - 0.01, mae + 0.01, 21, "bootstrap", "objects"),
+    out = [ResultRow(m, role, {"mae": Summary(mae, 0.05, mae - 0.01, mae + 0.01, 21, "bootstrap", "objects"),
                                "balanced_accuracy": Summary(b, 0.0, b - 0.02, b + 0.02, 21, "bootstrap", "objects")})
            for m, (role, mae, b) in rows.items()]
     save_results(EvalResults("persistence", [ResultTable("persistence", "t", metrics, out)]), folder)
@@ -120,9 +120,12 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     one = build.render_text("<!-- results:columns b interval=yes -->?<!-- /results -->", r, "DOC.md")
     assert "| Method | ref | MAE ↓ | B-Acc ↑ |" in one  # one run, no labels: the metric names alone
     assert "| perpetua\\_star |  | **0.220 ± 0.010** [0.210, 0.230] | **0.580 ± 0.020** [0.560, 0.600] |" in one
+    std = build.render_text("<!-- results:columns b spread=std interval=yes -->?<!-- /results -->", r, "DOC.md")
+    assert "| **0.220 ± 0.050** [0.210, 0.230] | **0.580 ± 0.000** [0.560, 0.600] |" in std
     only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
     assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
-    for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"), ("metrics=f1", "no metric ['f1']"),
+    for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"),
+                         ("spread=sd", "spread=sd: expected interval or std"), ("metrics=f1", "no metric ['f1']"),
                          ("extra=rmse", "no metric ['rmse']")):
         with pytest.raises(build.BuildError, match=re.escape(message)):
             build.render_text(f"<!-- results:columns a,b {bad} -->?<!-- /results -->", r, "DOC.md")
