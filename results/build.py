@@ -298,9 +298,10 @@ class Renderer:
             raise BuildError(f"{len(ids)} runs but {len(labels)} labels")
         if opts.get("rows", ids[0]) not in ids:
             raise BuildError(f"rows={opts['rows']}: expected one of the block's runs {ids}")
+        keep = set(self._run_columns(opts["rows"], opts)[1]) if "rows" in opts else None
         header, runs, roles = ["Method", "ref"], [], {}
         for rid, label in zip(ids, labels):
-            names, cells = self._run_columns(rid, opts)
+            names, cells = self._run_columns(rid, opts, keep)
             header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
             runs.append((cells, len(names)))
             if "rows" not in opts or opts["rows"] == rid:
@@ -313,8 +314,10 @@ class Renderer:
             lines.append("| " + " | ".join(row) + " |")
         return "\n" + "\n".join(lines) + "\n"
 
-    def _run_columns(self, rid: str, opts: dict[str, str]) -> tuple[list[str], dict[str, tuple[str, list[str]]]]:
-        """One run's part of a ``columns`` block: its column names and, per method, (role, cells)."""
+    def _run_columns(self, rid: str, opts: dict[str, str],
+                     keep: set[str] | None = None) -> tuple[list[str], dict[str, tuple[str, list[str]]]]:
+        """One run's part of a ``columns`` block: its column names and, per method, (role, cells); ``keep``:
+        only these methods (the best values are marked among them)."""
         from psg_data.evaluation import load_results
         from psg_data.evaluation._tables import best_marks, cell_text, ordered_rows
 
@@ -328,6 +331,7 @@ class Renderer:
         if spread not in ("interval", "std"):
             raise BuildError(f"spread={spread}: expected interval or std")
         metrics = [m for m in table.metrics if m.key in want]
+        table = dataclasses.replace(table, rows=[r for r in table.rows if keep is None or r.method in keep])
         rows = ordered_rows(table.rows)
         out = {}
         for r, marks in zip(rows, best_marks(table, rows)):

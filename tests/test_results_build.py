@@ -124,6 +124,9 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     assert "| **0.220 ± 0.050** [0.210, 0.230] | **0.580 ± 0.000** [0.560, 0.600] |" in std
     only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
     assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
+    only_a = build.render_text("<!-- results:columns a,b rows=a metrics=balanced_accuracy -->?<!-- /results -->", r,
+                               "DOC.md")  # b's best (perpetua_star) not shown: its fremen is the shown best
+    assert "| fremen |  | **0.600 ± 0.020** | **0.500 ± 0.020** |" in only_a and "perpetua\\_star" not in only_a
     for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"),
                          ("spread=sd", "spread=sd: expected interval or std"), ("metrics=f1", "no metric ['f1']"),
                          ("extra=rmse", "no metric ['rmse']")):
