@@ -91,7 +91,8 @@ def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() ->
 
 def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
     """A results.json written by psg-data's own writer: one table, MAE and B-Acc, per method (role, mae, bacc);
-    each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc), its std 0.05 (MAE) and 0 (B-Acc)."""
+    each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc), its std 0.05 (MAE) and 0 (B-Acc).
+    """
     from psg_data.evaluation import EvalResults, MetricInfo, ResultRow, ResultTable, Summary, save_results
 
     metrics = [MetricInfo("mae", "MAE", "lower", "mean absolute error"),
@@ -104,7 +105,8 @@ def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
 
 def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     """Each run's columns after the last's, rows in the first run's order then the others', '-' where a run
-    has no row, each column's best non-ceiling value bold on its own, extra metrics and interval ends."""
+    has no row, each column's best non-ceiling value bold on its own, extra metrics and interval ends.
+    """
     _table_run(tmp_path / "a", {"fremen": ("method", 0.2, 0.6), "oracle": ("ceiling", 0.1, 0.7),
                                 "last_seen": ("baseline", 0.3, 0.55)})
     _table_run(tmp_path / "b", {"fremen": ("method", 0.25, 0.5), "perpetua_star": ("method", 0.22, 0.58),
@@ -188,7 +190,8 @@ def test_a_failing_run_leaves_the_previous_one(tmp_path: Path, monkeypatch: pyte
 
 def test_a_commit_of_other_files_during_a_run_is_fine(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """HEAD moving while a run runs (a commit of RESULTS.md or the manifest) keeps the run: only the code counts;
-    run.json names the revision the run started at."""
+    run.json names the revision the run started at.
+    """
     monkeypatch.setattr(build, "code_state", lambda: {**CLEAN, "revision": "b" * 40})
     folder = build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=dict(CLEAN), quiet=True)
     assert json.loads((folder / "run.json").read_text())["revision"] == "a" * 40
