@@ -284,11 +284,14 @@ class Renderer:
         return "\n" + markdown_table(table_grid(table)) + "\n"
 
     def _columns(self, pos: list[str], opts: dict[str, str]) -> str:
-        """Several runs' tables side by side (``RUN1,RUN2``): one row per method (the first run's order, then
-        rows only later runs have; ``rows=RUN``: only that run's rows), each run's metric columns after the last's, headed ``LABEL: metric``
-        (``labels=A|B``; default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those metrics'
-        estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation (across
-        scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after each cell. Bold: each column's best non-ceiling value, as in a run's own table.
+        """Several runs' tables side by side (``RUN1,RUN2``).
+
+        One row per method (the first run's order, then rows only later runs have; ``rows=RUN``: only that
+        run's rows), each run's metric columns after the last's, headed ``LABEL: metric`` (``labels=A|B``;
+        default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
+        metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
+        (across scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after
+        each cell. Bold: each column's best non-ceiling value among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
 
@@ -316,8 +319,10 @@ class Renderer:
 
     def _run_columns(self, rid: str, opts: dict[str, str],
                      keep: set[str] | None = None) -> tuple[list[str], dict[str, tuple[str, list[str]]]]:
-        """One run's part of a ``columns`` block: its column names and, per method, (role, cells); ``keep``:
-        only these methods (the best values are marked among them)."""
+        """One run's part of a ``columns`` block: its column names and, per method, (role, cells).
+
+        ``keep``: only these methods (the best values are marked among them).
+        """
         from psg_data.evaluation import load_results
         from psg_data.evaluation._tables import best_marks, cell_text, ordered_rows
 
