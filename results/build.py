@@ -40,6 +40,7 @@ import sys
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -502,8 +503,7 @@ def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:
         old = path.read_text(encoding="utf-8")
         if a.quick and skipped:  # blocks of runs without a quick form stay as they are
             renderer.runs = {k: v for k, v in renderer.runs.items() if k not in skipped}
-            new = BLOCK.sub(lambda m, name=name: m[0] if _runs_of(m) & skipped else render_text(m[0], renderer, name),
-                            old)
+            new = BLOCK.sub(partial(_render_unless, skipped=skipped, renderer=renderer, name=name), old)
         else:
             new = render_text(old, renderer, name)
         if a.quick:
@@ -520,6 +520,11 @@ def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:
                  if a.quick and skipped else "")
               + (f"; changed: {', '.join(changed)}" if changed else "; documents unchanged"), file=sys.stderr)
     return 1 if a.check and changed else 0
+
+
+def _render_unless(m: re.Match[str], *, skipped: set[str], renderer: Renderer, name: str) -> str:
+    """The block ``m`` rendered, or as it is when it reads a run in ``skipped``."""
+    return m[0] if _runs_of(m) & skipped else render_text(m[0], renderer, name)
 
 
 def _runs_of(m: re.Match[str]) -> set[str]:
