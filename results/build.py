@@ -8,6 +8,9 @@
 A document holds its generated parts between markers; everything outside them is hand-written::
 
     <!-- results:table main-job format=text -->...<!-- /results -->      a table of a run's results.json
+    <!-- results:columns RUN1,RUN2 labels="gt|privileged" metrics=balanced_accuracy extra=mae,f1 -->...<!-- /results -->
+                                       several runs' tables side by side (rows=RUN: only that run's rows;
+                                       spread=std: ± the std across draws; interval=yes: the interval's ends)
     <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
     <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
     <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
@@ -26,6 +29,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import platform
 import re
@@ -36,6 +40,7 @@ import sys
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -172,7 +177,8 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL if quiet else None).returncode
         if rc != 0:
             raise BuildError(f"run {run.id}: {cmd!r} exited with {rc}")
-    if code_state() != state:
+    now = code_state()  # a commit of other files (the documents, the manifest) while a run runs is fine
+    if (now["code"], now["dirty"]) != (state["code"], state["dirty"]):
         raise BuildError(f"run {run.id}: {', '.join(CODE)} changed while it ran; its numbers name no one revision")
     if not (tmp / "results.json").is_file():
         raise BuildError(f"run {run.id}: {command!r} wrote no {tmp}/results.json (it must write to --out {{out}})")
@@ -261,7 +267,7 @@ class Renderer:
         pos, opts = _options(args, kind)
         fn = getattr(self, "_" + kind.replace("-", "_"), None)
         if fn is None:
-            raise BuildError(f"results:{kind}: unknown block kind (table, state, value, run, runs, revision)")
+            raise BuildError(f"results:{kind}: unknown block kind (table, columns, state, value, run, runs, revision)")
         return str(fn(pos, opts))
 
     def _table(self, pos: list[str], opts: dict[str, str]) -> str:
@@ -269,18 +275,86 @@ class Renderer:
         from psg_data.evaluation._table_formats import markdown_table, select_table, table_grid
         from psg_data.evaluation._tables import format_table
 
-        res = load_results(self._folder(pos[0]))
-        which = opts.get("table", "0")
-        tables = [t for k, t in enumerate(res.tables) if str(k) == which or t.name == which]
-        if len(tables) != 1:
-            raise BuildError(f"run {pos[0]}: no table {which!r} (tables: {[t.name for t in res.tables]})")
-        table = select_table(tables[0], metrics=opts["metrics"].split(",") if "metrics" in opts else None,
+        table = self._one_table(load_results(self._folder(pos[0])), opts.get("table", "0"), pos[0])
+        table = select_table(table, metrics=opts["metrics"].split(",") if "metrics" in opts else None,
                              references=opts.get("references", "yes") == "yes")
         if opts.get("notes", "no") != "yes":
             table = dataclasses.replace(table, notes=[])
         if opts.get("format", "markdown") == "text":
             return "\n```\n" + format_table(table) + "\n```\n"
         return "\n" + markdown_table(table_grid(table)) + "\n"
+
+    def _columns(self, pos: list[str], opts: dict[str, str]) -> str:
+        """Several runs' tables side by side (``RUN1,RUN2``).
+
+        One row per method (the first run's order, then rows only later runs have; ``rows=RUN``: only that
+        run's rows), each run's metric columns after the last's, headed ``LABEL: metric`` (``labels=A|B``;
+        default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
+        metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
+        (across scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after
+        each cell. Bold: each column's best non-ceiling value among the rows shown.
+        """
+        from psg_data.evaluation._table_formats import md_escape
+
+        ids = pos[0].split(",")
+        labels = opts["labels"].split("|") if "labels" in opts else ids
+        if len(labels) != len(ids):
+            raise BuildError(f"{len(ids)} runs but {len(labels)} labels")
+        if opts.get("rows", ids[0]) not in ids:
+            raise BuildError(f"rows={opts['rows']}: expected one of the block's runs {ids}")
+        keep = set(self._run_columns(opts["rows"], opts)[1]) if "rows" in opts else None
+        header, runs, roles = ["Method", "ref"], [], {}
+        for rid, label in zip(ids, labels):
+            names, cells = self._run_columns(rid, opts, keep)
+            header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
+            runs.append((cells, len(names)))
+            if "rows" not in opts or opts["rows"] == rid:
+                roles.update({m: role for m, (role, _) in cells.items() if m not in roles})
+        lines = ["| " + " | ".join(md_escape(h) for h in header) + " |", "|---|---|" + "---:|" * (len(header) - 2)]
+        for method, role in roles.items():
+            row = [md_escape(method), "" if role == "method" else role]
+            for cells, n in runs:
+                row += cells[method][1] if method in cells else ["-"] * n
+            lines.append("| " + " | ".join(row) + " |")
+        return "\n" + "\n".join(lines) + "\n"
+
+    def _run_columns(self, rid: str, opts: dict[str, str],
+                     keep: set[str] | None = None) -> tuple[list[str], dict[str, tuple[str, list[str]]]]:
+        """One run's part of a ``columns`` block: its column names and, per method, (role, cells).
+
+        ``keep``: only these methods (the best values are marked among them).
+        """
+        from psg_data.evaluation import load_results
+        from psg_data.evaluation._tables import best_marks, cell_text, ordered_rows
+
+        table = self._one_table(load_results(self._folder(rid)), opts.get("table", "0"), rid)
+        keys = [m.key for m in table.metrics]
+        want = opts["metrics"].split(",") if "metrics" in opts else keys
+        extra = [k for k in opts.get("extra", "").split(",") if k]
+        if set(want + extra) - set(keys):
+            raise BuildError(f"run {rid}: no metric {sorted(set(want + extra) - set(keys))} (metrics: {keys})")
+        spread = opts.get("spread", table.spread)
+        if spread not in ("interval", "std"):
+            raise BuildError(f"spread={spread}: expected interval or std")
+        metrics = [m for m in table.metrics if m.key in want]
+        table = dataclasses.replace(table, rows=[r for r in table.rows if keep is None or r.method in keep])
+        rows = ordered_rows(table.rows)
+        out = {}
+        for r, marks in zip(rows, best_marks(table, rows)):
+            out[r.method] = (r.role, [_cell(cell_text(r.values.get(m.key), m.scale, m.digits, spread),
+                                            marks[keys.index(m.key)],
+                                            _after(r, table, m.key, extra, opts.get("interval") == "yes"))
+                                      for m in metrics])
+        arrow = {"lower": " ↓", "higher": " ↑"}
+        return [f"{m.label}{arrow.get(m.better, '')}" for m in metrics], out
+
+    @staticmethod
+    def _one_table(res: Any, which: str, rid: str) -> Any:
+        """Table ``which`` (an index or a name) of run ``rid``'s results."""
+        tables = [t for k, t in enumerate(res.tables) if str(k) == which or t.name == which]
+        if len(tables) != 1:
+            raise BuildError(f"run {rid}: no table {which!r} (tables: {[t.name for t in res.tables]})")
+        return tables[0]
 
     def _state(self, pos: list[str], opts: dict[str, str]) -> str:
         from psg_data.evaluation._state_report import render, state_tables
@@ -333,6 +407,29 @@ class Renderer:
         if len(codes) <= 1:
             return revs[0] if revs else "-"
         return f"(not one: the runs were made at {', '.join(revs)}; `python results/build.py` reruns the stale ones)"
+
+
+def _cell(text: str, best: bool, after: str) -> str:
+    """A Markdown cell: the estimate (bold when the column's best non-ceiling value) and what follows it."""
+    from psg_data.evaluation._table_formats import md_escape
+
+    text = md_escape(text)
+    return (f"**{text}**" if best and text != "-" else text) + (f" {after}" if after else "")
+
+
+def _after(row: Any, table: Any, key: str, extra: list[str], interval: bool) -> str:
+    """What follows the cell of metric ``key``: the interval's ends ``[0.067, 0.073]`` (``interval``) and the
+    ``extra`` metrics' estimates ``(0.176, 0.426)``.
+    """
+    parts, s = [], row.values.get(key)
+    if interval and s is not None and math.isfinite(s.ci_low) and math.isfinite(s.ci_high):
+        m = table.metric(key)
+        parts.append(f"[{m.scale * s.ci_low:.{m.digits}f}, {m.scale * s.ci_high:.{m.digits}f}]")
+    values = [row.values.get(k) for k in extra]
+    if extra and all(v is not None and math.isfinite(v.mean) for v in values):
+        ms = [table.metric(k) for k in extra]
+        parts.append("(" + ", ".join(f"{m.scale * v.mean:.{m.digits}f}" for m, v in zip(ms, values)) + ")")
+    return " ".join(parts)
 
 
 def render_text(text: str, renderer: Renderer, name: str) -> str:
@@ -406,7 +503,7 @@ def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:
         old = path.read_text(encoding="utf-8")
         if a.quick and skipped:  # blocks of runs without a quick form stay as they are
             renderer.runs = {k: v for k, v in renderer.runs.items() if k not in skipped}
-            new = BLOCK.sub(lambda m: m[0] if _run_of(m) in skipped else render_text(m[0], renderer, name), old)
+            new = BLOCK.sub(partial(_render_unless, skipped=skipped, renderer=renderer, name=name), old)
         else:
             new = render_text(old, renderer, name)
         if a.quick:
@@ -425,9 +522,15 @@ def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:
     return 1 if a.check and changed else 0
 
 
-def _run_of(m: re.Match[str]) -> str:
+def _render_unless(m: re.Match[str], *, skipped: set[str], renderer: Renderer, name: str) -> str:
+    """The block ``m`` rendered, or as it is when it reads a run in ``skipped``."""
+    return m[0] if _runs_of(m) & skipped else render_text(m[0], renderer, name)
+
+
+def _runs_of(m: re.Match[str]) -> set[str]:
+    """The runs a block reads (a ``columns`` block names several, comma-separated)."""
     words = shlex.split(m["args"])
-    return words[0] if words else ""
+    return set(words[0].split(",")) if words and "=" not in words[0] else set()
 
 
 if __name__ == "__main__":

@@ -74,19 +74,74 @@ def test_a_bad_block_names_document_and_line(tmp_path: Path, block: str, message
 def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() -> None:
     """RESULTS.md and README.md: every marker parses, names a known kind and a run of the manifest."""
     ids = {r.id for r in build.load_manifest()}
-    kinds = {"table", "state", "value", "run", "runs", "revision"}
+    kinds = {"table", "columns", "state", "value", "run", "runs", "revision"}
     seen = 0
     for name in build.DOCUMENTS:
         for m in build.BLOCK.finditer((ROOT / name).read_text(encoding="utf-8")):
             seen += 1
             assert m["kind"] in kinds, (name, m[0][:80])
             words = m["args"].split()
-            assert m["kind"] in ("runs", "revision") or words[0] in ids, (name, m[0][:80])
+            assert m["kind"] in ("runs", "revision") or set(words[0].split(",")) <= ids, (name, m[0][:80])
     assert seen >= 20
     # a marker the parser does not see (a typo in the closing tag) would leave a stale number unnoticed
     for name in build.DOCUMENTS:
         text = (ROOT / name).read_text(encoding="utf-8")
         assert text.count("<!-- results:") == len(build.BLOCK.findall(text)), name
+
+
+def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
+    """A results.json written by psg-data's own writer: one table, MAE and B-Acc, per method (role, mae, bacc);
+    each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc), its std 0.05 (MAE) and 0 (B-Acc).
+    """
+    from psg_data.evaluation import EvalResults, MetricInfo, ResultRow, ResultTable, Summary, save_results
+
+    metrics = [MetricInfo("mae", "MAE", "lower", "mean absolute error"),
+               MetricInfo("balanced_accuracy", "B-Acc", "higher", "balanced accuracy")]
+    out = [ResultRow(m, role, {"mae": Summary(mae, 0.05, mae - 0.01, mae + 0.01, 21, "bootstrap", "objects"),
+                               "balanced_accuracy": Summary(b, 0.0, b - 0.02, b + 0.02, 21, "bootstrap", "objects")})
+           for m, (role, mae, b) in rows.items()]
+    save_results(EvalResults("persistence", [ResultTable("persistence", "t", metrics, out)]), folder)
+
+
+def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
+    """Each run's columns after the last's, rows in the first run's order then the others', '-' where a run
+    has no row, each column's best non-ceiling value bold on its own, extra metrics and interval ends.
+    """
+    _table_run(tmp_path / "a", {"fremen": ("method", 0.2, 0.6), "oracle": ("ceiling", 0.1, 0.7),
+                                "last_seen": ("baseline", 0.3, 0.55)})
+    _table_run(tmp_path / "b", {"fremen": ("method", 0.25, 0.5), "perpetua_star": ("method", 0.22, 0.58),
+                                "oracle": ("ceiling", 0.1, 0.69)})
+    r = build.Renderer([build.Run("a", "", "x"), build.Run("b", "", "x")], tmp_path)
+    text = '<!-- results:columns a,b labels="gt|noisy 0.1" metrics=balanced_accuracy extra=mae -->?<!-- /results -->'
+    body = build.render_text(text, r, "DOC.md").split("\n")[1:-1]
+    assert body == ["| Method | ref | gt: B-Acc ↑ | noisy 0.1: B-Acc ↑ |", "|---|---|---:|---:|",
+                    "| oracle | ceiling | 0.700 ± 0.020 (0.100) | 0.690 ± 0.020 (0.100) |",
+                    "| last\\_seen | baseline | 0.550 ± 0.020 (0.300) | - |",
+                    "| fremen |  | **0.600 ± 0.020** (0.200) | 0.500 ± 0.020 (0.250) |",
+                    "| perpetua\\_star |  | - | **0.580 ± 0.020** (0.220) |"]
+    one = build.render_text("<!-- results:columns b interval=yes -->?<!-- /results -->", r, "DOC.md")
+    assert "| Method | ref | MAE ↓ | B-Acc ↑ |" in one  # one run, no labels: the metric names alone
+    assert "| perpetua\\_star |  | **0.220 ± 0.010** [0.210, 0.230] | **0.580 ± 0.020** [0.560, 0.600] |" in one
+    std = build.render_text("<!-- results:columns b spread=std interval=yes -->?<!-- /results -->", r, "DOC.md")
+    assert "| **0.220 ± 0.050** [0.210, 0.230] | **0.580 ± 0.000** [0.560, 0.600] |" in std
+    only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
+    assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
+    only_a = build.render_text("<!-- results:columns a,b rows=a metrics=balanced_accuracy -->?<!-- /results -->", r,
+                               "DOC.md")  # b's best (perpetua_star) not shown: its fremen is the shown best
+    assert "| fremen |  | **0.600 ± 0.020** | **0.500 ± 0.020** |" in only_a and "perpetua\\_star" not in only_a
+    for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"),
+                         ("spread=sd", "spread=sd: expected interval or std"), ("metrics=f1", "no metric ['f1']"),
+                         ("extra=rmse", "no metric ['rmse']")):
+        with pytest.raises(build.BuildError, match=re.escape(message)):
+            build.render_text(f"<!-- results:columns a,b {bad} -->?<!-- /results -->", r, "DOC.md")
+
+
+def test_quick_render_leaves_blocks_of_runs_without_a_quick_form(tmp_path: Path) -> None:
+    """A columns block reading any run without a quick form stays as committed (the others render)."""
+    block = build.BLOCK.search("<!-- results:columns a,b x=1 -->?<!-- /results -->")
+    assert block is not None and build._runs_of(block) == {"a", "b"}
+    runs = build.BLOCK.search("<!-- results:runs -->?<!-- /results -->")
+    assert runs is not None and build._runs_of(runs) == set()
 
 
 WRITES_RESULTS = ("import json, os, sys; os.makedirs(sys.argv[1]); "
@@ -133,6 +188,15 @@ def test_a_failing_run_leaves_the_previous_one(tmp_path: Path, monkeypatch: pyte
     assert json.loads((tmp_path / "s" / "results.json").read_text()) == {"v": 1}
 
 
+def test_a_commit_of_other_files_during_a_run_is_fine(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """HEAD moving while a run runs (a commit of RESULTS.md or the manifest) keeps the run: only the code counts;
+    run.json names the revision the run started at.
+    """
+    monkeypatch.setattr(build, "code_state", lambda: {**CLEAN, "revision": "b" * 40})
+    folder = build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    assert json.loads((folder / "run.json").read_text())["revision"] == "a" * 40
+
+
 @pytest.mark.slow
 def test_quick_form_renders_every_block_from_real_runs(tmp_path: Path) -> None:
     """CI's quick form: the tiny runs made for real, every block with a quick run rendered from them."""
@@ -149,5 +213,11 @@ def test_quick_form_renders_every_block_from_real_runs(tmp_path: Path) -> None:
     assert methods(new[1]) == methods(old[1])  # the same rows, from the tiny lab's run
     assert new[1] != old[1]
     assert (ROOT / "README.md").read_text(encoding="utf-8") == committed  # --quick never writes the documents
+    tables = re.findall(r"<!-- results:columns [^>]*-->\n(.*?)<!-- /results -->",
+                        (runs / "rendered" / "RESULTS.md").read_text(encoding="utf-8"), re.S)
+    assert len(tables) >= 6  # RESULTS.md 3.2, 3.3 (two), 3.4, 3.5, 7.2: each a header, a rule and its rows
+    for body in tables:
+        lines = body.strip().splitlines()
+        assert lines[0].startswith("| Method | ref |") and len(lines) >= 7 and "?" not in body, body[:300]
     info = json.loads((runs / "main-job" / "run.json").read_text())
     assert info["quick"] is True and info["exit_code"] == 0 and info["cpu_s"] > 0
