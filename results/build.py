@@ -215,7 +215,7 @@ def lookup(doc: Any, path: str) -> Any:
         elif isinstance(cur, dict) and key in cur:
             cur = cur[key]
         elif isinstance(cur, dict) and key == "half_width" and {"ci_low", "ci_high"} <= set(cur):
-            cur = _half_width(cur)  # what a table's ± shows (psg_data.evaluation.Summary.half_width)
+            cur = _half_width(cur)
         else:
             raise BuildError(f"path {path!r}: no {key!r} at this step")
         if m["field"] is not None:
@@ -228,9 +228,10 @@ def lookup(doc: Any, path: str) -> Any:
 
 
 def _half_width(summary: dict[str, Any]) -> float:
-    """Half the interval's width, as ``psg_data.evaluation.Summary.half_width`` (NaN without an interval)."""
-    lo, hi = summary["ci_low"], summary["ci_high"]
-    return (hi - lo) / 2.0 if lo is not None and hi is not None else float("nan")
+    """What a table prints after ``±``: :attr:`psg_data.evaluation.Summary.half_width` of a results.json summary."""
+    from psg_data.evaluation._aggregate import Summary
+
+    return float(Summary.from_dict(summary).half_width)
 
 
 def _options(args: str, where: str) -> tuple[list[str], dict[str, str]]:
