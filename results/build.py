@@ -71,6 +71,11 @@ class Run:
     quick: str | None = None
     quick_setup: tuple[str, ...] = ()
     env: tuple[tuple[str, str], ...] = ()
+    stdout: str | None = None
+    """A file name in ``{out}``: the command's standard output is written there (for a command that prints
+    its results as JSON instead of writing them)."""
+    code: tuple[str, ...] = ()
+    """Paths besides :data:`CODE` whose numbers the run depends on (a script it runs)."""
 
     def form(self, quick: bool) -> tuple[tuple[str, ...], str | None]:
         """(setup commands, command) of the full or quick form; command None: no quick form."""
@@ -83,7 +88,7 @@ def load_manifest(path: Path = MANIFEST) -> list[Run]:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise BuildError(f"{path}: cannot read the manifest ({exc})") from None
-    runs, known = [], {"id", "purpose", "command", "setup", "quick", "quick_setup", "env"}
+    runs, known = [], {"id", "purpose", "command", "setup", "quick", "quick_setup", "env", "stdout", "code"}
     for k, e in enumerate(doc.get("runs", []) if isinstance(doc, dict) else []):
         where = f"{path}: runs[{k}]"
         if not isinstance(e, dict) or not isinstance(e.get("id"), str) or not isinstance(e.get("command"), str):
@@ -91,7 +96,8 @@ def load_manifest(path: Path = MANIFEST) -> list[Run]:
         if set(e) - known:
             raise BuildError(f"{where}: unknown field(s) {sorted(set(e) - known)}, expected {sorted(known)}")
         runs.append(Run(e["id"], e.get("purpose", ""), e["command"], tuple(e.get("setup", ())), e.get("quick"),
-                        tuple(e.get("quick_setup", ())), tuple(sorted(e.get("env", {}).items()))))
+                        tuple(e.get("quick_setup", ())), tuple(sorted(e.get("env", {}).items())),
+                        e.get("stdout"), tuple(e.get("code", ()))))
     ids = [r.id for r in runs]
     if not runs or len(set(ids)) != len(ids):
         raise BuildError(f"{path}: expected a non-empty list 'runs' with distinct ids")
@@ -105,11 +111,15 @@ def _git(*args: str) -> str:
     return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
 
 
-def code_state() -> dict[str, Any]:
-    """The revision, the hash of the code a run depends on (:data:`CODE`) and whether it has local changes."""
+def code_state(extra: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The revision, the hash of the code a run depends on (:data:`CODE` and a run's own ``extra`` paths) and
+    whether it has local changes."""
     rev = _git("rev-parse", "HEAD")
-    code = ":".join(_git("rev-parse", f"HEAD:{p}") for p in CODE)
-    dirty = bool(_git("status", "--porcelain", "--", *CODE))
+    try:
+        code = ":".join(_git("rev-parse", f"HEAD:{p}") for p in (*CODE, *extra))
+    except subprocess.CalledProcessError:
+        raise BuildError(f"one of {', '.join(extra)} is not committed (a run's 'code' names committed paths)") from None
+    dirty = bool(_git("status", "--porcelain", "--", *CODE, *extra))
     return {"revision": rev, "code": code, "dirty": dirty}
 
 
@@ -170,14 +180,20 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
     subs, env = {"out": str(tmp), "work": str(work)}, {**os.environ, **dict(run.env)}
     load0, cpu0, t0 = _load(), _cpu_children(), time.perf_counter()
     started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    if run.stdout:
+        tmp.mkdir(parents=True)
     for cmd in (*setup, command):
         argv = _argv(cmd, subs)
         if not quiet:
             print(f"results: {run.id}: {' '.join(shlex.quote(a) for a in argv)}", file=sys.stderr, flush=True)
-        rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL if quiet else None).returncode
+        if run.stdout and cmd is command:
+            with open(tmp / run.stdout, "wb") as out:
+                rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=out).returncode
+        else:
+            rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL if quiet else None).returncode
         if rc != 0:
             raise BuildError(f"run {run.id}: {cmd!r} exited with {rc}")
-    now = code_state()  # a commit of other files (the documents, the manifest) while a run runs is fine
+    now = code_state(run.code)  # a commit of other files (the documents, the manifest) while a run runs is fine
     if (now["code"], now["dirty"]) != (state["code"], state["dirty"]):
         raise BuildError(f"run {run.id}: {', '.join(CODE)} changed while it ran; its numbers name no one revision")
     if not (tmp / "results.json").is_file():
@@ -467,22 +483,29 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--list", action="store_true", help="the runs and whether each is current; run nothing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines, no output of the runs")
     a = p.parse_args(argv)
+    from psg_data.cli._errors import ReaderGoneStdout
+
+    stdout = sys.stdout
+    sys.stdout = ReaderGoneStdout(stdout)  # `--list | head`: the rest of the list is dropped, no traceback
     try:
         return _build(a)
     except BuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    finally:
+        sys.stdout = stdout
 
 
 def _build(a: argparse.Namespace) -> int:
     runs = load_manifest()
     runs_dir = (a.runs or ROOT / (".results-quick" if a.quick else ".results-runs")).resolve()
     runs_dir.mkdir(parents=True, exist_ok=True)
-    state = code_state()
-    if state["dirty"] and not (a.quick or a.check or a.render_only or a.list):
-        raise BuildError(f"{', '.join(CODE)} have uncommitted changes: commit them so each run names its code")
+    states = {r.id: code_state(r.code) for r in runs}
+    if any(st["dirty"] for st in states.values()) and not (a.quick or a.check or a.render_only or a.list):
+        raise BuildError(f"{', '.join(CODE)} or a run's 'code' have uncommitted changes: commit them so each run "
+                         "names its code")
     todo = [r for r in runs if (not a.only or r.id in a.only) and r.form(a.quick)[1] is not None
-            and not is_current(runs_dir / r.id, r.form(a.quick)[1] or "", state)]
+            and not is_current(runs_dir / r.id, r.form(a.quick)[1] or "", states[r.id])]
     if a.list:
         for r in runs:
             status = "no quick form" if r.form(a.quick)[1] is None else ("stale" if r in todo else "current")
@@ -492,7 +515,7 @@ def _build(a: argparse.Namespace) -> int:
         for k, r in enumerate(todo, 1):
             if not a.quiet:
                 print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
-            execute(r, runs_dir, quick=a.quick, state=state, quiet=a.quiet)
+            execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet)
     return _render(runs, runs_dir, a)
 
 

@@ -158,7 +158,7 @@ CLEAN = {"revision": "a" * 40, "code": "tree:blob", "dirty": False}
 def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A run lands in RUNS/ID with run.json (the cache key); a folder the builder did not write is refused."""
     run = _script_run(tmp_path, WRITES_RESULTS)
-    monkeypatch.setattr(build, "code_state", lambda: dict(CLEAN))  # the repository's own state may be dirty
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))  # the repository's own state may be dirty
     state = dict(CLEAN)
     folder = build.execute(run, tmp_path, quick=False, state=state, quiet=True)
     info = json.loads((folder / "run.json").read_text())
@@ -177,7 +177,7 @@ def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path, mo
 
 def test_a_failing_run_leaves_the_previous_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A run that fails, or whose code changed while it ran, replaces nothing: the last good results stay."""
-    monkeypatch.setattr(build, "code_state", lambda: dict(CLEAN))  # the repository's own state may be dirty
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))  # the repository's own state may be dirty
     state = dict(CLEAN)
     build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=state, quiet=True)
     with pytest.raises(build.BuildError, match="exited with 3"):
@@ -192,9 +192,33 @@ def test_a_commit_of_other_files_during_a_run_is_fine(tmp_path: Path, monkeypatc
     """HEAD moving while a run runs (a commit of RESULTS.md or the manifest) keeps the run: only the code counts;
     run.json names the revision the run started at.
     """
-    monkeypatch.setattr(build, "code_state", lambda: {**CLEAN, "revision": "b" * 40})
+    monkeypatch.setattr(build, "code_state", lambda *extra: {**CLEAN, "revision": "b" * 40})
     folder = build.execute(_script_run(tmp_path, WRITES_RESULTS), tmp_path, quick=False, state=dict(CLEAN), quiet=True)
     assert json.loads((folder / "run.json").read_text())["revision"] == "a" * 40
+
+
+def test_a_run_whose_command_prints_its_results(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``stdout``: the command's output becomes RUN/FILE (setup commands' output is not captured)."""
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))
+    printer = "import json; print(json.dumps({'n': 3}))"
+    run = build.Run("p", "", f"python -c {printer!r}", setup=("python -c \"print('setup')\"",), stdout="results.json")
+    folder = build.execute(run, tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    assert json.loads((folder / "results.json").read_text()) == {"n": 3}
+    with pytest.raises(build.BuildError, match="exited with 2"):
+        build.execute(build.Run("p", "", "python -c 'import sys; sys.exit(2)'", stdout="results.json"), tmp_path,
+                      quick=False, state=dict(CLEAN), quiet=True)
+    assert json.loads((folder / "results.json").read_text()) == {"n": 3}
+
+
+def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
+    """``code``: a script a run names joins the cache key (its blob hash after psg_data's and pyproject's)."""
+    base, extra = build.code_state(), build.code_state(("results/build.py",))
+    assert extra["code"].startswith(base["code"] + ":") and extra["code"] != base["code"]
+    with pytest.raises(build.BuildError, match="not committed"):
+        build.code_state(("results/no-such-script.py",))
+    manifest = tmp_path / "m.json"
+    manifest.write_text(json.dumps({"runs": [{"id": "a", "command": "x", "code": ["s.py"], "stdout": "r.json"}]}))
+    assert build.load_manifest(manifest)[0].code == ("s.py",) and build.load_manifest(manifest)[0].stdout == "r.json"
 
 
 @pytest.mark.slow
