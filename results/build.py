@@ -243,6 +243,17 @@ def lookup(doc: Any, path: str) -> Any:
     return cur
 
 
+_ALTERNATIVES = re.compile(r"\{([^{}]*\|[^{}]*)\}")
+"""``{a|b}`` in a value path: one value per alternative."""
+
+
+def _number(v: Any, opts: dict[str, str]) -> str:
+    """``v`` as a value block prints it: numbers times ``scale`` in ``fmt`` (default .3f), anything else as text."""
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        return str(v)
+    return format(float(v) * float(opts.get("scale", "1")), opts.get("fmt", ".3f"))
+
+
 def _half_width(summary: dict[str, Any]) -> float:
     """What a table prints after ``±``: :attr:`psg_data.evaluation.Summary.half_width` of a results.json summary."""
     from psg_data.evaluation._aggregate import Summary
@@ -386,13 +397,12 @@ class Renderer:
         return "\n" + render([g for g, n in zip(grids, names) if n in want], "markdown") + "\n"
 
     def _value(self, pos: list[str], opts: dict[str, str]) -> str:
+        """One value, or with ``{a|b|c}`` in the path each alternative's, joined by ``sep`` (default " / ")."""
         if len(pos) != 2:
             raise BuildError(f"results:value {' '.join(pos)}: expected RUN PATH")
-        v = lookup(self._json(pos[0]), pos[1])
-        if not isinstance(v, (int, float)) or isinstance(v, bool):
-            return str(v)
-        v = float(v) * float(opts.get("scale", "1"))
-        return format(v, opts.get("fmt", ".3f"))
+        doc, alt = self._json(pos[0]), _ALTERNATIVES.search(pos[1])
+        paths = [pos[1][:alt.start()] + a + pos[1][alt.end():] for a in alt[1].split("|")] if alt else [pos[1]]
+        return opts.get("sep", " / ").join(_number(lookup(doc, p), opts) for p in paths)
 
     def _run(self, pos: list[str], opts: dict[str, str]) -> str:
         info = self._json(pos[0], "run.json")

@@ -37,6 +37,17 @@ def test_lookup_follows_keys_indices_and_selectors() -> None:
             build.lookup(doc, bad)
 
 
+def test_value_alternatives_render_one_value_each(tmp_path: Path) -> None:
+    """``{a|b}`` in a value path: the values of each alternative, joined by ``sep``, each in ``fmt``."""
+    r = _renderer(tmp_path, {"rows": [{"m": "x", "v": 0.25}, {"m": "y", "v": 0.5}], "n": 3})
+    text = "<!-- results:value r rows[m={x|y}].v fmt=.2f -->?<!-- /results -->"
+    assert build.render_text(text, r, "D.md") == text.replace("?", "0.25 / 0.50")
+    text = "<!-- results:value r rows[m={y|x}].v scale=100 fmt=.0f sep=, -->?<!-- /results -->"
+    assert build.render_text(text, r, "D.md") == text.replace("?", "50,25")
+    with pytest.raises(build.BuildError, match="found 0"):
+        build.render_text("<!-- results:value r rows[m={x|z}].v -->?<!-- /results -->", r, "D.md")
+
+
 def _renderer(tmp_path: Path, doc: dict) -> object:
     run = build.Run("r", "", "psg-eval --out {out}")
     (tmp_path / "r").mkdir()
