@@ -156,13 +156,14 @@ def _argv(command: str, subs: dict[str, str]) -> list[str]:
     return [str(exe) if exe.exists() else words[0], *words[1:]]
 
 
-def is_current(folder: Path, command: str, state: dict[str, Any]) -> bool:
-    """The builder's run in ``folder`` ran ``command`` on today's code (and ended well)."""
+def is_current(folder: Path, command: str, state: dict[str, Any], setup: tuple[str, ...] = ()) -> bool:
+    """The builder's run in ``folder`` ran ``command`` after ``setup`` on today's code (and ended well)."""
     try:
         info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
-    return (info.get("command") == command and info.get("code") == state["code"] and not info.get("dirty")
+    return (info.get("command") == command and tuple(info.get("setup", ())) == setup
+            and info.get("code") == state["code"] and not info.get("dirty")
             and info.get("exit_code") == 0 and not state["dirty"])
 
 
@@ -198,7 +199,7 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         raise BuildError(f"run {run.id}: {', '.join(CODE)} changed while it ran; its numbers name no one revision")
     if not (tmp / "results.json").is_file():
         raise BuildError(f"run {run.id}: {command!r} wrote no {tmp}/results.json (it must write to --out {{out}})")
-    info = {"id": run.id, "command": command, "quick": quick, **state, "started": started,
+    info = {"id": run.id, "command": command, **({"setup": list(setup)} if setup else {}), "quick": quick, **state, "started": started,
             "wall_s": round(time.perf_counter() - t0, 1), "cpu_s": round(_cpu_children() - cpu0, 1),
             "load_before": load0, "load_after": _load(), "machine": machine(), "exit_code": 0}
     (tmp / "run.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
@@ -515,7 +516,7 @@ def _build(a: argparse.Namespace) -> int:
         raise BuildError(f"{', '.join(CODE)} or a run's 'code' have uncommitted changes: commit them so each run "
                          "names its code")
     todo = [r for r in runs if (not a.only or r.id in a.only) and r.form(a.quick)[1] is not None
-            and not is_current(runs_dir / r.id, r.form(a.quick)[1] or "", states[r.id])]
+            and not is_current(runs_dir / r.id, r.form(a.quick)[1] or "", states[r.id], r.form(a.quick)[0])]
     if a.list:
         for r in runs:
             status = "no quick form" if r.form(a.quick)[1] is None else ("stale" if r in todo else "current")

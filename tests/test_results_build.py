@@ -177,6 +177,7 @@ def test_runs_are_renamed_into_place_and_foreign_folders_kept(tmp_path: Path, mo
     assert build.is_current(folder, run.command, state)
     assert not build.is_current(folder, run.command, {**state, "code": "other"})
     assert not build.is_current(folder, run.command + " -x", state)
+    assert not build.is_current(folder, run.command, state, setup=("psg-data synth {work}/lab",))
     assert [p.name for p in tmp_path.iterdir()] in (["s", ".work"], [".work", "s"])
     build.execute(run, tmp_path, quick=False, state=state, quiet=True)  # its own run: replaced
     (tmp_path / "mine").mkdir()
@@ -215,6 +216,8 @@ def test_a_run_whose_command_prints_its_results(tmp_path: Path, monkeypatch: pyt
     run = build.Run("p", "", f"python -c {printer!r}", setup=("python -c \"print('setup')\"",), stdout="results.json")
     folder = build.execute(run, tmp_path, quick=False, state=dict(CLEAN), quiet=True)
     assert json.loads((folder / "results.json").read_text()) == {"n": 3}
+    assert build.is_current(folder, run.command, dict(CLEAN), run.setup)  # the setup is part of the key
+    assert not build.is_current(folder, run.command, dict(CLEAN))
     with pytest.raises(build.BuildError, match="exited with 2"):
         build.execute(build.Run("p", "", "python -c 'import sys; sys.exit(2)'", stdout="results.json"), tmp_path,
                       quick=False, state=dict(CLEAN), quiet=True)
