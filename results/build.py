@@ -249,10 +249,11 @@ _ALTERNATIVES = re.compile(r"\{([^{}]*\|[^{}]*)\}")
 
 
 def _number(v: Any, opts: dict[str, str]) -> str:
-    """``v`` as a value block prints it: numbers times ``scale`` in ``fmt`` (default .3f), anything else as text."""
+    """``v`` as a value block prints it: numbers times ``scale`` plus ``offset`` in ``fmt`` (default .3f; a
+    share missed: ``scale=-100 offset=100``), anything else as text."""
     if not isinstance(v, (int, float)) or isinstance(v, bool):
         return str(v)
-    return format(float(v) * float(opts.get("scale", "1")), opts.get("fmt", ".3f"))
+    return format(float(v) * float(opts.get("scale", "1")) + float(opts.get("offset", "0")), opts.get("fmt", ".3f"))
 
 
 def _half_width(summary: dict[str, Any]) -> float:

@@ -44,6 +44,8 @@ def test_value_alternatives_render_one_value_each(tmp_path: Path) -> None:
     assert build.render_text(text, r, "D.md") == text.replace("?", "0.25 / 0.50")
     text = "<!-- results:value r rows[m={y|x}].v scale=100 fmt=.0f sep=, -->?<!-- /results -->"
     assert build.render_text(text, r, "D.md") == text.replace("?", "50,25")
+    text = "<!-- results:value r rows[m=x].v scale=-100 offset=100 fmt=.1f -->?<!-- /results -->"
+    assert build.render_text(text, r, "D.md") == text.replace("?", "75.0")
     with pytest.raises(build.BuildError, match="found 0"):
         build.render_text("<!-- results:value r rows[m={x|z}].v -->?<!-- /results -->", r, "D.md")
 
