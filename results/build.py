@@ -215,6 +215,7 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
 # ---------------------------------------------------------------------------------------------- rendering
 
 
+_PARTS = re.compile(r"(?:[^.\[]|\[[^\]]*\])+")
 _STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\])?")
 
 
@@ -222,7 +223,7 @@ def lookup(doc: Any, path: str) -> Any:
     """``doc`` at ``path``: dotted keys, list indices, and ``key[field=value]`` for the list item whose
     ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``)."""
     cur = doc
-    for part in path.split("."):
+    for part in _PARTS.findall(path):  # dots inside [...] belong to the selector's value
         m = _STEP.fullmatch(part)
         if m is None:
             raise BuildError(f"path {path!r}: cannot read step {part!r}")
