@@ -1,6 +1,7 @@
 """Where Perpetua* loses to FreMEn with the 2 h horizon: scores split by the filter's last observation.
 
-Run: python docs/analysis/last_state_split.py   (about 15 s on a warm cache; prints a table)
+Run: python docs/analysis/last_state_split.py [--out DIR]   (about 15 s on a warm cache; prints a table;
+with --out also writes DIR/results.json, the form results/build.py renders RESULTS.md 6.1 from)
 
 Evaluates the main job's protocol on the demo lab (adaptive, default horizon and weighting, labels
 gt, estimator seed 0), keeps every edge's beliefs, and splits the scored time by the state of the
@@ -12,6 +13,13 @@ diagnostic, not the table's B-Acc, which is computed per edge and then averaged 
 """
 
 from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -28,7 +36,13 @@ def last_state(t: np.ndarray, hist: tuple[np.ndarray, np.ndarray], obs_t: np.nda
     return np.where(idx >= 0, all_y[np.clip(idx, 0, None)], -1)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, help="also write DIR/results.json (DIR must not exist)")
+    a = ap.parse_args(argv)
+    if a.out is not None and a.out.exists():
+        print(f"error: {a.out}: output exists; expected a new folder", file=sys.stderr)
+        return 1
     import psg_data
     from psg_data.evaluation import PersistenceOptions, persistence_task_from_dataset, run_persistence_task
 
@@ -52,13 +66,29 @@ def main() -> None:
           + ", ".join(f"{n} {res.summary[n]['balanced_accuracy'].mean:.3f}" for n in NAMES))
     print(f"{'estimator':24s} {'last seen':9s} {'hours':>6s} {'occupancy':>9s} {'mean p':>7s} {'TPR':>6s} "
           f"{'TNR':>6s} {'mean':>6s}")
+    rows = []
     for n in NAMES:
         for state in (1, 0):
             tp, pos, tn, sp, sw = sums[(n, state)]
             tpr, tnr = tp / pos, tn / (sw - pos)
             print(f"{n:24s} {'present' if state else 'absent':9s} {sw / 3600:6.0f} {pos / sw:9.3f} {sp / sw:7.3f} "
                   f"{tpr:6.3f} {tnr:6.3f} {(tpr + tnr) / 2:6.3f}")
+            rows.append({"method": n, "last_seen": "present" if state else "absent", "hours": float(sw / 3600),
+                         "occupancy": float(pos / sw), "mean_belief": float(sp / sw), "tpr": float(tpr),
+                         "tnr": float(tnr), "mean_rate": float((tpr + tnr) / 2)})
+    if a.out is not None:
+        table_bacc = {n: float(res.summary[n]["balanced_accuracy"].mean) for n in NAMES}
+        _write(a.out, {"horizon_s": horizon, "balanced_accuracy": table_bacc, "rows": rows})
+    return 0
+
+
+def _write(out: Path, doc: dict[str, object]) -> None:
+    """``out/results.json``, written into a temporary folder renamed into place."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    (tmp / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, out)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
