@@ -37,6 +37,7 @@ def last_state(t: np.ndarray, hist: tuple[np.ndarray, np.ndarray], obs_t: np.nda
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the split table (and write ``--out DIR/results.json``); 0 on success, 1 if DIR exists."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="also write DIR/results.json (DIR must not exist)")
     a = ap.parse_args(argv)

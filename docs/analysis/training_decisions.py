@@ -48,12 +48,13 @@ def fit_summaries() -> dict[str, Any]:
     for labels in LABELS:
         task = persistence_task_from_dataset(psg_data.datasets.demo(), labels=labels)
         est = get_estimator("perpetua_star").fit(task.train_streams, timezone=task.timezone)
-        out[labels] = plain(est.fit_summary_)
+        out[labels] = plain(getattr(est, "fit_summary_"))
         out[labels]["train_objects"] = len({s.edge[0] for s in task.train_streams if len(s)})
     return out
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the fits' summaries as JSON, or write them to ``--out DIR/results.json``; 1 if DIR exists."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="write DIR/results.json (DIR must not exist) instead of printing")
     a = ap.parse_args(argv)
