@@ -38,18 +38,19 @@ def plain(x: Any) -> Any:
     return x
 
 
-def fit_summaries() -> dict[str, Any]:
-    """``{labels: fit_summary_}`` of one default ``perpetua_star`` fit per label source on the demo lab."""
+def fit_summaries() -> list[dict[str, Any]]:
+    """``[{"labels": source, **fit_summary_, "train_objects": n}]``: one default ``perpetua_star`` fit per label
+    source on the demo lab."""
     import psg_data
     from psg_data.estimators import get_estimator
     from psg_data.evaluation import persistence_task_from_dataset
 
-    out: dict[str, Any] = {}
+    out: list[dict[str, Any]] = []
     for labels in LABELS:
         task = persistence_task_from_dataset(psg_data.datasets.demo(), labels=labels)
         est = get_estimator("perpetua_star").fit(task.train_streams, timezone=task.timezone)
-        out[labels] = plain(est.fit_summary_)  # type: ignore[attr-defined]
-        out[labels]["train_objects"] = len({s.edge[0] for s in task.train_streams if len(s)})
+        objects = len({s.edge[0] for s in task.train_streams if len(s)})
+        out.append({"labels": labels, **plain(est.fit_summary_), "train_objects": objects})  # type: ignore[attr-defined]
     return out
 
 
@@ -58,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="write DIR/results.json (DIR must not exist) instead of printing")
     a = ap.parse_args(argv)
-    text = json.dumps({"labels": fit_summaries()}, indent=1, default=str) + "\n"
+    text = json.dumps({"fits": fit_summaries()}, indent=1, default=str) + "\n"
     if a.out is None:
         sys.stdout.write(text)
         return 0
