@@ -40,7 +40,8 @@ def plain(x: Any) -> Any:
 
 def fit_summaries() -> list[dict[str, Any]]:
     """``[{"labels": source, **fit_summary_, "train_objects": n}]``: one default ``perpetua_star`` fit per label
-    source on the demo lab."""
+    source on the demo lab.
+    """
     import psg_data
     from psg_data.estimators import get_estimator
     from psg_data.evaluation import persistence_task_from_dataset
