@@ -216,12 +216,13 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
 
 
 _PARTS = re.compile(r"(?:[^.\[]|\[[^\]]*\])+")
-_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\])?")
+_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?P<selectors>(?:\[[^=\]]+=[^\]]*\])*)")
+_SELECTOR = re.compile(r"\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\]")
 
 
 def lookup(doc: Any, path: str) -> Any:
     """``doc`` at ``path``: dotted keys, list indices, and ``key[field=value]`` for the list item whose
-    ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``)."""
+    ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``; ``rows[a=x][b=y]``: both)."""
     cur = doc
     for part in _PARTS.findall(path):  # dots inside [...] belong to the selector's value
         m = _STEP.fullmatch(part)
@@ -236,11 +237,13 @@ def lookup(doc: Any, path: str) -> Any:
             cur = _half_width(cur)
         else:
             raise BuildError(f"path {path!r}: no {key!r} at this step")
-        if m["field"] is not None:
-            hits = [x for x in cur if isinstance(x, dict) and str(x.get(m["field"])) == m["value"]] \
+        if m["selectors"]:
+            sel = [(s["field"], s["value"]) for s in _SELECTOR.finditer(m["selectors"])]
+            hits = [x for x in cur if isinstance(x, dict) and all(str(x.get(f)) == v for f, v in sel)] \
                 if isinstance(cur, list) else []
             if len(hits) != 1:
-                raise BuildError(f"path {path!r}: expected one item with {m['field']}={m['value']}, found {len(hits)}")
+                what = ", ".join(f"{f}={v}" for f, v in sel)
+                raise BuildError(f"path {path!r}: expected one item with {what}, found {len(hits)}")
             cur = hits[0]
     return cur
 
