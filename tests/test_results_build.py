@@ -33,7 +33,8 @@ def test_lookup_follows_keys_indices_and_selectors() -> None:
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.mean") == 0.25
     doc["tables"][0]["rows"][1]["method"] = "fremen:gamma=0.99,n=1"  # dots inside a selector's value
     assert build.lookup(doc, "tables.0.rows[method=fremen:gamma=0.99,n=1].values.mae.mean") == 0.5
-    rows = {"rows": [{"m": "a", "s": "present", "v": 1}, {"m": "a", "s": "absent", "v": 2}, {"m": "b", "s": "absent", "v": 3}]}
+    rows = {"rows": [{"m": "a", "s": "present", "v": 1}, {"m": "a", "s": "absent", "v": 2},
+                     {"m": "b", "s": "absent", "v": 3}]}
     assert build.lookup(rows, "rows[m=a][s=absent].v") == 2 and build.lookup(rows, "rows[s=absent][m=b].v") == 3
     with pytest.raises(build.BuildError, match="found 2"):
         build.lookup(rows, "rows[m=a].v")
