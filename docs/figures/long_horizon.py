@@ -1,6 +1,8 @@
 """Figure: Perpetua*'s eq. 14 far from the last observation, on the built-in lab (predictive setting).
 
 Run: python docs/figures/long_horizon.py [OUT.png]   (default docs/figures/perpetua_star_long_horizon.png)
+     python docs/figures/long_horizon.py --out DIR  (DIR/perpetua_star_long_horizon.png and DIR/results.json,
+                                                     the averages RESULTS.md 6.2 renders; DIR must not exist)
 
 Fits ``perpetua_star`` (FreMEn prior, cadence defaults) on the lab's training weeks, feeds each
 edge its training observations and predicts the test week without further observations. For one
@@ -12,13 +14,18 @@ absent and last seen present.
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 
-def main(out: Path) -> None:
+def main(out: Path) -> dict[str, dict[str, float]]:
+    """Draw the figure into ``out``; return the printed averages per last-seen state."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -43,10 +50,13 @@ def main(out: Path) -> None:
         curves[s.edge] = (gt_t, gt_y, prior, b, a, int(s.y[-1]))
         far = gt_t - s.t_s[-1] > 86400.0
         rows["present" if s.y[-1] == 1 else "absent"].append((prior[far], b[far], a[far], gt_y[far]))
+    averages = {}
     for k, v in rows.items():
         p, b, a, y = (np.concatenate([r[i] for r in v]) for i in range(4))
         print(f"last seen {k:7s} ({len(v):2d} edges, > 24 h ahead): prior f {p.mean():.3f}  eq. 14 {b.mean():.3f}  "
               f"annealed {a.mean():.3f}  true occupancy {y.mean():.3f}")
+        averages[k] = {"edges": len(v), "prior": float(p.mean()), "perpetua_star": float(b.mean()),
+                       "perpetua_star_annealed": float(a.mean()), "true_occupancy": float(y.mean())}
     objs = sorted({e[0] for e in curves})  # sorted: the choice must not depend on the hash seed
     obj = max(objs, key=lambda o: sum(1 for e in curves if e[0] == o))
     edges = sorted(e for e in curves if e[0] == obj)
@@ -69,7 +79,29 @@ def main(out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
+    return averages
+
+
+def cli(argv: list[str] | None = None) -> int:
+    """``[OUT.png]`` or ``--out DIR`` (figure and results.json, written into a folder renamed into place)."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("png", nargs="?", type=Path, default=Path(__file__).with_name("perpetua_star_long_horizon.png"))
+    ap.add_argument("--out", type=Path, help="write DIR/perpetua_star_long_horizon.png and DIR/results.json")
+    a = ap.parse_args(argv)
+    if a.out is None:
+        main(a.png)
+        return 0
+    if a.out.exists():
+        print(f"error: {a.out}: output exists; expected a new folder", file=sys.stderr)
+        return 1
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{a.out.name}.", dir=a.out.parent))
+    averages = main(tmp / "perpetua_star_long_horizon.png")
+    (tmp / "results.json").write_text(json.dumps({"far_from_last_observation": averages}, indent=1) + "\n",
+                                      encoding="utf-8")
+    os.replace(tmp, a.out)
+    return 0
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).with_name("perpetua_star_long_horizon.png"))
+    sys.exit(cli())
