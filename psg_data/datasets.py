@@ -67,7 +67,7 @@ def _is_complete(root: Path) -> bool:
             return False
         import pyarrow.parquet as pq
 
-        t = pq.read_table(files).to_pylist()
+        t = pq.ParquetFile(files).read().to_pylist()  # one file: read_table's dataset layer (and pandas) not needed
         return all((root / r["path"]).is_file() and (root / r["path"]).stat().st_size == r["size_bytes"] for r in t)
     except (FormatError, OSError, ValueError):
         return False

@@ -203,7 +203,7 @@ def _init_worker() -> None:
     cv2.setNumThreads(1)
     import rosbags.highlevel  # noqa: F401
 
-    import psg_data.writers  # noqa: F401
+    import psg_data.writers._dataset_writer  # noqa: F401
 
 def _run_parallel(tasks: list[ScanTask], procs: int, progress: Callable[..., Any] | None,
                   scheduler: str | None = None) -> list[ScanResult]:
