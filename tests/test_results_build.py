@@ -221,6 +221,40 @@ def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
     assert build.load_manifest(manifest)[0].code == ("s.py",) and build.load_manifest(manifest)[0].stdout == "r.json"
 
 
+def test_runs_share_the_work_folder_one_setup_built(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``uses``: a run reads an earlier run's kept {work:ID} folder; it is stale when that run is made again, and
+    making it alone while that run is stale is refused.
+    """
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))
+    make = "import sys, pathlib; pathlib.Path(sys.argv[1], 'lab.txt').write_text('built')"
+    read = ("import json, os, pathlib, sys; os.makedirs(sys.argv[2]); json.dump({'lab': "
+            "pathlib.Path(sys.argv[1], 'lab.txt').read_text()}, open(sys.argv[2] + '/results.json', 'w'))")
+    owner = build.Run("lab", "", f"python -c {read!r} {{work}} {{out}}", setup=(f"python -c {make!r} {{work}}",))
+    user = build.Run("nav", "", f"python -c {read!r} {{work:lab}} {{out}}", uses=("lab",))
+    runs, states = [owner, user], {"lab": dict(CLEAN), "nav": dict(CLEAN)}
+
+    def stale(*only: str) -> list[str]:
+        return [r.id for r in build.stale_runs(runs, tmp_path, states, quick=False, only=list(only))]
+
+    assert stale() == ["lab", "nav"]
+    with pytest.raises(build.BuildError, match="uses the work folder of lab: run that first"):
+        build.execute(user, tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    with pytest.raises(build.BuildError, match=r"nav uses lab, which is stale: run it too \(--only lab\)"):
+        stale("nav")
+    build.execute(owner, tmp_path, quick=False, state=dict(CLEAN), quiet=True, keep_work=True)
+    assert stale() == ["nav"] and (tmp_path / ".work" / "lab" / "lab.txt").is_file()
+    folder = build.execute(user, tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    assert json.loads((folder / "results.json").read_text()) == {"lab": "built"} and stale() == []
+    assert not (tmp_path / ".work" / "nav").exists()  # a folder no run uses is removed
+    info = json.loads((tmp_path / "lab" / "run.json").read_text())
+    (tmp_path / "lab" / "run.json").write_text(json.dumps({**info, "started": "later"}))  # the lab made again
+    assert stale() == ["nav"]
+    manifest = tmp_path / "m.json"
+    manifest.write_text(json.dumps({"runs": [{"id": "a", "command": "x", "uses": ["b"]}, {"id": "b", "command": "y"}]}))
+    with pytest.raises(build.BuildError, match=r"runs\[0\]: uses \['b'\]: expected ids of earlier runs"):
+        build.load_manifest(manifest)
+
+
 @pytest.mark.slow
 def test_quick_form_renders_every_block_from_real_runs(tmp_path: Path) -> None:
     """CI's quick form: the tiny runs made for real, every block with a quick run rendered from them."""
