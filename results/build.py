@@ -335,8 +335,9 @@ class Renderer:
         run's rows), each run's metric columns after the last's, headed ``LABEL: metric`` (``labels=A|B``;
         default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
         metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
-        (across scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after
-        each cell. Bold: each column's best non-ceiling value among the rows shown.
+        (across scenes or draws; default: the table's own ±; ``none``: no ±); ``interval=yes``: the interval's ends
+        after each cell; ``join=" / "``: each run's metrics in one cell, joined by this text (headed by the run's
+        label). Bold: each column's (metric's) best non-ceiling value among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
 
@@ -350,7 +351,12 @@ class Renderer:
         header, runs, roles = ["Method", "ref"], [], {}
         for rid, label in zip(ids, labels):
             names, cells = self._run_columns(rid, opts, keep)
-            header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
+            if "join" in opts:
+                names, cells = [label if "labels" in opts else opts["join"].join(names)], \
+                    {m: (role, [opts["join"].join(texts)]) for m, (role, texts) in cells.items()}
+                header += names
+            else:
+                header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
             runs.append((cells, len(names)))
             if "rows" not in opts or opts["rows"] == rid:
                 roles.update({m: role for m, (role, _) in cells.items() if m not in roles})
@@ -369,7 +375,7 @@ class Renderer:
         ``keep``: only these methods (the best values are marked among them).
         """
         from psg_data.evaluation import load_results
-        from psg_data.evaluation._tables import best_marks, cell_text, ordered_rows
+        from psg_data.evaluation._tables import best_marks, ordered_rows
 
         table = self._one_table(load_results(self._folder(rid)), opts.get("table", "0"), rid)
         keys = [m.key for m in table.metrics]
@@ -378,14 +384,14 @@ class Renderer:
         if set(want + extra) - set(keys):
             raise BuildError(f"run {rid}: no metric {sorted(set(want + extra) - set(keys))} (metrics: {keys})")
         spread = opts.get("spread", table.spread)
-        if spread not in ("interval", "std"):
-            raise BuildError(f"spread={spread}: expected interval or std")
+        if spread not in ("interval", "std", "none"):
+            raise BuildError(f"spread={spread}: expected interval, std or none")
         metrics = [m for m in table.metrics if m.key in want]
         table = dataclasses.replace(table, rows=[r for r in table.rows if keep is None or r.method in keep])
         rows = ordered_rows(table.rows)
         out = {}
         for r, marks in zip(rows, best_marks(table, rows)):
-            out[r.method] = (r.role, [_cell(cell_text(r.values.get(m.key), m.scale, m.digits, spread),
+            out[r.method] = (r.role, [_cell(_value_text(r.values.get(m.key), m.scale, m.digits, spread),
                                             marks[keys.index(m.key)],
                                             _after(r, table, m.key, extra, opts.get("interval") == "yes"))
                                       for m in metrics])
@@ -451,6 +457,15 @@ class Renderer:
         if len(codes) <= 1:
             return revs[0] if revs else "-"
         return f"(not one: the runs were made at {', '.join(revs)}; `python results/build.py` reruns the stale ones)"
+
+
+def _value_text(s: Any, scale: float, digits: int, spread: str) -> str:
+    """A cell's estimate: psg-data's ``cell_text`` (``0.185 ± 0.012``), or the estimate alone (``spread=none``)."""
+    from psg_data.evaluation._tables import cell_text
+
+    if spread == "none":
+        return "-" if s is None or not math.isfinite(s.mean) else f"{scale * s.mean:.{digits}f}"
+    return cell_text(s, scale, digits, spread)
 
 
 def _cell(text: str, best: bool, after: str) -> str:

@@ -129,8 +129,13 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     only_a = build.render_text("<!-- results:columns a,b rows=a metrics=balanced_accuracy -->?<!-- /results -->", r,
                                "DOC.md")  # b's best (perpetua_star) not shown: its fremen is the shown best
     assert "| fremen |  | **0.600 ± 0.020** | **0.500 ± 0.020** |" in only_a and "perpetua\\_star" not in only_a
+    join = '<!-- results:columns a,b labels="gt|noisy" join=" / " spread=none -->?<!-- /results -->'
+    joined = build.render_text(join, r, "DOC.md").split("\n")[1:-1]  # a run's metrics in one cell, each bold alone
+    assert joined[:2] == ["| Method | ref | gt | noisy |", "|---|---|---:|---:|"]
+    assert "| fremen |  | **0.200** / **0.600** | 0.250 / 0.500 |" in joined
+    assert "| perpetua\\_star |  | - | **0.220** / **0.580** |" in joined
     for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"),
-                         ("spread=sd", "spread=sd: expected interval or std"), ("metrics=f1", "no metric ['f1']"),
+                         ("spread=sd", "spread=sd: expected interval, std or none"), ("metrics=f1", "no metric ['f1']"),
                          ("extra=rmse", "no metric ['rmse']")):
         with pytest.raises(build.BuildError, match=re.escape(message)):
             build.render_text(f"<!-- results:columns a,b {bad} -->?<!-- /results -->", r, "DOC.md")
