@@ -336,7 +336,7 @@ class Renderer:
         default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
         metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
         (across scenes or draws; default: the table's own ±; ``none``: no ±); ``interval=yes``: the interval's ends
-        after each cell; ``join=" / "``: each run's metrics in one cell, joined by this text (headed by the run's
+        after each cell (``interval=a,b``: after these metrics' cells); ``join=" / "``: each run's metrics in one cell, joined by this text (headed by the run's
         label). Bold: each column's (metric's) best non-ceiling value among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
@@ -393,10 +393,12 @@ class Renderer:
         for r, marks in zip(rows, best_marks(table, rows)):
             out[r.method] = (r.role, [_cell(_value_text(r.values.get(m.key), m.scale, m.digits, spread),
                                             marks[keys.index(m.key)],
-                                            _after(r, table, m.key, extra, opts.get("interval") == "yes"))
+                                            _after(r, table, m.key, extra, opts.get("interval") == "yes"
+                                                   or m.key in opts.get("interval", "").split(",")))
                                       for m in metrics])
         arrow = {"lower": " ↓", "higher": " ↑"}
-        return [f"{m.label}{arrow.get(m.better, '')}" for m in metrics], out
+        group = {k: f"{g} " for g, ks in table.groups for k in ks}  # "Static presence (168) SR %"
+        return [f"{group.get(m.key, '')}{m.label}{arrow.get(m.better, '')}" for m in metrics], out
 
     @staticmethod
     def _one_table(res: Any, which: str, rid: str) -> Any:

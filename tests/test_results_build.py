@@ -89,7 +89,8 @@ def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() ->
         assert text.count("<!-- results:") == len(build.BLOCK.findall(text)), name
 
 
-def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
+def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]],
+               groups: list[tuple[str, list[str]]] | None = None) -> None:
     """A results.json written by psg-data's own writer: one table, MAE and B-Acc, per method (role, mae, bacc);
     each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc), its std 0.05 (MAE) and 0 (B-Acc).
     """
@@ -100,7 +101,7 @@ def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
     out = [ResultRow(m, role, {"mae": Summary(mae, 0.05, mae - 0.01, mae + 0.01, 21, "bootstrap", "objects"),
                                "balanced_accuracy": Summary(b, 0.0, b - 0.02, b + 0.02, 21, "bootstrap", "objects")})
            for m, (role, mae, b) in rows.items()]
-    save_results(EvalResults("persistence", [ResultTable("persistence", "t", metrics, out)]), folder)
+    save_results(EvalResults("persistence", [ResultTable("persistence", "t", metrics, out, groups=groups or [])]), folder)
 
 
 def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
@@ -139,6 +140,17 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
                          ("extra=rmse", "no metric ['rmse']")):
         with pytest.raises(build.BuildError, match=re.escape(message)):
             build.render_text(f"<!-- results:columns a,b {bad} -->?<!-- /results -->", r, "DOC.md")
+
+
+def test_columns_block_names_groups_and_puts_intervals_after_chosen_metrics(tmp_path: Path) -> None:
+    """A grouped table's headers carry the group (the sim tables' "Static presence (168) SR %"); ``interval=mae``:
+    the interval's ends after the MAE cells only.
+    """
+    _table_run(tmp_path / "g", {"fremen": ("method", 0.2, 0.6)}, groups=[("Error (3)", ["mae"])])
+    r = build.Renderer([build.Run("g", "", "x")], tmp_path)
+    lines = build.render_text("<!-- results:columns g interval=mae -->?<!-- /results -->", r, "DOC.md").split("\n")
+    assert lines[1] == "| Method | ref | Error (3) MAE ↓ | B-Acc ↑ |"
+    assert lines[3] == "| fremen |  | **0.200 ± 0.010** [0.190, 0.210] | **0.600 ± 0.020** |"
 
 
 def test_quick_render_leaves_blocks_of_runs_without_a_quick_form(tmp_path: Path) -> None:
