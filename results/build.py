@@ -241,7 +241,7 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
 # ---------------------------------------------------------------------------------------------- rendering
 
 
-_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\])?")
+_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>.*)\])?")  # a value may hold [...]
 
 
 def lookup(doc: Any, path: str) -> Any:

@@ -32,6 +32,8 @@ def test_lookup_follows_keys_indices_and_selectors() -> None:
     assert build.lookup(doc, "tables.0.rows[method=fremen].values.mae.mean") == 0.5
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.mean") == 0.25
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.half_width") == pytest.approx(0.2)
+    doors = {"rows": [{"method": "fremen [doors known]", "v": 1}, {"method": "fremen", "v": 2}]}
+    assert build.lookup(doors, "rows[method=fremen [doors known]].v") == 1  # the doors task's row names
     for bad in ("tables.1", "tables.0.rows[method=perpetua].values", "tables.0.rows.values", "nope"):
         with pytest.raises(build.BuildError, match="path"):
             build.lookup(doc, bad)
