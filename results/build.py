@@ -336,8 +336,9 @@ class Renderer:
         default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
         metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
         (across scenes or draws; default: the table's own ±; ``none``: no ±); ``interval=yes``: the interval's ends
-        after each cell (``interval=a,b``: after these metrics' cells); ``join=" / "``: each run's metrics in one cell, joined by this text (headed by the run's
-        label). Bold: each column's (metric's) best non-ceiling value among the rows shown.
+        after each cell (``interval=a,b``: after these metrics' cells); ``join=" / "``: each run's metrics in one
+        cell, joined by this text (headed by the run's label). Bold: each column's (metric's) best non-ceiling value
+        among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
 

@@ -103,7 +103,8 @@ def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]],
     out = [ResultRow(m, role, {"mae": Summary(mae, 0.05, mae - 0.01, mae + 0.01, 21, "bootstrap", "objects"),
                                "balanced_accuracy": Summary(b, 0.0, b - 0.02, b + 0.02, 21, "bootstrap", "objects")})
            for m, (role, mae, b) in rows.items()]
-    save_results(EvalResults("persistence", [ResultTable("persistence", "t", metrics, out, groups=groups or [])]), folder)
+    table = ResultTable("persistence", "t", metrics, out, groups=groups or [])
+    save_results(EvalResults("persistence", [table]), folder)
 
 
 def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
