@@ -21,7 +21,9 @@ A run is current when its command and the code it ran (the git tree of ``psg_dat
 ``pyproject.toml``) equal today's; stale runs are rerun into ``--runs DIR`` (default
 ``.results-runs/``, git-ignored): each into a temporary folder renamed into place when it ends, with
 ``run.json`` (command, revision, machine, wall and CPU seconds, load). A folder without the builder's
-``run.json`` is never replaced. The documents are rewritten atomically, and only their blocks change.
+``run.json`` is never replaced. A run may read what an earlier run's setup built (``uses``: its ``{work:ID}``
+folder, kept): it is stale whenever that run is made again. The documents are rewritten atomically, and only
+their blocks change.
 """
 
 from __future__ import annotations
@@ -76,6 +78,9 @@ class Run:
     its results as JSON instead of writing them)."""
     code: tuple[str, ...] = ()
     """Paths besides :data:`CODE` whose numbers the run depends on (a script it runs)."""
+    uses: tuple[str, ...] = ()
+    """Earlier runs whose ``{work}`` folder this run reads as ``{work:ID}`` (data one run's setup built, shared
+    instead of built again); such a folder is kept after its run, and a rerun of it makes this run stale."""
 
     def form(self, quick: bool) -> tuple[tuple[str, ...], str | None]:
         """(setup commands, command) of the full or quick form; command None: no quick form."""
@@ -88,7 +93,8 @@ def load_manifest(path: Path = MANIFEST) -> list[Run]:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise BuildError(f"{path}: cannot read the manifest ({exc})") from None
-    runs, known = [], {"id", "purpose", "command", "setup", "quick", "quick_setup", "env", "stdout", "code"}
+    runs, known = [], {"id", "purpose", "command", "setup", "quick", "quick_setup", "env", "stdout", "code",
+                                 "uses"}
     for k, e in enumerate(doc.get("runs", []) if isinstance(doc, dict) else []):
         where = f"{path}: runs[{k}]"
         if not isinstance(e, dict) or not isinstance(e.get("id"), str) or not isinstance(e.get("command"), str):
@@ -97,7 +103,9 @@ def load_manifest(path: Path = MANIFEST) -> list[Run]:
             raise BuildError(f"{where}: unknown field(s) {sorted(set(e) - known)}, expected {sorted(known)}")
         runs.append(Run(e["id"], e.get("purpose", ""), e["command"], tuple(e.get("setup", ())), e.get("quick"),
                         tuple(e.get("quick_setup", ())), tuple(sorted(e.get("env", {}).items())),
-                        e.get("stdout"), tuple(e.get("code", ()))))
+                        e.get("stdout"), tuple(e.get("code", ())), tuple(e.get("uses", ()))))
+        if set(runs[-1].uses) - {r.id for r in runs[:-1]}:
+            raise BuildError(f"{where}: uses {list(runs[-1].uses)}: expected ids of earlier runs")
     ids = [r.id for r in runs]
     if not runs or len(set(ids)) != len(ids):
         raise BuildError(f"{path}: expected a non-empty list 'runs' with distinct ids")
@@ -156,29 +164,48 @@ def _argv(command: str, subs: dict[str, str]) -> list[str]:
     return [str(exe) if exe.exists() else words[0], *words[1:]]
 
 
-def is_current(folder: Path, command: str, state: dict[str, Any], setup: tuple[str, ...] = ()) -> bool:
-    """The builder's run in ``folder`` ran ``command`` after ``setup`` on today's code (and ended well)."""
+def _started(folder: Path) -> str | None:
+    """When the builder's run in ``folder`` started (None: no run there)."""
+    try:
+        return str(json.loads((folder / "run.json").read_text(encoding="utf-8"))["started"])
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def is_current(folder: Path, command: str, state: dict[str, Any], setup: tuple[str, ...] = (),
+               uses: dict[str, str | None] | None = None) -> bool:
+    """The builder's run in ``folder`` ran ``command`` after ``setup`` on today's code (and ended well), on the
+    ``uses`` runs' folders as they are now (``{id: started}``).
+    """
     try:
         info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
     return (info.get("command") == command and tuple(info.get("setup", ())) == setup
             and info.get("code") == state["code"] and not info.get("dirty")
-            and info.get("exit_code") == 0 and not state["dirty"])
+            and info.get("exit_code") == 0 and not state["dirty"] and info.get("uses", {}) == (uses or {}))
 
 
-def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], quiet: bool = False) -> Path:
-    """Run ``run`` (setup, then command) into a temporary folder and rename it to ``runs_dir/ID``."""
+def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], quiet: bool = False,
+            keep_work: bool = False) -> Path:
+    """Run ``run`` (setup, then command) into a temporary folder and rename it to ``runs_dir/ID``.
+
+    ``keep_work``: leave its ``{work}`` folder for the runs that use it (``Run.uses``).
+    """
     setup, command = run.form(quick)
     assert command is not None
     final, tmp = runs_dir / run.id, runs_dir / f".{run.id}.partial-{os.getpid()}"
     if final.exists() and not (final / "run.json").exists():
         raise BuildError(f"{final}: exists and is not a run this builder wrote (no run.json); move it away")
+    used = {u: _started(runs_dir / u) for u in run.uses}
+    if any(v is None or not (runs_dir / ".work" / u).is_dir() for u, v in used.items()):
+        raise BuildError(f"run {run.id}: uses the work folder of {', '.join(run.uses)}: run that first")
     work = runs_dir / ".work" / run.id
     shutil.rmtree(tmp, ignore_errors=True)
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     subs, env = {"out": str(tmp), "work": str(work)}, {**os.environ, **dict(run.env)}
+    subs.update({f"work:{u}": str(runs_dir / ".work" / u) for u in run.uses})
     load0, cpu0, t0 = _load(), _cpu_children(), time.perf_counter()
     started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     if run.stdout:
@@ -199,7 +226,8 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         raise BuildError(f"run {run.id}: {', '.join(CODE)} changed while it ran; its numbers name no one revision")
     if not (tmp / "results.json").is_file():
         raise BuildError(f"run {run.id}: {command!r} wrote no {tmp}/results.json (it must write to --out {{out}})")
-    info = {"id": run.id, "command": command, **({"setup": list(setup)} if setup else {}), "quick": quick, **state, "started": started,
+    info = {"id": run.id, "command": command, **({"setup": list(setup)} if setup else {}), "quick": quick, **state,
+            "started": started, "uses": used,
             "wall_s": round(time.perf_counter() - t0, 1), "cpu_s": round(_cpu_children() - cpu0, 1),
             "load_before": load0, "load_after": _load(), "machine": machine(), "exit_code": 0}
     (tmp / "run.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
@@ -208,27 +236,54 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         final.rename(old)
     tmp.rename(final)
     shutil.rmtree(old, ignore_errors=True)
-    shutil.rmtree(work, ignore_errors=True)
+    if not keep_work:
+        shutil.rmtree(work, ignore_errors=True)
     return final
 
 
 # ---------------------------------------------------------------------------------------------- rendering
 
 
-_PARTS = re.compile(r"(?:[^.\[]|\[[^\]]*\])+")
-_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?P<selectors>(?:\[[^=\]]+=[^\]]*\])*)")
-_SELECTOR = re.compile(r"\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\]")
+def _steps(path: str) -> list[tuple[str, list[tuple[str, str]]]]:
+    """``path`` as (key, [(field, value), ...]) steps: dots and brackets inside a selector's value belong to it
+    (``rows[method=perpetua_star:gamma=0.99][last_seen=present]``, ``rows[method=fremen [doors known]]``)."""
+    steps: list[tuple[str, list[tuple[str, str]]]] = []
+    key, depth, buf = "", 0, ""
+    sels: list[tuple[str, str]] = []
+    for ch in path + ".":
+        if depth == 0 and ch == ".":
+            if not key:
+                raise BuildError(f"path {path!r}: cannot read it (an empty step)")
+            steps.append((key, sels))
+            key, sels = "", []  # a new list: the step keeps its own
+        elif depth == 0 and ch == "[":
+            if not key:
+                raise BuildError(f"path {path!r}: a selector needs a key before it")
+            depth, buf = 1, ""
+        elif depth == 0:
+            if sels:
+                raise BuildError(f"path {path!r}: text after a selector")
+            key += ch
+        else:
+            depth += (ch == "[") - (ch == "]")
+            if depth == 0:
+                field, eq, value = buf.partition("=")
+                if not eq or not field:
+                    raise BuildError(f"path {path!r}: expected [field=value], got [{buf}]")
+                sels.append((field, value))
+                buf = ""
+            else:
+                buf += ch
+    if depth:
+        raise BuildError(f"path {path!r}: unclosed selector")
+    return steps
 
 
 def lookup(doc: Any, path: str) -> Any:
     """``doc`` at ``path``: dotted keys, list indices, and ``key[field=value]`` for the list item whose
     ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``; ``rows[a=x][b=y]``: both)."""
     cur = doc
-    for part in _PARTS.findall(path):  # dots inside [...] belong to the selector's value
-        m = _STEP.fullmatch(part)
-        if m is None:
-            raise BuildError(f"path {path!r}: cannot read step {part!r}")
-        key = m["key"]
+    for key, sel in _steps(path):
         if isinstance(cur, list) and key.isdigit() and int(key) < len(cur):
             cur = cur[int(key)]
         elif isinstance(cur, dict) and key in cur:
@@ -237,8 +292,7 @@ def lookup(doc: Any, path: str) -> Any:
             cur = _half_width(cur)
         else:
             raise BuildError(f"path {path!r}: no {key!r} at this step")
-        if m["selectors"]:
-            sel = [(s["field"], s["value"]) for s in _SELECTOR.finditer(m["selectors"])]
+        if sel:
             hits = [x for x in cur if isinstance(x, dict) and all(str(x.get(f)) == v for f, v in sel)] \
                 if isinstance(cur, list) else []
             if len(hits) != 1:
@@ -325,8 +379,10 @@ class Renderer:
         run's rows), each run's metric columns after the last's, headed ``LABEL: metric`` (``labels=A|B``;
         default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
         metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
-        (across scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after
-        each cell. Bold: each column's best non-ceiling value among the rows shown.
+        (across scenes or draws; default: the table's own ±; ``none``: no ±); ``interval=yes``: the interval's ends
+        after each cell (``interval=a,b``: after these metrics' cells); ``join=" / "``: each run's metrics in one
+        cell, joined by this text (headed by the run's label). Bold: each column's (metric's) best non-ceiling value
+        among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
 
@@ -340,7 +396,12 @@ class Renderer:
         header, runs, roles = ["Method", "ref"], [], {}
         for rid, label in zip(ids, labels):
             names, cells = self._run_columns(rid, opts, keep)
-            header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
+            if "join" in opts:
+                names, cells = [label if "labels" in opts else opts["join"].join(names)], \
+                    {m: (role, [opts["join"].join(texts)]) for m, (role, texts) in cells.items()}
+                header += names
+            else:
+                header += [f"{label}: {n}" if "labels" in opts or len(ids) > 1 else n for n in names]
             runs.append((cells, len(names)))
             if "rows" not in opts or opts["rows"] == rid:
                 roles.update({m: role for m, (role, _) in cells.items() if m not in roles})
@@ -359,7 +420,7 @@ class Renderer:
         ``keep``: only these methods (the best values are marked among them).
         """
         from psg_data.evaluation import load_results
-        from psg_data.evaluation._tables import best_marks, cell_text, ordered_rows
+        from psg_data.evaluation._tables import best_marks, ordered_rows
 
         table = self._one_table(load_results(self._folder(rid)), opts.get("table", "0"), rid)
         keys = [m.key for m in table.metrics]
@@ -368,19 +429,21 @@ class Renderer:
         if set(want + extra) - set(keys):
             raise BuildError(f"run {rid}: no metric {sorted(set(want + extra) - set(keys))} (metrics: {keys})")
         spread = opts.get("spread", table.spread)
-        if spread not in ("interval", "std"):
-            raise BuildError(f"spread={spread}: expected interval or std")
+        if spread not in ("interval", "std", "none"):
+            raise BuildError(f"spread={spread}: expected interval, std or none")
         metrics = [m for m in table.metrics if m.key in want]
         table = dataclasses.replace(table, rows=[r for r in table.rows if keep is None or r.method in keep])
         rows = ordered_rows(table.rows)
         out = {}
         for r, marks in zip(rows, best_marks(table, rows)):
-            out[r.method] = (r.role, [_cell(cell_text(r.values.get(m.key), m.scale, m.digits, spread),
+            out[r.method] = (r.role, [_cell(_value_text(r.values.get(m.key), m.scale, m.digits, spread),
                                             marks[keys.index(m.key)],
-                                            _after(r, table, m.key, extra, opts.get("interval") == "yes"))
+                                            _after(r, table, m.key, extra, opts.get("interval") == "yes"
+                                                   or m.key in opts.get("interval", "").split(",")))
                                       for m in metrics])
         arrow = {"lower": " ↓", "higher": " ↑"}
-        return [f"{m.label}{arrow.get(m.better, '')}" for m in metrics], out
+        group = {k: f"{g} " for g, ks in table.groups for k in ks}  # "Static presence (168) SR %"
+        return [f"{group.get(m.key, '')}{m.label}{arrow.get(m.better, '')}" for m in metrics], out
 
     @staticmethod
     def _one_table(res: Any, which: str, rid: str) -> Any:
@@ -440,6 +503,15 @@ class Renderer:
         if len(codes) <= 1:
             return revs[0] if revs else "-"
         return f"(not one: the runs were made at {', '.join(revs)}; `python results/build.py` reruns the stale ones)"
+
+
+def _value_text(s: Any, scale: float, digits: int, spread: str) -> str:
+    """A cell's estimate: psg-data's ``cell_text`` (``0.185 ± 0.012``), or the estimate alone (``spread=none``)."""
+    from psg_data.evaluation._tables import cell_text
+
+    if spread == "none":
+        return "-" if s is None or not math.isfinite(s.mean) else f"{scale * s.mean:.{digits}f}"
+    return cell_text(s, scale, digits, spread)
 
 
 def _cell(text: str, best: bool, after: str) -> str:
@@ -520,8 +592,7 @@ def _build(a: argparse.Namespace) -> int:
     if any(st["dirty"] for st in states.values()) and not (a.quick or a.check or a.render_only or a.list):
         raise BuildError(f"{', '.join(CODE)} or a run's 'code' have uncommitted changes: commit them so each run "
                          "names its code")
-    todo = [r for r in runs if (not a.only or r.id in a.only) and r.form(a.quick)[1] is not None
-            and not is_current(runs_dir / r.id, r.form(a.quick)[1] or "", states[r.id], r.form(a.quick)[0])]
+    todo = stale_runs(runs, runs_dir, states, quick=a.quick, only=a.only)
     if a.list:
         for r in runs:
             status = "no quick form" if r.form(a.quick)[1] is None else ("stale" if r in todo else "current")
@@ -531,8 +602,29 @@ def _build(a: argparse.Namespace) -> int:
         for k, r in enumerate(todo, 1):
             if not a.quiet:
                 print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
-            execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet)
+            execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet,
+                    keep_work=any(r.id in o.uses for o in runs))
     return _render(runs, runs_dir, a)
+
+
+def stale_runs(runs: list[Run], runs_dir: Path, states: dict[str, dict[str, Any]], *, quick: bool,
+               only: list[str]) -> list[Run]:
+    """The runs to make (of ``only``, if given), in manifest order: not current, or using a run that is to be made
+    or was made again since; a run using a stale run that ``only`` leaves out is an error.
+    """
+    stale: set[str] = set()
+    for r in runs:
+        command = r.form(quick)[1]
+        used = {u: _started(runs_dir / u) for u in r.uses}
+        if command is not None and (set(r.uses) & stale or not is_current(runs_dir / r.id, command, states[r.id],
+                                                                             r.form(quick)[0], used)):
+            stale.add(r.id)
+    todo = [r for r in runs if r.id in stale and (not only or r.id in only)]
+    for r in todo:
+        missing = sorted(set(r.uses) & stale - {t.id for t in todo})
+        if missing:
+            raise BuildError(f"run {r.id} uses {', '.join(missing)}, which is stale: run it too (--only {missing[0]})")
+    return todo
 
 
 def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:

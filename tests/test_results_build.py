@@ -38,7 +38,14 @@ def test_lookup_follows_keys_indices_and_selectors() -> None:
     assert build.lookup(rows, "rows[m=a][s=absent].v") == 2 and build.lookup(rows, "rows[s=absent][m=b].v") == 3
     with pytest.raises(build.BuildError, match="found 2"):
         build.lookup(rows, "rows[m=a].v")
+    rows["rows"].append({"m": "c [doors known] @ 0.05", "s": "x.y", "v": 4})  # brackets and dots in a value
+    assert build.lookup(rows, "rows[m=c [doors known] @ 0.05][s=x.y].v") == 4
+    for bad in ("rows[m=a", "rows[m=a]x.v", ".v", "rows[ma].v"):
+        with pytest.raises(build.BuildError, match="path"):
+            build.lookup(rows, bad)
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.half_width") == pytest.approx(0.2)
+    doors = {"rows": [{"method": "fremen [doors known]", "v": 1}, {"method": "fremen", "v": 2}]}
+    assert build.lookup(doors, "rows[method=fremen [doors known]].v") == 1  # the doors task's row names
     for bad in ("tables.1", "tables.0.rows[method=perpetua].values", "tables.0.rows.values", "nope"):
         with pytest.raises(build.BuildError, match="path"):
             build.lookup(doc, bad)
@@ -109,7 +116,8 @@ def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() ->
         assert text.count("<!-- results:") == len(build.BLOCK.findall(text)), name
 
 
-def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
+def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]],
+               groups: list[tuple[str, list[str]]] | None = None) -> None:
     """A results.json written by psg-data's own writer: one table, MAE and B-Acc, per method (role, mae, bacc);
     each value's interval is value +- 0.01 (MAE) and +- 0.02 (B-Acc), its std 0.05 (MAE) and 0 (B-Acc).
     """
@@ -120,7 +128,8 @@ def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]]) -> None:
     out = [ResultRow(m, role, {"mae": Summary(mae, 0.05, mae - 0.01, mae + 0.01, 21, "bootstrap", "objects"),
                                "balanced_accuracy": Summary(b, 0.0, b - 0.02, b + 0.02, 21, "bootstrap", "objects")})
            for m, (role, mae, b) in rows.items()]
-    save_results(EvalResults("persistence", [ResultTable("persistence", "t", metrics, out)]), folder)
+    table = ResultTable("persistence", "t", metrics, out, groups=groups or [])
+    save_results(EvalResults("persistence", [table]), folder)
 
 
 def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
@@ -149,11 +158,27 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     only_a = build.render_text("<!-- results:columns a,b rows=a metrics=balanced_accuracy -->?<!-- /results -->", r,
                                "DOC.md")  # b's best (perpetua_star) not shown: its fremen is the shown best
     assert "| fremen |  | **0.600 ± 0.020** | **0.500 ± 0.020** |" in only_a and "perpetua\\_star" not in only_a
+    join = '<!-- results:columns a,b labels="gt|noisy" join=" / " spread=none -->?<!-- /results -->'
+    joined = build.render_text(join, r, "DOC.md").split("\n")[1:-1]  # a run's metrics in one cell, each bold alone
+    assert joined[:2] == ["| Method | ref | gt | noisy |", "|---|---|---:|---:|"]
+    assert "| fremen |  | **0.200** / **0.600** | 0.250 / 0.500 |" in joined
+    assert "| perpetua\\_star |  | - | **0.220** / **0.580** |" in joined
     for bad, message in (('labels="x"', "2 runs but 1 labels"), ("rows=c", "rows=c: expected one of"),
-                         ("spread=sd", "spread=sd: expected interval or std"), ("metrics=f1", "no metric ['f1']"),
+                         ("spread=sd", "spread=sd: expected interval, std or none"), ("metrics=f1", "no metric ['f1']"),
                          ("extra=rmse", "no metric ['rmse']")):
         with pytest.raises(build.BuildError, match=re.escape(message)):
             build.render_text(f"<!-- results:columns a,b {bad} -->?<!-- /results -->", r, "DOC.md")
+
+
+def test_columns_block_names_groups_and_puts_intervals_after_chosen_metrics(tmp_path: Path) -> None:
+    """A grouped table's headers carry the group (the sim tables' "Static presence (168) SR %"); ``interval=mae``:
+    the interval's ends after the MAE cells only.
+    """
+    _table_run(tmp_path / "g", {"fremen": ("method", 0.2, 0.6)}, groups=[("Error (3)", ["mae"])])
+    r = build.Renderer([build.Run("g", "", "x")], tmp_path)
+    lines = build.render_text("<!-- results:columns g interval=mae -->?<!-- /results -->", r, "DOC.md").split("\n")
+    assert lines[1] == "| Method | ref | Error (3) MAE ↓ | B-Acc ↑ |"
+    assert lines[3] == "| fremen |  | **0.200 ± 0.010** [0.190, 0.210] | **0.600 ± 0.020** |"
 
 
 def test_quick_render_leaves_blocks_of_runs_without_a_quick_form(tmp_path: Path) -> None:
@@ -242,6 +267,40 @@ def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
     manifest = tmp_path / "m.json"
     manifest.write_text(json.dumps({"runs": [{"id": "a", "command": "x", "code": ["s.py"], "stdout": "r.json"}]}))
     assert build.load_manifest(manifest)[0].code == ("s.py",) and build.load_manifest(manifest)[0].stdout == "r.json"
+
+
+def test_runs_share_the_work_folder_one_setup_built(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``uses``: a run reads an earlier run's kept {work:ID} folder; it is stale when that run is made again, and
+    making it alone while that run is stale is refused.
+    """
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))
+    make = "import sys, pathlib; pathlib.Path(sys.argv[1], 'lab.txt').write_text('built')"
+    read = ("import json, os, pathlib, sys; os.makedirs(sys.argv[2]); json.dump({'lab': "
+            "pathlib.Path(sys.argv[1], 'lab.txt').read_text()}, open(sys.argv[2] + '/results.json', 'w'))")
+    owner = build.Run("lab", "", f"python -c {read!r} {{work}} {{out}}", setup=(f"python -c {make!r} {{work}}",))
+    user = build.Run("nav", "", f"python -c {read!r} {{work:lab}} {{out}}", uses=("lab",))
+    runs, states = [owner, user], {"lab": dict(CLEAN), "nav": dict(CLEAN)}
+
+    def stale(*only: str) -> list[str]:
+        return [r.id for r in build.stale_runs(runs, tmp_path, states, quick=False, only=list(only))]
+
+    assert stale() == ["lab", "nav"]
+    with pytest.raises(build.BuildError, match="uses the work folder of lab: run that first"):
+        build.execute(user, tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    with pytest.raises(build.BuildError, match=r"nav uses lab, which is stale: run it too \(--only lab\)"):
+        stale("nav")
+    build.execute(owner, tmp_path, quick=False, state=dict(CLEAN), quiet=True, keep_work=True)
+    assert stale() == ["nav"] and (tmp_path / ".work" / "lab" / "lab.txt").is_file()
+    folder = build.execute(user, tmp_path, quick=False, state=dict(CLEAN), quiet=True)
+    assert json.loads((folder / "results.json").read_text()) == {"lab": "built"} and stale() == []
+    assert not (tmp_path / ".work" / "nav").exists()  # a folder no run uses is removed
+    info = json.loads((tmp_path / "lab" / "run.json").read_text())
+    (tmp_path / "lab" / "run.json").write_text(json.dumps({**info, "started": "later"}))  # the lab made again
+    assert stale() == ["nav"]
+    manifest = tmp_path / "m.json"
+    manifest.write_text(json.dumps({"runs": [{"id": "a", "command": "x", "uses": ["b"]}, {"id": "b", "command": "y"}]}))
+    with pytest.raises(build.BuildError, match=r"runs\[0\]: uses \['b'\]: expected ids of earlier runs"):
+        build.load_manifest(manifest)
 
 
 @pytest.mark.slow
