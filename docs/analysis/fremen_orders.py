@@ -48,6 +48,7 @@ def orders_of(task: Any, spec_text: str) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Fit, then write ``--out``/results.json atomically; 0 on success."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="folder to write results.json into (created)")
     p.add_argument("--dataset", default=None, help="a lab dataset folder (default: the demo lab)")
