@@ -419,7 +419,7 @@ class Renderer:
 
     def _revision(self, pos: list[str], opts: dict[str, str]) -> str:
         infos = [self._json(rid, "run.json") for rid in self.runs if (self.runs_dir / rid / "run.json").exists()]
-        codes = {i["code"] for i in infos}
+        codes = {":".join(i["code"].split(":")[:len(CODE)]) for i in infos}  # a run's own 'code' paths aside
         revs = sorted({i["revision"][:7] for i in infos})
         if len(codes) <= 1:
             return revs[0] if revs else "-"

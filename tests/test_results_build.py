@@ -221,6 +221,20 @@ def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
     assert build.load_manifest(manifest)[0].code == ("s.py",) and build.load_manifest(manifest)[0].stdout == "r.json"
 
 
+def test_revision_block_compares_the_psg_data_code_only(tmp_path: Path) -> None:
+    """One revision when every run ran the same psg_data and pyproject (a run's own script hash aside)."""
+    for rid, rev, code in (("a", "a" * 40, "tree:blob"), ("b", "b" * 40, "tree:blob:script")):
+        (tmp_path / rid).mkdir()
+        (tmp_path / rid / "run.json").write_text(json.dumps({"revision": rev, "code": code}))
+        (tmp_path / rid / "results.json").write_text("{}")
+    r = build.Renderer([build.Run("a", "", "x"), build.Run("b", "", "x", code=("s.py",))], tmp_path)
+    assert build.render_text("<!-- results:revision -->?<!-- /results -->", r, "D") == \
+        "<!-- results:revision -->aaaaaaa<!-- /results -->"
+    (tmp_path / "b" / "run.json").write_text(json.dumps({"revision": "b" * 40, "code": "other:blob:script"}))
+    assert "not one: the runs were made at aaaaaaa, bbbbbbb" in build.render_text(
+        "<!-- results:revision -->?<!-- /results -->", r, "D")
+
+
 @pytest.mark.slow
 def test_quick_form_renders_every_block_from_real_runs(tmp_path: Path) -> None:
     """CI's quick form: the tiny runs made for real, every block with a quick run rendered from them."""
