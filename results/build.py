@@ -10,7 +10,8 @@ A document holds its generated parts between markers; everything outside them is
     <!-- results:table main-job format=text -->...<!-- /results -->      a table of a run's results.json
     <!-- results:columns RUN1,RUN2 labels="gt|privileged" metrics=balanced_accuracy extra=mae,f1 -->...<!-- /results -->
                                        several runs' tables side by side (rows=RUN: only that run's rows;
-                                       spread=std: ± the std across draws; interval=yes: the interval's ends)
+                                       spread=std: ± the std across draws; interval=yes: the interval's ends;
+                                       std=yes: a column of the stds across draws)
     <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
     <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
     <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
@@ -309,7 +310,8 @@ class Renderer:
         default the run ids, none for one run); ``metrics=a,b``: only these; ``extra=mae,f1``: those
         metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
         (across scenes or draws; default: the table's own ±); ``interval=yes``: the interval's ends after
-        each cell. Bold: each column's best non-ceiling value among the rows shown.
+        each cell; ``std=yes``: a last column per run with the shown metrics' standard deviations (across
+        draws or scenes; ``0.004 / 0.005``). Bold: each column's best non-ceiling value among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
 
@@ -363,7 +365,12 @@ class Renderer:
                                             _after(r, table, m.key, extra, opts.get("interval") == "yes"))
                                       for m in metrics])
         arrow = {"lower": " ↓", "higher": " ↑"}
-        return [f"{m.label}{arrow.get(m.better, '')}" for m in metrics], out
+        names = [f"{m.label}{arrow.get(m.better, '')}" for m in metrics]
+        if opts.get("std") == "yes":  # one more column: each shown metric's std across draws / scenes
+            names.append(f"std ({' / '.join(m.label for m in metrics)})")
+            for r in rows:
+                out[r.method][1].append(" / ".join(_std_text(r.values.get(m.key), m) for m in metrics))
+        return names, out
 
     @staticmethod
     def _one_table(res: Any, which: str, rid: str) -> Any:
@@ -432,6 +439,11 @@ def _cell(text: str, best: bool, after: str) -> str:
 
     text = md_escape(text)
     return (f"**{text}**" if best and text != "-" else text) + (f" {after}" if after else "")
+
+
+def _std_text(s: Any, metric: Any) -> str:
+    """A summary's standard deviation in its metric's scale and digits; ``-`` when there is none."""
+    return f"{metric.scale * s.std:.{metric.digits}f}" if s is not None and math.isfinite(s.std) else "-"
 
 
 def _after(row: Any, table: Any, key: str, extra: list[str], interval: bool) -> str:

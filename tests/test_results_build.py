@@ -124,6 +124,9 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     assert "| perpetua\\_star |  | **0.220 ± 0.010** [0.210, 0.230] | **0.580 ± 0.020** [0.560, 0.600] |" in one
     std = build.render_text("<!-- results:columns b spread=std interval=yes -->?<!-- /results -->", r, "DOC.md")
     assert "| **0.220 ± 0.050** [0.210, 0.230] | **0.580 ± 0.000** [0.560, 0.600] |" in std
+    stds = build.render_text("<!-- results:columns b std=yes -->?<!-- /results -->", r, "DOC.md")
+    assert "| Method | ref | MAE ↓ | B-Acc ↑ | std (MAE / B-Acc) |" in stds
+    assert "| perpetua\\_star |  | **0.220 ± 0.010** | **0.580 ± 0.020** | 0.050 / 0.000 |" in stds
     only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
     assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
     only_a = build.render_text("<!-- results:columns a,b rows=a metrics=balanced_accuracy -->?<!-- /results -->", r,
