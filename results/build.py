@@ -215,14 +215,17 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
 # ---------------------------------------------------------------------------------------------- rendering
 
 
-_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>[^\]]*)\])?")
+_STEP = re.compile(r"(?P<key>[^.\[\]]+)(?:\[(?P<field>[^=\]]+)=(?P<value>.*)\])?")
+_DOT = re.compile(r"\.(?![^\[]*\])")
+"""A dot outside ``[...]``: a selector's value may hold dots and brackets (``rows[method=fremen @ 0.05]``)."""
 
 
 def lookup(doc: Any, path: str) -> Any:
     """``doc`` at ``path``: dotted keys, list indices, and ``key[field=value]`` for the list item whose
-    ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``)."""
+    ``field`` is ``value`` (``tables.0.rows[method=fremen].values.mae.mean``; the value may hold dots and
+    brackets: ``rows[method=fremen [doors known]]``, ``rows[method=fremen @ 0.05]``)."""
     cur = doc
-    for part in path.split("."):
+    for part in _DOT.split(path):
         m = _STEP.fullmatch(part)
         if m is None:
             raise BuildError(f"path {path!r}: cannot read step {part!r}")

@@ -32,6 +32,10 @@ def test_lookup_follows_keys_indices_and_selectors() -> None:
     assert build.lookup(doc, "tables.0.rows[method=fremen].values.mae.mean") == 0.5
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.mean") == 0.25
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.half_width") == pytest.approx(0.2)
+    rows = [{"method": "fremen @ 0.05", "v": 1}, {"method": "fremen [doors known]", "v": 2},
+            {"method": "fremen (expected cost)", "v": 3}]
+    assert [build.lookup({"rows": rows}, f"rows[method={m}].v") for m in
+            ("fremen @ 0.05", "fremen [doors known]", "fremen (expected cost)")] == [1, 2, 3]
     for bad in ("tables.1", "tables.0.rows[method=perpetua].values", "tables.0.rows.values", "nope"):
         with pytest.raises(build.BuildError, match="path"):
             build.lookup(doc, bad)
