@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -174,16 +175,19 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
     final, tmp = runs_dir / run.id, runs_dir / f".{run.id}.partial-{os.getpid()}"
     if final.exists() and not (final / "run.json").exists():
         raise BuildError(f"{final}: exists and is not a run this builder wrote (no run.json); move it away")
-    work = runs_dir / ".work" / run.id
+    work, reuse = _work_folder(runs_dir, run.id, setup)
     shutil.rmtree(tmp, ignore_errors=True)
-    shutil.rmtree(work, ignore_errors=True)
-    work.mkdir(parents=True)
+    if not reuse:
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
     subs, env = {"out": str(tmp), "work": str(work)}, {**os.environ, **dict(run.env)}
     load0, cpu0, t0 = _load(), _cpu_children(), time.perf_counter()
     started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     if run.stdout:
         tmp.mkdir(parents=True)
-    for cmd in (*setup, command):
+    for cmd in ((command,) if reuse else (*setup, command)):
+        if cmd is command and work.name != run.id:
+            (work / ".setup-done").touch()  # later runs of this build with the same setup reuse the folder
         argv = _argv(cmd, subs)
         if not quiet:
             print(f"results: {run.id}: {' '.join(shlex.quote(a) for a in argv)}", file=sys.stderr, flush=True)
@@ -208,8 +212,19 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         final.rename(old)
     tmp.rename(final)
     shutil.rmtree(old, ignore_errors=True)
-    shutil.rmtree(work, ignore_errors=True)
+    if work.name == run.id:
+        shutil.rmtree(work, ignore_errors=True)
     return final
+
+
+def _work_folder(runs_dir: Path, run_id: str, setup: tuple[str, ...]) -> tuple[Path, bool]:
+    """A run's ``{work}`` folder and whether its setup already ran there: runs with the same setup commands
+    (none naming ``{out}``) share one folder within a build (the quick form's tiny lab is made once).
+    """
+    if not setup or any("{out}" in c for c in setup):
+        return runs_dir / ".work" / run_id, False
+    work = runs_dir / ".work" / ("setup-" + hashlib.sha256("\n".join(setup).encode()).hexdigest()[:16])
+    return work, (work / ".setup-done").is_file()
 
 
 # ---------------------------------------------------------------------------------------------- rendering
@@ -527,11 +542,21 @@ def _build(a: argparse.Namespace) -> int:
             print(f"{r.id:28s} {status:14s} {r.form(a.quick)[1] or r.command}")
         return 0
     if not (a.check or a.render_only):
-        for k, r in enumerate(todo, 1):
-            if not a.quiet:
-                print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
-            execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet)
+        _drop_shared_setups(runs_dir)  # a build makes its shared setups anew (the code may have changed)
+        try:
+            for k, r in enumerate(todo, 1):
+                if not a.quiet:
+                    print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
+                execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet)
+        finally:
+            _drop_shared_setups(runs_dir)
     return _render(runs, runs_dir, a)
+
+
+def _drop_shared_setups(runs_dir: Path) -> None:
+    """Remove the shared ``{work}`` folders of ``runs_dir`` (a run's own folder is its own business)."""
+    for folder in (runs_dir / ".work").glob("setup-*"):
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _render(runs: list[Run], runs_dir: Path, a: argparse.Namespace) -> int:

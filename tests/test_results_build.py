@@ -217,6 +217,27 @@ def test_a_run_whose_command_prints_its_results(tmp_path: Path, monkeypatch: pyt
     assert json.loads((folder / "results.json").read_text()) == {"n": 3}
 
 
+def test_runs_with_the_same_setup_share_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Within a build, runs whose setup commands are equal run them once and share {work}; a setup naming
+    {out} is never shared; a new build makes the shared setup anew.
+    """
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))
+    log = tmp_path / "setups.log"
+    setup = (f"python -c \"open({str(log)!r}, 'a').write('s'); open('{{work}}/lab', 'w').write('lab')\"",)
+    reads = ("import json, os, sys; os.makedirs(sys.argv[1]); "
+             "json.dump({'lab': open(sys.argv[2]).read()}, open(sys.argv[1] + '/results.json', 'w'))")
+    runs = [build.Run(rid, "", f"python -c {reads!r} {{out}} {{work}}/lab", setup=setup) for rid in ("a", "b")]
+    for run in runs:
+        folder = build.execute(run, tmp_path / "runs", quick=False, state=dict(CLEAN), quiet=True)
+        assert json.loads((folder / "results.json").read_text()) == {"lab": "lab"}
+    assert log.read_text() == "s"  # made once for both runs
+    own = build.Run("c", "", "python -c 'pass'", setup=("python -c 'pass' {out}",))
+    assert build._work_folder(tmp_path, "c", own.setup) == (tmp_path / ".work" / "c", False)
+    build._drop_shared_setups(tmp_path / "runs")
+    build.execute(runs[0], tmp_path / "runs", quick=False, state=dict(CLEAN), quiet=True)
+    assert log.read_text() == "ss"
+
+
 def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
     """``code``: a script a run names joins the cache key (its blob hash after psg_data's and pyproject's)."""
     base, extra = build.code_state(), build.code_state(("results/build.py",))
