@@ -10,7 +10,8 @@ A document holds its generated parts between markers; everything outside them is
     <!-- results:table main-job format=text -->...<!-- /results -->      a table of a run's results.json
     <!-- results:columns RUN1,RUN2 labels="gt|privileged" metrics=balanced_accuracy extra=mae,f1 -->...<!-- /results -->
                                        several runs' tables side by side (rows=RUN: only that run's rows;
-                                       spread=std: ± the std across draws; interval=yes: the interval's ends)
+                                       spread=std: ± the std across draws; interval=yes: the interval's ends;
+                                       std=yes: a column of the stds across draws)
     <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
     <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
     <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -200,17 +202,20 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
     used = {u: _started(runs_dir / u) for u in run.uses}
     if any(v is None or not (runs_dir / ".work" / u).is_dir() for u, v in used.items()):
         raise BuildError(f"run {run.id}: uses the work folder of {', '.join(run.uses)}: run that first")
-    work = runs_dir / ".work" / run.id
+    work, reuse = _work_folder(runs_dir, run.id, setup, shared=not keep_work)
     shutil.rmtree(tmp, ignore_errors=True)
-    shutil.rmtree(work, ignore_errors=True)
-    work.mkdir(parents=True)
+    if not reuse:
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
     subs, env = {"out": str(tmp), "work": str(work)}, {**os.environ, **dict(run.env)}
     subs.update({f"work:{u}": str(runs_dir / ".work" / u) for u in run.uses})
     load0, cpu0, t0 = _load(), _cpu_children(), time.perf_counter()
     started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     if run.stdout:
         tmp.mkdir(parents=True)
-    for cmd in (*setup, command):
+    for cmd in ((command,) if reuse else (*setup, command)):
+        if cmd is command and work.name != run.id:
+            (work / ".setup-done").touch()  # later runs of this build with the same setup reuse the folder
         argv = _argv(cmd, subs)
         if not quiet:
             print(f"results: {run.id}: {' '.join(shlex.quote(a) for a in argv)}", file=sys.stderr, flush=True)
@@ -236,9 +241,20 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         final.rename(old)
     tmp.rename(final)
     shutil.rmtree(old, ignore_errors=True)
-    if not keep_work:
+    if work.name == run.id and not keep_work:
         shutil.rmtree(work, ignore_errors=True)
     return final
+
+
+def _work_folder(runs_dir: Path, run_id: str, setup: tuple[str, ...], *, shared: bool = True) -> tuple[Path, bool]:
+    """A run's ``{work}`` folder and whether its setup already ran there: runs with the same setup commands
+    (none naming ``{out}``) share one folder within a build (the quick form's tiny lab is made once);
+    ``shared=False`` (a folder later runs read as ``{work:ID}``): the run's own folder.
+    """
+    if not shared or not setup or any("{out}" in c for c in setup):
+        return runs_dir / ".work" / run_id, False
+    work = runs_dir / ".work" / ("setup-" + hashlib.sha256("\n".join(setup).encode()).hexdigest()[:16])
+    return work, (work / ".setup-done").is_file()
 
 
 # ---------------------------------------------------------------------------------------------- rendering
@@ -381,8 +397,9 @@ class Renderer:
         metrics' estimates in brackets after each cell; ``spread=std``: ± is the values' standard deviation
         (across scenes or draws; default: the table's own ±; ``none``: no ±); ``interval=yes``: the interval's ends
         after each cell (``interval=a,b``: after these metrics' cells); ``join=" / "``: each run's metrics in one
-        cell, joined by this text (headed by the run's label). Bold: each column's (metric's) best non-ceiling value
-        among the rows shown.
+        cell, joined by this text (headed by the run's label); ``std=yes``: a last column per run with the shown
+        metrics' standard deviations (across draws or scenes; ``0.004 / 0.005``). Bold: each column's (metric's)
+        best non-ceiling value among the rows shown.
         """
         from psg_data.evaluation._table_formats import md_escape
 
@@ -443,7 +460,12 @@ class Renderer:
                                       for m in metrics])
         arrow = {"lower": " ↓", "higher": " ↑"}
         group = {k: f"{g} " for g, ks in table.groups for k in ks}  # "Static presence (168) SR %"
-        return [f"{group.get(m.key, '')}{m.label}{arrow.get(m.better, '')}" for m in metrics], out
+        names = [f"{group.get(m.key, '')}{m.label}{arrow.get(m.better, '')}" for m in metrics]
+        if opts.get("std") == "yes":  # one more column: each shown metric's std across draws / scenes
+            names.append(f"std ({' / '.join(m.label for m in metrics)})")
+            for r in rows:
+                out[r.method][1].append(" / ".join(_std_text(r.values.get(m.key), m) for m in metrics))
+        return names, out
 
     @staticmethod
     def _one_table(res: Any, which: str, rid: str) -> Any:
@@ -498,7 +520,7 @@ class Renderer:
 
     def _revision(self, pos: list[str], opts: dict[str, str]) -> str:
         infos = [self._json(rid, "run.json") for rid in self.runs if (self.runs_dir / rid / "run.json").exists()]
-        codes = {i["code"] for i in infos}
+        codes = {":".join(i["code"].split(":")[:len(CODE)]) for i in infos}  # a run's own 'code' paths aside
         revs = sorted({i["revision"][:7] for i in infos})
         if len(codes) <= 1:
             return revs[0] if revs else "-"
@@ -520,6 +542,11 @@ def _cell(text: str, best: bool, after: str) -> str:
 
     text = md_escape(text)
     return (f"**{text}**" if best and text != "-" else text) + (f" {after}" if after else "")
+
+
+def _std_text(s: Any, metric: Any) -> str:
+    """A summary's standard deviation in its metric's scale and digits; ``-`` when there is none."""
+    return f"{metric.scale * s.std:.{metric.digits}f}" if s is not None and math.isfinite(s.std) else "-"
 
 
 def _after(row: Any, table: Any, key: str, extra: list[str], interval: bool) -> str:
@@ -599,12 +626,22 @@ def _build(a: argparse.Namespace) -> int:
             print(f"{r.id:28s} {status:14s} {r.form(a.quick)[1] or r.command}")
         return 0
     if not (a.check or a.render_only):
-        for k, r in enumerate(todo, 1):
-            if not a.quiet:
-                print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
-            execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet,
-                    keep_work=any(r.id in o.uses for o in runs))
+        _drop_shared_setups(runs_dir)  # a build makes its shared setups anew (the code may have changed)
+        try:
+            for k, r in enumerate(todo, 1):
+                if not a.quiet:
+                    print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
+                execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet,
+                        keep_work=any(r.id in o.uses for o in runs))
+        finally:
+            _drop_shared_setups(runs_dir)
     return _render(runs, runs_dir, a)
+
+
+def _drop_shared_setups(runs_dir: Path) -> None:
+    """Remove the shared ``{work}`` folders of ``runs_dir`` (a run's own folder is its own business)."""
+    for folder in (runs_dir / ".work").glob("setup-*"):
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def stale_runs(runs: list[Run], runs_dir: Path, states: dict[str, dict[str, Any]], *, quick: bool,

@@ -46,6 +46,10 @@ def test_lookup_follows_keys_indices_and_selectors() -> None:
     assert build.lookup(doc, "tables.0.rows[method=fremen:max_order=5].values.mae.half_width") == pytest.approx(0.2)
     doors = {"rows": [{"method": "fremen [doors known]", "v": 1}, {"method": "fremen", "v": 2}]}
     assert build.lookup(doors, "rows[method=fremen [doors known]].v") == 1  # the doors task's row names
+    rows = [{"method": "fremen @ 0.05", "v": 1}, {"method": "fremen [doors known]", "v": 2},
+            {"method": "fremen (expected cost)", "v": 3}]
+    assert [build.lookup({"rows": rows}, f"rows[method={m}].v") for m in
+            ("fremen @ 0.05", "fremen [doors known]", "fremen (expected cost)")] == [1, 2, 3]
     for bad in ("tables.1", "tables.0.rows[method=perpetua].values", "tables.0.rows.values", "nope"):
         with pytest.raises(build.BuildError, match="path"):
             build.lookup(doc, bad)
@@ -153,6 +157,9 @@ def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     assert "| perpetua\\_star |  | **0.220 ± 0.010** [0.210, 0.230] | **0.580 ± 0.020** [0.560, 0.600] |" in one
     std = build.render_text("<!-- results:columns b spread=std interval=yes -->?<!-- /results -->", r, "DOC.md")
     assert "| **0.220 ± 0.050** [0.210, 0.230] | **0.580 ± 0.000** [0.560, 0.600] |" in std
+    stds = build.render_text("<!-- results:columns b std=yes -->?<!-- /results -->", r, "DOC.md")
+    assert "| Method | ref | MAE ↓ | B-Acc ↑ | std (MAE / B-Acc) |" in stds
+    assert "| perpetua\\_star |  | **0.220 ± 0.010** | **0.580 ± 0.020** | 0.050 / 0.000 |" in stds
     only_b = build.render_text("<!-- results:columns a,b rows=b -->?<!-- /results -->", r, "DOC.md")
     assert "last\\_seen" not in only_b and "| perpetua\\_star |  | - |" in only_b
     only_a = build.render_text("<!-- results:columns a,b rows=a metrics=balanced_accuracy -->?<!-- /results -->", r,
@@ -258,6 +265,27 @@ def test_a_run_whose_command_prints_its_results(tmp_path: Path, monkeypatch: pyt
     assert json.loads((folder / "results.json").read_text()) == {"n": 3}
 
 
+def test_runs_with_the_same_setup_share_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Within a build, runs whose setup commands are equal run them once and share {work}; a setup naming
+    {out} is never shared; a new build makes the shared setup anew.
+    """
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))
+    log = tmp_path / "setups.log"
+    setup = (f"python -c \"open({str(log)!r}, 'a').write('s'); open('{{work}}/lab', 'w').write('lab')\"",)
+    reads = ("import json, os, sys; os.makedirs(sys.argv[1]); "
+             "json.dump({'lab': open(sys.argv[2]).read()}, open(sys.argv[1] + '/results.json', 'w'))")
+    runs = [build.Run(rid, "", f"python -c {reads!r} {{out}} {{work}}/lab", setup=setup) for rid in ("a", "b")]
+    for run in runs:
+        folder = build.execute(run, tmp_path / "runs", quick=False, state=dict(CLEAN), quiet=True)
+        assert json.loads((folder / "results.json").read_text()) == {"lab": "lab"}
+    assert log.read_text() == "s"  # made once for both runs
+    own = build.Run("c", "", "python -c 'pass'", setup=("python -c 'pass' {out}",))
+    assert build._work_folder(tmp_path, "c", own.setup) == (tmp_path / ".work" / "c", False)
+    build._drop_shared_setups(tmp_path / "runs")
+    build.execute(runs[0], tmp_path / "runs", quick=False, state=dict(CLEAN), quiet=True)
+    assert log.read_text() == "ss"
+
+
 def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
     """``code``: a script a run names joins the cache key (its blob hash after psg_data's and pyproject's)."""
     base, extra = build.code_state(), build.code_state(("results/build.py",))
@@ -301,6 +329,20 @@ def test_runs_share_the_work_folder_one_setup_built(tmp_path: Path, monkeypatch:
     manifest.write_text(json.dumps({"runs": [{"id": "a", "command": "x", "uses": ["b"]}, {"id": "b", "command": "y"}]}))
     with pytest.raises(build.BuildError, match=r"runs\[0\]: uses \['b'\]: expected ids of earlier runs"):
         build.load_manifest(manifest)
+
+
+def test_revision_block_compares_the_psg_data_code_only(tmp_path: Path) -> None:
+    """One revision when every run ran the same psg_data and pyproject (a run's own script hash aside)."""
+    for rid, rev, code in (("a", "a" * 40, "tree:blob"), ("b", "b" * 40, "tree:blob:script")):
+        (tmp_path / rid).mkdir()
+        (tmp_path / rid / "run.json").write_text(json.dumps({"revision": rev, "code": code}))
+        (tmp_path / rid / "results.json").write_text("{}")
+    r = build.Renderer([build.Run("a", "", "x"), build.Run("b", "", "x", code=("s.py",))], tmp_path)
+    assert build.render_text("<!-- results:revision -->?<!-- /results -->", r, "D") == \
+        "<!-- results:revision -->aaaaaaa<!-- /results -->"
+    (tmp_path / "b" / "run.json").write_text(json.dumps({"revision": "b" * 40, "code": "other:blob:script"}))
+    assert "not one: the runs were made at aaaaaaa, bbbbbbb" in build.render_text(
+        "<!-- results:revision -->?<!-- /results -->", r, "D")
 
 
 @pytest.mark.slow
