@@ -39,6 +39,7 @@ complex exponentials.
 from __future__ import annotations
 
 import datetime
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -247,11 +248,17 @@ class FremenComponents:
         out = np.full(tau.shape, self.mean, dtype=np.float64)
         if self.k.size:
             theta = np.mod(tau, self.base_period_s) * (2 * np.pi / self.base_period_s)
-            amp = 2 * np.abs(self.coef)
-            ph = np.angle(self.coef)
-            for kk, a, p in zip(self.k, amp, ph):
-                out += a * np.cos(kk * theta + p)
+            k, amp, ph = self._terms
+            # every component's term at once (the same operations per element), then summed in order
+            terms = amp * np.cos(k * theta[..., None] + ph)
+            for j in range(k.size):
+                out += terms[..., j]
         return out
+
+    @functools.cached_property
+    def _terms(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """(m,) harmonic indices as floats, amplitudes 2 |c_k| and phases arg c_k."""
+        return self.k.astype(np.float64), 2 * np.abs(self.coef), np.angle(self.coef)
 
     def predict(self, tau: ArrayLike) -> NDArray[np.float64]:
         """Prediction saturated to [0, 1] (the paper's sigma)."""
