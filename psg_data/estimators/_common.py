@@ -213,11 +213,11 @@ class BaseFilter:
             raise EstimatorError(f"edge {self.edge}: update_many got {t.size} times and {yy.size} observations")
         if t.size == 0:
             return
-        if not np.all(np.isfinite(t)):
+        if not np.isfinite(t).all():  # the arrays' own all()/any(): np.all's dispatch cost per observation
             raise EstimatorError(f"edge {self.edge}: observation times must be finite")
-        if not np.all((yy == 0) | (yy == 1)):
+        if not ((yy == 0) | (yy == 1)).all():
             raise EstimatorError(f"edge {self.edge}: observations must be 0 or 1")
-        if t.size > 1 and np.any(np.diff(t) < 0):
+        if t.size > 1 and (np.diff(t) < 0).any():
             i = int(np.argmax(np.diff(t) < 0)) + 1
             raise EstimatorError(f"edge {self.edge}: observation times must be non-decreasing, got {t[i]} after "
                                  f"{t[i - 1]}")
