@@ -86,11 +86,11 @@ def _score(y: NDArray[np.int64], b: NDArray[np.float64], w: NDArray[np.float64],
     pos = b >= cfg.threshold
     t = y8 == 1
     masks = (t & pos, ~t & pos, t & ~pos, ~t & ~pos)  # tp, fp, fn, tn
-    counts = [float(np.count_nonzero(m)) for m in masks]  # = sum of unit weights
+    n_tp, n_fp, n_fn, n_tn = (float(np.count_nonzero(m)) for m in masks)  # = sums of unit weights
     err = np.abs(y8 - b)
     out["sample_mae"] = float(np.sum(err) / float(y.size))
-    out["sample_balanced_accuracy"] = _bacc_of(*counts, cfg.sample_convention)
-    out["sample_f1"] = _f1_of(counts[0], counts[1], counts[2], cfg.sample_convention, 0.0)
+    out["sample_balanced_accuracy"] = _bacc_of(n_tp, n_fp, n_fn, n_tn, cfg.sample_convention)
+    out["sample_f1"] = _f1_of(n_tp, n_fp, n_fn, cfg.sample_convention, 0.0)
     total = np.sum(w)
     if total > 0:
         tp, fp, fn, tn = (float(np.sum(w[m])) for m in masks)
