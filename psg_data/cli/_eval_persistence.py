@@ -34,19 +34,19 @@ def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs:
     from psg_data.evaluation._persistence_job import fit_counts, persistence_rows, run_persistence_rows
     from psg_data.evaluation._report import choose_plot_edges
 
-    task = persistence_task_for(choice, labels=labels, quiet=quiet, label_seed=label_seed)
-    require_hints(specs, task.estimator_hints, choice.label)
-    rows, roles = persistence_rows(specs, task.estimator_hints, references=references)
-    total = fit_counts(rows, task, options) * len(task.ground_truth)
-    keep = list(task.ground_truth) if keep_all else choose_plot_edges(task.ground_truth, k=4)
-    with Progress("evaluating", total=total, unit="edge runs", quiet=quiet) as prog, \
-            _executor(jobs, scheduler) as executor:
-        def progress(done: int, _total: int) -> None:
-            prog.done = done
-            prog.update(0)
+    with _executor(jobs, scheduler) as executor:  # its workers start (import) while the dataset is read
+        task = persistence_task_for(choice, labels=labels, quiet=quiet, label_seed=label_seed)
+        require_hints(specs, task.estimator_hints, choice.label)
+        rows, roles = persistence_rows(specs, task.estimator_hints, references=references)
+        total = fit_counts(rows, task, options) * len(task.ground_truth)
+        keep = list(task.ground_truth) if keep_all else choose_plot_edges(task.ground_truth, k=4)
+        with Progress("evaluating", total=total, unit="edge runs", quiet=quiet) as prog:
+            def progress(done: int, _total: int) -> None:
+                prog.done = done
+                prog.update(0)
 
-        result = run_persistence_rows(rows, task, options, jobs=jobs,
-                                      executor=executor, progress=progress, keep_predictions=keep)
+            result = run_persistence_rows(rows, task, options, jobs=jobs,
+                                          executor=executor, progress=progress, keep_predictions=keep)
     return result, task, roles
 
 

@@ -213,11 +213,11 @@ class BaseFilter:
             raise EstimatorError(f"edge {self.edge}: update_many got {t.size} times and {yy.size} observations")
         if t.size == 0:
             return
-        if not np.all(np.isfinite(t)):
+        if not np.isfinite(t).all():  # the arrays' own all()/any(): np.all's dispatch cost per observation
             raise EstimatorError(f"edge {self.edge}: observation times must be finite")
-        if not np.all((yy == 0) | (yy == 1)):
+        if not ((yy == 0) | (yy == 1)).all():
             raise EstimatorError(f"edge {self.edge}: observations must be 0 or 1")
-        if t.size > 1 and np.any(np.diff(t) < 0):
+        if t.size > 1 and (np.diff(t) < 0).any():
             i = int(np.argmax(np.diff(t) < 0)) + 1
             raise EstimatorError(f"edge {self.edge}: observation times must be non-decreasing, got {t[i]} after "
                                  f"{t[i - 1]}")
@@ -240,14 +240,15 @@ class BaseFilter:
     def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
         """P(present) at times ``t_s`` (any shape); times before the last observation are clamped to it."""
         t = np.asarray(t_s, dtype=np.float64)
-        if not np.all(np.isfinite(t)):
+        if not np.isfinite(t).all():
             raise EstimatorError(f"edge {self.edge}: query times must be finite")
         if self._last_t is not None:
             t = np.maximum(t, self._last_t)
         out = np.asarray(self._predict(t.reshape(-1)), dtype=np.float64).reshape(t.shape)
         if not self._repairs_predictions:
             return out  # a plugin's values as they are: psg-eval checks them and reports NaN or out of range
-        return np.clip(np.nan_to_num(out, nan=0.5), 0.0, 1.0)
+        # NaN -> 0.5, then [0, 1] (+-inf clip to 1 and 0, as nan_to_num's +-max would; two ufuncs, not nan_to_num)
+        return np.clip(np.where(np.isnan(out), 0.5, out), 0.0, 1.0)
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:  # pragma: no cover
         raise NotImplementedError

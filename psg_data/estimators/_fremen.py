@@ -38,6 +38,8 @@ complex exponentials.
 
 from __future__ import annotations
 
+import datetime
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -63,22 +65,50 @@ _DIRECT_LIMIT = 100_000  # N*K below which the direct sum is used
 
 
 # the offset table's grid stays two days inside pandas' datetime64[ns] range (1677-09-21 .. 2262-04-11),
-# so that its local times fit too (UTC offsets, local mean times included, are under a day); times beyond
-# take the offset at the grid's end
+# where it was built with pandas before, so that its local times fit too (UTC offsets, local mean times
+# included, are under a day); times beyond take the offset at the grid's end
 _PANDAS_FIRST_S = math.ceil(-9223372036.854775807 / 900.0) * 900.0 + 2 * 86400.0
 _PANDAS_LAST_S = math.floor(9223372036.854775807 / 900.0) * 900.0 - 2 * 86400.0
 _OFFSET_TABLES: dict[str, tuple[float, float, NDArray[np.float64], NDArray[np.float64]]] = {}
+_COARSE = 96
+"""Grid steps (of 900 s: one day) between the offsets looked up first; a zone's offset changes at most
+once in between (tzdata's offset changes are >= 6.9 days apart), found by bisection on the grid."""
 
 
-def _pandas_offsets(t: NDArray[np.float64], timezone: str) -> NDArray[np.float64]:
-    import pandas as pd
+def _zone(timezone: str) -> Any:
+    from zoneinfo import ZoneInfo
 
-    ns = np.round(t * 1e9).astype(np.int64)
     try:
-        idx = pd.DatetimeIndex(ns.view("datetime64[ns]")).tz_localize("UTC").tz_convert(timezone)
-    except Exception as exc:  # unknown zone names raise several pandas/zoneinfo errors
+        return ZoneInfo(timezone)
+    except Exception as exc:  # unknown or malformed zone names raise several zoneinfo errors
         raise EstimatorError(f"unknown timezone {timezone!r}: {exc}") from exc
-    return (idx.tz_localize(None).asi8 - ns).astype(np.float64) / 1e9
+
+
+def _zone_offset(tz: Any, t: float) -> float:
+    """UTC offset (s) of zone ``tz`` at Unix time ``t``."""
+    return float(datetime.datetime.fromtimestamp(t, tz).utcoffset().total_seconds())  # type: ignore[union-attr]
+
+
+def _offset_steps(grid: NDArray[np.float64], timezone: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(grid times where the UTC offset differs from the previous grid time, their offsets), and the
+    offset at ``grid[0]`` first; from zoneinfo, one look-up per day and a bisection per change (no
+    pandas: importing it was a second per worker process for these few numbers).
+    """
+    tz = _zone(timezone)
+    last = grid.size - 1
+    idx = list(range(0, last, _COARSE)) + [last]
+    coarse = [_zone_offset(tz, float(grid[i])) for i in idx]
+    at, offs = [float(grid[0])], [coarse[0]]
+    for k in range(len(idx) - 1):
+        if coarse[k + 1] == coarse[k]:
+            continue
+        lo, hi = idx[k], idx[k + 1]  # offset(grid[lo]) = coarse[k] != offset(grid[hi])
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            lo, hi = (mid, hi) if _zone_offset(tz, float(grid[mid])) == coarse[k] else (lo, mid)
+        at.append(float(grid[hi]))
+        offs.append(coarse[k + 1])
+    return np.array(at), np.array(offs)
 
 
 def _offset_table(timezone: str, lo: float, hi: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -89,10 +119,8 @@ def _offset_table(timezone: str, lo: float, hi: float) -> tuple[NDArray[np.float
     a = max(math.floor(min(lo, tab[0] if tab else lo) / 900.0) * 900.0 - 400 * 86400.0, _PANDAS_FIRST_S)
     b = min(math.ceil(max(hi, tab[1] if tab else hi) / 900.0) * 900.0 + 400 * 86400.0, _PANDAS_LAST_S)
     grid = np.arange(a, b + 900.0, 900.0)  # zone transitions happen on quarter hours
-    off = _pandas_offsets(grid, timezone)
-    ch = np.flatnonzero(np.diff(off) != 0) + 1
-    trans = np.concatenate([[-np.inf], grid[ch]])
-    offs = np.concatenate([[off[0]], off[ch]])
+    at, offs = _offset_steps(grid, timezone)
+    trans = np.concatenate([[-np.inf], at[1:]])
     _OFFSET_TABLES[timezone] = (a, b, trans, offs)
     return trans, offs
 
@@ -220,11 +248,17 @@ class FremenComponents:
         out = np.full(tau.shape, self.mean, dtype=np.float64)
         if self.k.size:
             theta = np.mod(tau, self.base_period_s) * (2 * np.pi / self.base_period_s)
-            amp = 2 * np.abs(self.coef)
-            ph = np.angle(self.coef)
-            for kk, a, p in zip(self.k, amp, ph):
-                out += a * np.cos(kk * theta + p)
+            k, amp, ph = self._terms
+            # every component's term at once (the same operations per element), then summed in order
+            terms = amp * np.cos(k * theta[..., None] + ph)
+            for j in range(k.size):
+                out += terms[..., j]
         return out
+
+    @functools.cached_property
+    def _terms(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """(m,) harmonic indices as floats, amplitudes 2 |c_k| and phases arg c_k."""
+        return self.k.astype(np.float64), 2 * np.abs(self.coef), np.angle(self.coef)
 
     def predict(self, tau: ArrayLike) -> NDArray[np.float64]:
         """Prediction saturated to [0, 1] (the paper's sigma)."""

@@ -110,16 +110,22 @@ def _estep_lognormal(lo: NDArray[np.float64], hi: NDArray[np.float64], mu: NDArr
     with np.errstate(divide="ignore"):
         la, lb = np.log(lo)[..., None], np.log(hi)[..., None]
     exact = (lo == hi)[..., None]
+    any_exact = bool(exact.any())  # without exact rows every np.where(exact, ., x) below is x: skipped
     a = (la - mu) / sd
     b = (lb - mu) / sd
     with np.errstate(invalid="ignore"):
-        logp = np.where(exact, -np.log(sd) - _LOG_SQRT_2PI - 0.5 * a * a, _log_diff_ndtr(a, np.where(exact, a + 1, b)))
-        lpa = np.where(np.isfinite(a), -_LOG_SQRT_2PI - 0.5 * a * a, -np.inf)
-        lpb = np.where(np.isfinite(b), -_LOG_SQRT_2PI - 0.5 * b * b, -np.inf)
+        if any_exact:
+            logp = np.where(exact, -np.log(sd) - _LOG_SQRT_2PI - 0.5 * a * a,
+                            _log_diff_ndtr(a, np.where(exact, a + 1, b)))
+        else:
+            logp = _log_diff_ndtr(a, b)
+        fa, fb = np.isfinite(a), np.isfinite(b)
+        lpa = np.where(fa, -_LOG_SQRT_2PI - 0.5 * a * a, -np.inf)
+        lpb = np.where(fb, -_LOG_SQRT_2PI - 0.5 * b * b, -np.inf)
         ra = np.exp(np.minimum(lpa - logp, 700.0))
         rb = np.exp(np.minimum(lpb - logp, 700.0))
         ez = ra - rb
-        ez2 = 1.0 + np.where(np.isfinite(a), a * ra, 0.0) - np.where(np.isfinite(b), b * rb, 0.0)
+        ez2 = 1.0 + np.where(fa, a * ra, 0.0) - np.where(fb, b * rb, 0.0)
     # narrow intervals (width h < 1e-5 in z, e.g. 1 ms at 1 h): Phi(b) - Phi(a) and the moment
     # ratios cancel to ~eps / h; expand around the midpoint m instead (error O(h^4))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -133,8 +139,11 @@ def _estep_lognormal(lo: NDArray[np.float64], hi: NDArray[np.float64], mu: NDArr
                         logp)
         ez = np.where(narrow, m - m * h * h / 12.0, ez)
         ez2 = np.where(narrow, m * m + h * h * (1.0 - 2.0 * m * m) / 12.0, ez2)
-    ez = np.where(exact, a, ez)
-    ez2 = np.where(exact, a * a, np.maximum(ez2, ez * ez))
+    if any_exact:
+        ez = np.where(exact, a, ez)
+        ez2 = np.where(exact, a * a, np.maximum(ez2, ez * ez))
+    else:
+        ez2 = np.maximum(ez2, ez * ez)
     bad = ~np.isfinite(logp)
     ez = np.where(bad, 0.0, ez)
     ez2 = np.where(bad, 1.0, ez2)

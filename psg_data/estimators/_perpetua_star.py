@@ -284,6 +284,7 @@ class PerpetuaStarFilter(BaseFilter):
         self.phase = -1  # filtered state after the last observation (-1: none yet)
         self.n_restarts = 0
         self._const_logit: float | None = None
+        self._logit_memo: tuple[Any, float, NDArray[np.float64], NDArray[np.float64]] | None = None
         if isinstance(prior, ConstantPrior):
             f = min(max(float(np.clip(prior.value, 0.0, 1.0)), self.prior_floor), 1.0 - self.prior_floor)
             self._const_logit = math.log(f) - math.log1p(-f)
@@ -322,16 +323,31 @@ class PerpetuaStarFilter(BaseFilter):
         self._Es = [float(x) for x in np.asarray(v, dtype=np.float64).reshape(2)]
 
     # ------------------------------------------------------------------ update
-    def _prior_logit(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self._const_logit is not None:
-            return np.full(t.shape, self._const_logit)
+    def _prior_logit_of(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         f = np.clip(self.prior(t), self.prior_floor, 1.0 - self.prior_floor)
         return _logit(f)
 
+    def _prior_logit(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Logit of the floored prior at times ``t``; remembered for the next :meth:`_prior_logit_one`."""
+        if self._const_logit is not None:
+            return np.full(t.shape, self._const_logit)
+        out = self._prior_logit_of(t)
+        self._logit_memo = (self.prior, self.prior_floor, np.array(t, dtype=np.float64, copy=True), out)
+        return out
+
     def _prior_logit_one(self, t: float) -> float:
+        """:meth:`_prior_logit` at one time; taken from the last array call when it had ``t`` (the prior is
+        elementwise: the same number), as the adaptive loop's update at a time it has just predicted.
+        """
         if self._const_logit is not None:
             return self._const_logit
-        return float(self._prior_logit(np.array([t]))[0])
+        memo = self._logit_memo
+        if memo is not None and memo[0] is self.prior and memo[1] == self.prior_floor and memo[2].ndim == 1:
+            ts = memo[2]
+            i = int(np.searchsorted(ts, t))
+            if i < ts.size and ts[i] == t:
+                return float(memo[3][i])
+        return float(self._prior_logit_of(np.array([t]))[0])
 
     def update(self, t_s: float, y: int) -> None:
         """One observation through the scalar path (same equations as :meth:`update_many`)."""

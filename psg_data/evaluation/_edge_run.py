@@ -24,7 +24,7 @@ from psg_data.evaluation._persistence_types import (
     EvaluationIssue,
     PredictionTrace,
 )
-from psg_data.metrics._classification import _bacc, _f1, _mae
+from psg_data.metrics._classification import _bacc_of, _f1_of
 
 __all__ = ["EdgeJob", "ScoreConfig", "run_edge", "run_chunk", "fit_estimator", "HORIZON_BINS_S", "horizon_bin_names"]
 
@@ -73,18 +73,30 @@ def nan_metrics() -> dict[str, float]:
 
 
 def _score(y: NDArray[np.int64], b: NDArray[np.float64], w: NDArray[np.float64], cfg: ScoreConfig) -> dict[str, float]:
-    """Metrics on valid samples ``y`` (0/1), beliefs ``b`` and time weights ``w``."""
+    """Metrics on valid samples ``y`` (0/1), beliefs ``b`` and time weights ``w``.
+
+    The confusion masks are formed once for the sample and the time-weighted metrics, and balanced
+    accuracy and F1 share their counts: the numbers of ``_mae`` / ``_bacc`` / ``_f1`` (the sample forms
+    with unit weights, whose sums are counts), with a third of the small numpy calls.
+    """
     out = nan_metrics()
     y8 = y.astype(np.int8)
-    if y.size:
-        ones = np.ones_like(b)
-        out["sample_mae"] = _mae(y8, b, ones, None)
-        out["sample_balanced_accuracy"] = _bacc(y8, b, ones, cfg.threshold, cfg.sample_convention)
-        out["sample_f1"] = _f1(y8, b, ones, cfg.threshold, cfg.sample_convention, 0.0)
-    if np.sum(w) > 0:
-        out["mae"] = _mae(y8, b, w, None)
-        out["balanced_accuracy"] = _bacc(y8, b, w, cfg.threshold, cfg.convention)
-        out["f1"] = _f1(y8, b, w, cfg.threshold, cfg.convention, 0.0)
+    if not y.size:
+        return out
+    pos = b >= cfg.threshold
+    t = y8 == 1
+    masks = (t & pos, ~t & pos, t & ~pos, ~t & ~pos)  # tp, fp, fn, tn
+    n_tp, n_fp, n_fn, n_tn = (float(np.count_nonzero(m)) for m in masks)  # = sums of unit weights
+    err = np.abs(y8 - b)
+    out["sample_mae"] = float(np.sum(err) / float(y.size))
+    out["sample_balanced_accuracy"] = _bacc_of(n_tp, n_fp, n_fn, n_tn, cfg.sample_convention)
+    out["sample_f1"] = _f1_of(n_tp, n_fp, n_fn, cfg.sample_convention, 0.0)
+    total = np.sum(w)
+    if total > 0:
+        tp, fp, fn, tn = (float(np.sum(w[m])) for m in masks)
+        out["mae"] = float(np.sum(w * err) / total)
+        out["balanced_accuracy"] = _bacc_of(tp, fp, fn, tn, cfg.convention)
+        out["f1"] = _f1_of(tp, fp, fn, cfg.convention, 0.0)
     return out
 
 

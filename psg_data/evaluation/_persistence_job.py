@@ -194,8 +194,8 @@ def write_persistence_outputs(result: PersistenceResult, out: Path, *, info: dic
     from psg_data.evaluation._persistence_plots import plot_beliefs, plot_horizon, plot_metric_bars
     from psg_data.evaluation._report import persistence_results, write_persistence_results
 
-    write_persistence_results(result, out, info=info, roles=roles)
     results = persistence_results(result, roles=roles, info=info)
+    write_persistence_results(result, out, info=info, roles=roles, results=results)
     if plots:
         flat = [n for n, (role, _) in roles.items() if role == "chance"] + \
             [n for n in result.estimators if n.endswith("output=median")]

@@ -214,11 +214,12 @@ def choose_plot_edges(result_or_truth: Any, k: int = 4) -> list[tuple[str, str]]
 
 
 def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *, info: dict[str, Any],
-                              roles: Mapping[str, tuple[str, str]] | None = None, title: str | None = None
-                              ) -> dict[str, Path]:
+                              roles: Mapping[str, tuple[str, str]] | None = None, title: str | None = None,
+                              results: EvalResults | None = None) -> dict[str, Path]:
     """Write ``results.json`` (the results schema), ``summary.csv``, ``table.txt``, ``results.csv`` (one row
     per estimator, seed, draw and edge), ``seeds.json`` and the breakdowns per object / receptacle /
-    weekday / horizon (``by_*.csv``).
+    weekday / horizon (``by_*.csv``). ``results``: :func:`persistence_results` of the same arguments when
+    the caller has it already (it is not computed twice).
 
     Replaces each of these files in ``out_dir`` atomically (an interrupted call leaves the previous
     file as it was; other files are left alone).
@@ -229,7 +230,9 @@ def write_persistence_results(result: PersistenceResult, out_dir: str | Path, *,
     from psg_data.writers._safe_output import write_atomically
 
     out = Path(out_dir)
-    paths = save_results(persistence_results(result, roles=roles, info=info, title=title), out)
+    if results is None:
+        results = persistence_results(result, roles=roles, info=info, title=title)
+    paths = save_results(results, out)
     extra = {"csv": out / "results.csv", "by_object": out / "by_object.csv", "by_receptacle": out / "by_receptacle.csv",
              "by_weekday": out / "by_weekday.csv", "by_horizon": out / "by_horizon.csv", "seeds": out / "seeds.json"}
     write_atomically(extra["csv"], lambda tmp: result.to_frame().to_csv(tmp, index=False))

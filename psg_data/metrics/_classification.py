@@ -181,7 +181,11 @@ def _mae(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64], th
 
 def _bacc(y: NDArray[np.int8], b: NDArray[np.float64], w: NDArray[np.float64], threshold: float,
           convention: str) -> float:
-    tp, fp, fn, tn = _counts(y, b, w, threshold)
+    return _bacc_of(*_counts(y, b, w, threshold), convention)
+
+
+def _bacc_of(tp: float, fp: float, fn: float, tn: float, convention: str) -> float:
+    """Balanced accuracy from the weighted confusion counts."""
     if convention == "reference":
         return (tp / (tp + fn + _EPS) + tn / (tn + fp + _EPS)) / 2.0
     recalls = []
@@ -201,6 +205,11 @@ def _f1(
     zero_division: float,
 ) -> float:
     tp, fp, fn, _ = _counts(y, b, w, threshold)
+    return _f1_of(tp, fp, fn, convention, zero_division)
+
+
+def _f1_of(tp: float, fp: float, fn: float, convention: str, zero_division: float) -> float:
+    """F1 of 'present' from the weighted confusion counts."""
     if convention == "reference":
         p = tp / (tp + fp + _EPS)
         r = tp / (tp + fn + _EPS)

@@ -280,13 +280,13 @@ def test_offset_table_is_reused_and_grown_not_rebuilt(monkeypatch: pytest.Monkey
     zone = "America/Toronto"
     monkeypatch.setattr(_fremen, "_OFFSET_TABLES", {})
     calls: list[int] = []
-    real = _fremen._pandas_offsets
+    real = _fremen._offset_steps
 
-    def counted(t: np.ndarray, tz: str) -> np.ndarray:
+    def counted(t: np.ndarray, tz: str) -> tuple[np.ndarray, np.ndarray]:
         calls.append(t.size)
         return real(t, tz)
 
-    monkeypatch.setattr(_fremen, "_pandas_offsets", counted)
+    monkeypatch.setattr(_fremen, "_offset_steps", counted)
     spring = 1_710_054_000.0  # 2024-03-10 07:00 UTC: Toronto goes from -5 h to -4 h
     assert _zone_offset(spring - 1, zone) == -18000 and _zone_offset(spring, zone) == -14400
     lo = spring - 900.0 + 400 * 86400.0  # the table then starts 900 s before the transition
@@ -317,9 +317,9 @@ def test_offset_table_is_reused_and_grown_not_rebuilt(monkeypatch: pytest.Monkey
 
 def test_utc_names_and_empty_input_never_need_the_zone_tables(monkeypatch: pytest.MonkeyPatch) -> None:
     def fail(t: np.ndarray, tz: str) -> np.ndarray:
-        raise AssertionError("pandas offsets were computed")
+        raise AssertionError("zone offsets were computed")
 
-    monkeypatch.setattr(_fremen, "_pandas_offsets", fail)
+    monkeypatch.setattr(_fremen, "_offset_steps", fail)
     monkeypatch.setattr(_fremen, "_OFFSET_TABLES", {})
     for zone in ("UTC", "Etc/UTC", "utc", "GMT"):
         out = wall_seconds([0, 86400], zone)
