@@ -47,7 +47,8 @@ def test_psg_eval_jobs_leaves_no_process_behind(tmp_path: Path) -> None:
 
 
 _BUSY_POOL = """
-import sys, time
+import signal, sys, time
+signal.signal(signal.SIGHUP, signal.SIG_DFL)  # as a terminal starts it, even when the tests run under nohup
 from psg_data._pool import process_pool
 with process_pool(2) as pool:
     futures = [pool.submit(time.sleep, 300) for _ in range(2)]
