@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -50,10 +50,13 @@ def orders_of(task: Any, spec_text: str) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """Fit, then write ``--out``/results.json atomically; 0 on success."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="folder to write results.json into (created)")
+    p.add_argument("--out", type=Path, required=True, help="new folder to write results.json into")
     p.add_argument("--dataset", default=None, help="a lab dataset folder (default: the demo lab)")
     p.add_argument("--train-weeks", type=int, default=4, help="the benchmark's training weeks (default 4)")
     a = p.parse_args(argv)
+    if (problem := _refuse(a.out)) is not None:
+        print(problem, file=sys.stderr)
+        return 1
     import psg_data
     from psg_data.evaluation import persistence_task_from_dataset
     from psg_data.evaluation._dataset_task import persistence_task_from_benchmark
@@ -64,11 +67,30 @@ def main(argv: list[str] | None = None) -> int:
            "lab": {k: orders_of(lab, s) for k, s in RULES.items()},
            "benchmark": {"draw": 0, "train_weeks": a.train_weeks,
                          **{k: orders_of(bench, s) for k, s in RULES.items()}}}
-    a.out.mkdir(parents=True, exist_ok=True)
-    tmp = a.out / f".results.json.tmp-{os.getpid()}"
-    tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, a.out / "results.json")
+    _write(a.out, doc)
     return 0
+
+
+def _write(out: Path, doc: dict[str, Any]) -> None:
+    """``out/results.json`` through psg-data's safe-output rule (staged beside ``out``, committed by rename)."""
+    from psg_data.writers._safe_output import commit_tree, make_staging
+
+    stage = make_staging(out.with_name(out.name + ".partial"))
+    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    commit_tree(stage, out, kind="results")
+
+
+def _refuse(out: Path | None) -> str | None:
+    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
+    from psg_data.errors import PsgDataError
+    from psg_data.writers._safe_output import check_output
+
+    try:
+        if out is not None:
+            check_output(out, overwrite=False, kind="results")
+    except PsgDataError as exc:
+        return f"error: {exc}"
+    return None
 
 
 if __name__ == "__main__":

@@ -16,10 +16,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,8 +40,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="also write DIR/results.json (DIR must not exist)")
     a = ap.parse_args(argv)
-    if a.out is not None and a.out.exists():
-        print(f"error: {a.out}: output exists; expected a new folder", file=sys.stderr)
+    if (problem := _refuse(a.out)) is not None:
+        print(problem, file=sys.stderr)
         return 1
     import psg_data
     from psg_data.evaluation import PersistenceOptions, persistence_task_from_dataset, run_persistence_task
@@ -83,12 +82,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _write(out: Path, doc: dict[str, object]) -> None:
-    """``out/results.json``, written into a temporary folder renamed into place."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    (tmp / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, out)
+def _write(out: Path, doc: dict[str, Any]) -> None:
+    """``out/results.json`` through psg-data's safe-output rule (staged beside ``out``, committed by rename)."""
+    from psg_data.writers._safe_output import commit_tree, make_staging
+
+    stage = make_staging(out.with_name(out.name + ".partial"))
+    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    commit_tree(stage, out, kind="results")
+
+
+def _refuse(out: Path | None) -> str | None:
+    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
+    from psg_data.errors import PsgDataError
+    from psg_data.writers._safe_output import check_output
+
+    try:
+        if out is not None:
+            check_output(out, overwrite=False, kind="results")
+    except PsgDataError as exc:
+        return f"error: {exc}"
+    return None
 
 
 if __name__ == "__main__":

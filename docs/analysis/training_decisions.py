@@ -14,28 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 LABELS = ("gt", "noisy:0.1", "noisy:0.2", "privileged")
-
-
-def plain(x: Any) -> Any:
-    """``x`` with numpy scalars/arrays and tuple keys made JSON-safe (lists, floats, strings)."""
-    if isinstance(x, dict):
-        return {str(k): plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return plain(x.tolist())
-    if isinstance(x, np.generic):
-        return x.item()
-    return x
 
 
 def fit_summaries() -> list[dict[str, Any]]:
@@ -45,13 +28,14 @@ def fit_summaries() -> list[dict[str, Any]]:
     import psg_data
     from psg_data.estimators import get_estimator
     from psg_data.evaluation import persistence_task_from_dataset
+    from psg_data.evaluation._persistence_types import clean_json
 
     out: list[dict[str, Any]] = []
     for labels in LABELS:
         task = persistence_task_from_dataset(psg_data.datasets.demo(), labels=labels)
         est = get_estimator("perpetua_star").fit(task.train_streams, timezone=task.timezone)
         objects = len({s.edge[0] for s in task.train_streams if len(s)})
-        out.append({"labels": labels, **plain(est.fit_summary_), "train_objects": objects})  # type: ignore[attr-defined]
+        out.append({"labels": labels, **clean_json(est.fit_summary_), "train_objects": objects})  # type: ignore[attr-defined]
     return out
 
 
@@ -60,19 +44,37 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="write DIR/results.json (DIR must not exist) instead of printing")
     a = ap.parse_args(argv)
-    text = json.dumps({"fits": fit_summaries()}, indent=1, default=str) + "\n"
-    if a.out is None:
-        sys.stdout.write(text)
-        return 0
-    if a.out.exists():
-        print(f"error: {a.out}: output exists; expected a new folder", file=sys.stderr)
+    if (problem := _refuse(a.out)) is not None:
+        print(problem, file=sys.stderr)
         return 1
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{a.out.name}.", dir=a.out.parent))
-    (tmp / "results.json").write_text(text, encoding="utf-8")
-    os.replace(tmp, a.out)
+    doc = {"fits": fit_summaries()}
+    if a.out is None:
+        sys.stdout.write(json.dumps(doc, indent=1, default=str) + "\n")
+    else:
+        _write(a.out, doc)
     return 0
 
+
+def _write(out: Path, doc: dict[str, Any]) -> None:
+    """``out/results.json`` through psg-data's safe-output rule (staged beside ``out``, committed by rename)."""
+    from psg_data.writers._safe_output import commit_tree, make_staging
+
+    stage = make_staging(out.with_name(out.name + ".partial"))
+    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    commit_tree(stage, out, kind="results")
+
+
+def _refuse(out: Path | None) -> str | None:
+    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
+    from psg_data.errors import PsgDataError
+    from psg_data.writers._safe_output import check_output
+
+    try:
+        if out is not None:
+            check_output(out, overwrite=False, kind="results")
+    except PsgDataError as exc:
+        return f"error: {exc}"
+    return None
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -91,17 +89,30 @@ def cli(argv: list[str] | None = None) -> int:
     if a.out is None:
         main(a.png)
         return 0
-    if a.out.exists():
-        print(f"error: {a.out}: output exists; expected a new folder", file=sys.stderr)
+    if (problem := _refuse(a.out)) is not None:
+        print(problem, file=sys.stderr)
         return 1
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{a.out.name}.", dir=a.out.parent))
-    averages = main(tmp / "perpetua_star_long_horizon.png")
-    (tmp / "results.json").write_text(json.dumps({"far_from_last_observation": averages}, indent=1) + "\n",
-                                      encoding="utf-8")
-    os.replace(tmp, a.out)
+    from psg_data.writers._safe_output import commit_tree, make_staging
+
+    stage = make_staging(a.out.with_name(a.out.name + ".partial"))
+    averages = main(stage / "perpetua_star_long_horizon.png")
+    (stage / "results.json").write_text(json.dumps({"far_from_last_observation": averages}, indent=1) + "\n",
+                                        encoding="utf-8")
+    commit_tree(stage, a.out, kind="results")
     return 0
 
+
+def _refuse(out: Path | None) -> str | None:
+    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
+    from psg_data.errors import PsgDataError
+    from psg_data.writers._safe_output import check_output
+
+    try:
+        if out is not None:
+            check_output(out, overwrite=False, kind="results")
+    except PsgDataError as exc:
+        return f"error: {exc}"
+    return None
 
 if __name__ == "__main__":
     sys.exit(cli())
