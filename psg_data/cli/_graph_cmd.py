@@ -92,16 +92,26 @@ def _label_text(g: object) -> str:
     return f"labels {info.get('labels', '?')} (an edge: an object seen on a receptacle{scans} under these labels)"
 
 
-def _print_text(g: Any, snap: Any, table: Any, object_id: str | None, when: str) -> None:
+def _sorted_edges(cols: dict[str, list[Any]]) -> dict[str, list[Any]]:
+    """The snapshot's rows by object, most probable receptacle first (stable; NaN last within an object)."""
+    p = cols["p"]
+    order = sorted(range(len(p)), key=lambda i: (cols["object_id"][i], p[i] != p[i], -p[i] if p[i] == p[i] else 0.0))
+    return {k: [v[i] for i in order] for k, v in cols.items()}
+
+
+def _print_text(g: Any, snap: Any, table: dict[str, list[Any]], object_id: str | None, when: str) -> None:
+    from psg_data.cli._text_table import columns_to_text, rounded
+
     click.echo(f"{g!r} at {when} ({g.timezone}); {_label_text(g)}")
     if object_id is not None:
         click.echo(f"{object_id}: its receptacles ranked by P(on it at {when})")
-    click.echo(table.round({"p": 3, "x_m": 2, "y_m": 2, "z_m": 2}).to_string(index=False))
-    doors = snap.doors_to_pandas()
-    if len(doors):
-        doors = doors.assign(between=doors["room_a"].astype(str) + " and " + doors["room_b"].astype(str))
+    click.echo(columns_to_text(rounded(table, {"p": 3, "x_m": 2, "y_m": 2, "z_m": 2})))
+    doors = snap.doors_to_pydict()
+    if doors["door_id"]:
+        between = [f"{a} and {b}" for a, b in zip(doors["room_a"], doors["room_b"])]
         click.echo("")
-        click.echo(doors[["door_id", "p_open", "between"]].round({"p_open": 3}).to_string(index=False))
+        click.echo(columns_to_text(rounded({"door_id": doors["door_id"], "p_open": doors["p_open"], "between": between},
+                                           {"p_open": 3})))
 
 
 @click.command("graph", cls=ContractCommand)
@@ -153,15 +163,17 @@ def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, est
     t = float(at) if _NUMBER.fullmatch(at.strip()) else at  # bounded by the graph (years 1 to 9999)
     snap = g.at(t)
     if object_id is not None:
-        table = g.locate(object_id, t, top=top).to_pandas()
+        table = g.locate(object_id, t, top=top).to_pydict()
     else:
-        table = snap.to_pandas().sort_values(["object_id", "p"], ascending=[True, False], kind="stable")
+        table = _sorted_edges(snap.to_pydict())
     import datetime as dt
     from zoneinfo import ZoneInfo
 
     when = dt.datetime.fromtimestamp(snap.t_s, ZoneInfo(g.timezone)).isoformat(timespec="minutes")
+    from psg_data.cli._text_table import columns_to_csv
+
     if table_format == "csv":
-        click.echo(table.to_csv(index=False), nl=False)
+        click.echo(columns_to_csv(table), nl=False)
     else:
         _print_text(g, snap, table, object_id, when)
     if csv_path is not None:
@@ -169,7 +181,8 @@ def graph_cmd(ctx: click.Context, path: str, at: str, object_id: str | None, est
 
         click.echo("warning: --csv FILE is now --format csv > FILE; the old spelling goes in the next release",
                    err=True)
-        write_atomically(csv_path, lambda tmp: table.to_csv(tmp, index=False), inputs=_inputs(path, labels))
+        write_atomically(csv_path, lambda tmp: Path(tmp).write_text(columns_to_csv(table), encoding="utf-8"),
+                         inputs=_inputs(path, labels))
     if png is not None:
         from psg_data.navigation._plots import plot_snapshot
 

@@ -17,9 +17,10 @@ import atexit
 import logging
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
+if TYPE_CHECKING:
+    from rich.console import Console
 
 __all__ = ["Progress", "console", "setup_logging"]
 
@@ -30,6 +31,8 @@ def console() -> Console:
     """The console that log lines and progress share (stderr, whatever ``sys.stderr`` is when it writes)."""
     global _console
     if _console is None:
+        from rich.console import Console  # on first output: a quiet command does not import rich
+
         _console = Console(stderr=True, soft_wrap=True, highlight=False, emoji=False)
     return _console
 

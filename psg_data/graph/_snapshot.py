@@ -70,6 +70,25 @@ class Snapshot:
         return doors_believed_open(self.door_probabilities(), threshold)
 
     # -- conversions -------------------------------------------------------------------------------
+    def to_pydict(self) -> dict[str, list[Any]]:
+        """:meth:`to_pandas`'s columns as lists (the receptacle's box centre x_m, y_m, z_m: world frame, metres)."""
+        xyz = self.layout.receptacle_xyz(self.receptacles.tolist())
+        recs = self.layout.receptacles
+        rec_ids = self.receptacles.tolist()
+        return {"object_id": self.objects.tolist(), "receptacle_id": rec_ids, "p": self.p.tolist(),
+                "room_id": [recs[r].room_id if r in recs else None for r in rec_ids],
+                "x_m": xyz[:, 0].tolist(), "y_m": xyz[:, 1].tolist(), "z_m": xyz[:, 2].tolist()}
+
+    def doors_to_pydict(self) -> dict[str, list[Any]]:
+        """:meth:`doors_to_pandas`'s columns as lists (door_id, p_open, room_a, room_b, x_m, y_m, z_m; metres)."""
+        xyz = self.layout.door_xyz(self.doors.tolist())
+        rec = self.layout.doors
+        ids = self.doors.tolist()
+        return {"door_id": ids, "p_open": self.p_open.tolist(),
+                "room_a": [rec[d].room_a if d in rec else None for d in ids],
+                "room_b": [rec[d].room_b if d in rec else None for d in ids],
+                "x_m": xyz[:, 0].tolist(), "y_m": xyz[:, 1].tolist(), "z_m": xyz[:, 2].tolist()}
+
     def to_pandas(self) -> Any:
         """The edges as a ``pandas.DataFrame``: object_id, receptacle_id, p, room_id, x_m, y_m, z_m
         (the receptacle's box centre, world frame, metres).
@@ -135,6 +154,12 @@ class Ranking:
     def best(self) -> str | None:
         """The most probable receptacle (None for an object without edges)."""
         return self.receptacles[0] if self.receptacles else None
+
+    def to_pydict(self) -> dict[str, list[Any]]:
+        """:meth:`to_pandas`'s columns as lists: rank (1 = best), receptacle_id, p, room_id, x_m, y_m, z_m (metres)."""
+        return {"rank": list(range(1, len(self) + 1)), "receptacle_id": list(self.receptacles), "p": self.p.tolist(),
+                "room_id": list(self.rooms), "x_m": self.xyz[:, 0].tolist(), "y_m": self.xyz[:, 1].tolist(),
+                "z_m": self.xyz[:, 2].tolist()}
 
     def to_pandas(self) -> Any:
         """Rank (1 = best), receptacle_id, p, room_id, x_m, y_m, z_m as a ``pandas.DataFrame``."""
