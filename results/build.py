@@ -1,6 +1,7 @@
 """Rebuild RESULTS.md (and README's main-job table) from the runs listed in results/manifest.json.
 
     python results/build.py                 # run what is stale, then rewrite the documents' blocks
+    python results/build.py --jobs 2        # the same, two runs at once (the costliest first)
     python results/build.py --check         # exit 1 if a document differs from what the runs render
     python results/build.py --quick         # the manifest's quick form (tiny sizes): every block renders
     python results/build.py --list          # the runs, their commands and whether they are current
@@ -83,6 +84,8 @@ class Run:
     uses: tuple[str, ...] = ()
     """Earlier runs whose ``{work}`` folder this run reads as ``{work:ID}`` (data one run's setup built, shared
     instead of built again); such a folder is kept after its run, and a rerun of it makes this run stale."""
+    alone: bool = False
+    """With ``--jobs`` above 1, run it with no other run beside it (a run whose wall time a document quotes)."""
 
     def form(self, quick: bool) -> tuple[tuple[str, ...], str | None]:
         """(setup commands, command) of the full or quick form; command None: no quick form."""
@@ -96,7 +99,7 @@ def load_manifest(path: Path = MANIFEST) -> list[Run]:
     except (OSError, ValueError) as exc:
         raise BuildError(f"{path}: cannot read the manifest ({exc})") from None
     runs, known = [], {"id", "purpose", "command", "setup", "quick", "quick_setup", "env", "stdout", "code",
-                                 "uses"}
+                                 "uses", "alone"}
     for k, e in enumerate(doc.get("runs", []) if isinstance(doc, dict) else []):
         where = f"{path}: runs[{k}]"
         if not isinstance(e, dict) or not isinstance(e.get("id"), str) or not isinstance(e.get("command"), str):
@@ -105,7 +108,7 @@ def load_manifest(path: Path = MANIFEST) -> list[Run]:
             raise BuildError(f"{where}: unknown field(s) {sorted(set(e) - known)}, expected {sorted(known)}")
         runs.append(Run(e["id"], e.get("purpose", ""), e["command"], tuple(e.get("setup", ())), e.get("quick"),
                         tuple(e.get("quick_setup", ())), tuple(sorted(e.get("env", {}).items())),
-                        e.get("stdout"), tuple(e.get("code", ())), tuple(e.get("uses", ()))))
+                        e.get("stdout"), tuple(e.get("code", ())), tuple(e.get("uses", ())), bool(e.get("alone"))))
         if set(runs[-1].uses) - {r.id for r in runs[:-1]}:
             raise BuildError(f"{where}: uses {list(runs[-1].uses)}: expected ids of earlier runs")
     ids = [r.id for r in runs]
@@ -148,13 +151,22 @@ def _load() -> float | None:
     return round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
 
 
-def _cpu_children() -> float:
+def _run_command(argv: list[str], env: dict[str, str], stdout: Any) -> tuple[int, float]:
+    """Run one command; (exit code, CPU seconds of it and the processes it waited for: NaN without ``os.wait4``).
+
+    The CPU time is the command's own (``wait4``), so runs beside each other (``--jobs``) count apart.
+    """
+    proc = subprocess.Popen(argv, env=env, cwd=ROOT, stdout=stdout)
+    if not hasattr(os, "wait4"):  # Windows
+        return proc.wait(), float("nan")
     try:
-        import resource
-    except ImportError:  # Windows: no CPU time of children
-        return float("nan")
-    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return ru.ru_utime + ru.ru_stime
+        _, status, usage = os.wait4(proc.pid, 0)
+    except BaseException:  # interrupted: the command does not outlive the builder
+        proc.kill()
+        proc.wait()
+        raise
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return proc.returncode, usage.ru_utime + usage.ru_stime
 
 
 def _argv(command: str, subs: dict[str, str]) -> list[str]:
@@ -209,7 +221,7 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         work.mkdir(parents=True)
     subs, env = {"out": str(tmp), "work": str(work)}, {**os.environ, **dict(run.env)}
     subs.update({f"work:{u}": str(runs_dir / ".work" / u) for u in run.uses})
-    load0, cpu0, t0 = _load(), _cpu_children(), time.perf_counter()
+    load0, cpu, t0 = _load(), 0.0, time.perf_counter()
     started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     if run.stdout:
         tmp.mkdir(parents=True)
@@ -221,9 +233,10 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
             print(f"results: {run.id}: {' '.join(shlex.quote(a) for a in argv)}", file=sys.stderr, flush=True)
         if run.stdout and cmd is command:
             with open(tmp / run.stdout, "wb") as out:
-                rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=out).returncode
+                rc, used_cpu = _run_command(argv, env, out)
         else:
-            rc = subprocess.run(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL if quiet else None).returncode
+            rc, used_cpu = _run_command(argv, env, subprocess.DEVNULL if quiet else None)
+        cpu += used_cpu
         if rc != 0:
             raise BuildError(f"run {run.id}: {cmd!r} exited with {rc}")
     now = code_state(run.code)  # a commit of other files (the documents, the manifest) while a run runs is fine
@@ -233,7 +246,7 @@ def execute(run: Run, runs_dir: Path, *, quick: bool, state: dict[str, Any], qui
         raise BuildError(f"run {run.id}: {command!r} wrote no {tmp}/results.json (it must write to --out {{out}})")
     info = {"id": run.id, "command": command, **({"setup": list(setup)} if setup else {}), "quick": quick, **state,
             "started": started, "uses": used,
-            "wall_s": round(time.perf_counter() - t0, 1), "cpu_s": round(_cpu_children() - cpu0, 1),
+            "wall_s": round(time.perf_counter() - t0, 1), "cpu_s": round(cpu, 1),
             "load_before": load0, "load_after": _load(), "machine": machine(), "exit_code": 0}
     (tmp / "run.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
     old = runs_dir / f".{run.id}.old-{os.getpid()}"
@@ -596,8 +609,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--render-only", action="store_true", help="run nothing; render from the runs there are")
     p.add_argument("--only", action="append", default=[], metavar="ID", help="run only these runs (repeatable)")
     p.add_argument("--list", action="store_true", help="the runs and whether each is current; run nothing")
+    p.add_argument("-j", "--jobs", type=int, default=1, metavar="N", help="runs at once (default 1; a run's own "
+                   "workers come on top); a manifest entry with \"alone\": true runs with nothing beside it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines, no output of the runs")
     a = p.parse_args(argv)
+    if a.jobs < 1:
+        p.error(f"--jobs {a.jobs}: expected a number of runs at once, 1 or more")
     from psg_data.cli._errors import ReaderGoneStdout
 
     stdout = sys.stdout
@@ -627,15 +644,77 @@ def _build(a: argparse.Namespace) -> int:
         return 0
     if not (a.check or a.render_only):
         _drop_shared_setups(runs_dir)  # a build makes its shared setups anew (the code may have changed)
+        kept = {u for o in runs for u in o.uses}
         try:
-            for k, r in enumerate(todo, 1):
-                if not a.quiet:
-                    print(f"results: run {k}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
-                execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet,
-                        keep_work=any(r.id in o.uses for o in runs))
+            run_all(todo, lambda r: execute(r, runs_dir, quick=a.quick, state=states[r.id], quiet=a.quiet,
+                                            keep_work=r.id in kept),
+                    jobs=a.jobs, waits=_waits(todo, a.quick), cost=partial(_last_cpu, runs_dir), quiet=a.quiet)
         finally:
             _drop_shared_setups(runs_dir)
     return _render(runs, runs_dir, a)
+
+
+def _waits(todo: list[Run], quick: bool) -> dict[str, set[str]]:
+    """What each run waits for beside others: the runs it ``uses`` and the first run of its shared setup."""
+    first: dict[str, str] = {}
+    out: dict[str, set[str]] = {}
+    ids = {r.id for r in todo}
+    for r in todo:
+        setup = r.form(quick)[0]
+        out[r.id] = set(r.uses) & ids
+        if setup and not any("{out}" in c for c in setup):
+            owner = first.setdefault("\n".join(setup), r.id)
+            if owner != r.id:
+                out[r.id].add(owner)
+    return out
+
+
+def _last_cpu(runs_dir: Path, run: Run) -> float:
+    """The CPU seconds of the run's last recorded run (0: none): the longest start first."""
+    try:
+        v = float(json.loads((runs_dir / run.id / "run.json").read_text(encoding="utf-8"))["cpu_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
+    return v if math.isfinite(v) else 0.0
+
+
+def run_all(todo: list[Run], do: Any, *, jobs: int, waits: dict[str, set[str]], cost: Any, quiet: bool) -> None:
+    """``do(run)`` for every run: in manifest order with ``jobs`` 1, else up to ``jobs`` at once, the costliest
+    ready run first, a run after those it ``waits`` for, an ``alone`` run with nothing beside it. The first
+    failure stops new starts; the runs under way end, then it is raised.
+    """
+    from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+
+    pending = list(todo) if jobs == 1 else sorted(todo, key=lambda r: -cost(r))
+    done: set[str] = set()
+    running: dict[Future[Any], Run] = {}
+    error: BaseException | None = None
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        while (pending and error is None) or running:
+            for r in _startable(pending, running.values(), done, waits, jobs) if error is None else []:
+                pending.remove(r)
+                if not quiet:
+                    print(f"results: run {len(todo) - len(pending)}/{len(todo)}: {r.id}", file=sys.stderr, flush=True)
+                running[pool.submit(do, r)] = r
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for f in finished:
+                done.add(running.pop(f).id)
+                if f.exception() is not None and error is None:
+                    error = f.exception()
+    if error is not None:
+        raise error
+
+
+def _startable(pending: list[Run], running: Any, done: set[str], waits: dict[str, set[str]], jobs: int) -> list[Run]:
+    """The runs to start now (:func:`run_all`'s rules)."""
+    busy = list(running)
+    out: list[Run] = []
+    for r in pending:
+        if len(busy) + len(out) >= jobs or any(b.alone for b in (*busy, *out)):
+            break
+        if waits.get(r.id, set()) <= done and not (r.alone and (busy or out)):
+            out.append(r)
+    return out
 
 
 def _drop_shared_setups(runs_dir: Path) -> None:

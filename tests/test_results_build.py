@@ -286,6 +286,100 @@ def test_runs_with_the_same_setup_share_it(tmp_path: Path, monkeypatch: pytest.M
     assert log.read_text() == "ss"
 
 
+def _sched(n: int, **kw: object) -> list[object]:
+    return [build.Run(f"r{k}", "", "x", **kw) for k in range(n)]
+
+
+def test_jobs_run_side_by_side_after_what_they_wait_for() -> None:
+    """``--jobs 2``: two runs are under way at once (a barrier both must reach), never three; a run starts after
+    the runs it waits for; the costliest ready run first; ``--jobs 1`` keeps the manifest order, one at a time.
+    """
+    import threading
+
+    lock, now, most, order = threading.Lock(), [0], [0], []
+    pair = threading.Barrier(2, timeout=20)
+
+    def do(run: object) -> None:
+        with lock:
+            now[0] += 1
+            most[0] = max(most[0], now[0])
+            order.append(run.id)  # type: ignore[attr-defined]
+        if run.id in ("r0", "r1"):  # type: ignore[attr-defined]
+            pair.wait()  # breaks (an error) unless both run at once
+        with lock:
+            now[0] -= 1
+
+    runs = _sched(5)
+    cost = {"r0": 1.0, "r1": 2.0, "r2": 3.0, "r3": 9.0, "r4": 0.0}
+    build.run_all(runs, do, jobs=2, waits={"r0": {"r3"}, "r1": {"r3"}, "r4": {"r0"}}, cost=lambda r: cost[r.id],
+                  quiet=True)
+    assert most[0] == 2 and sorted(order) == [r.id for r in runs]
+    assert order.index("r3") < min(order.index("r0"), order.index("r1")) and order.index("r0") < order.index("r4")
+    assert order[:2] == ["r3", "r2"]  # costliest first among the ready ones
+    order.clear()
+    most[0] = 0
+    build.run_all(_sched(4), lambda r: order.append(r.id), jobs=1, waits={}, cost=lambda r: -int(r.id[1]),
+                  quiet=True)
+    assert order == ["r0", "r1", "r2", "r3"]
+
+
+def test_an_alone_run_has_nothing_beside_it_and_a_failure_stops_new_starts() -> None:
+    """A run marked ``alone`` (its wall time is quoted) runs by itself; the first failure is raised after the
+    runs under way end, and nothing new starts after it.
+    """
+    import threading
+    import time
+
+    lock, now, beside, started = threading.Lock(), [0], {}, []
+
+    def do(run: object) -> None:
+        with lock:
+            now[0] += 1
+            started.append(run.id)  # type: ignore[attr-defined]
+        time.sleep(0.05)
+        with lock:
+            beside[run.id] = now[0]  # type: ignore[attr-defined]
+            now[0] -= 1
+        if run.id == "bad":  # type: ignore[attr-defined]
+            raise build.BuildError("run bad: exited with 1")
+
+    runs = [*_sched(3), build.Run("solo", "", "x", alone=True), build.Run("r9", "", "x")]
+    build.run_all(runs, do, jobs=2, waits={}, cost=lambda r: 1.0 if r.id == "solo" else 0.0, quiet=True)
+    assert beside["solo"] == 1 and sorted(started) == sorted(r.id for r in runs)
+    started.clear()
+    runs = [build.Run("bad", "", "x"), *_sched(4)]
+    with pytest.raises(build.BuildError, match="run bad"):
+        build.run_all(runs, do, jobs=1, waits={}, cost=lambda r: 0.0, quiet=True)
+    assert started == ["bad"]
+
+
+def test_waits_name_used_runs_and_the_first_run_of_a_shared_setup() -> None:
+    """Runs with one shared setup wait for the first of them (it builds {work}); a setup naming {out} is its
+    own; ``uses`` of runs not being made are no wait.
+    """
+    s = ("psg-data synth {work}/lab",)
+    runs = [build.Run("a", "", "x", setup=s), build.Run("b", "", "x", setup=s), build.Run("c", "", "x",
+            setup=("make {out}",)), build.Run("d", "", "x", setup=("make {out}",)),
+            build.Run("e", "", "x", uses=("a", "gone"))]
+    assert build._waits(runs, quick=False) == {"a": set(), "b": {"a"}, "c": set(), "d": set(), "e": {"a"}}
+
+
+def test_run_json_counts_each_runs_own_cpu(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """CPU seconds are the command's own (and its children's), so two runs at once do not count each other."""
+    monkeypatch.setattr(build, "code_state", lambda *extra: dict(CLEAN))
+    burn = ("import json, os, sys, time, subprocess; os.makedirs(sys.argv[1]); "
+            "subprocess.run([sys.executable, '-c', 'import time\\nt=time.process_time()\\n"
+            "while time.process_time() - t < 0.4: pass']); "
+            "json.dump({'v': 1}, open(sys.argv[1] + '/results.json', 'w'))")
+    idle = ("import json, os, sys, time; os.makedirs(sys.argv[1]); time.sleep(0.6); "
+            "json.dump({'v': 1}, open(sys.argv[1] + '/results.json', 'w'))")
+    runs = [build.Run("burn", "", f"python -c {burn!r} {{out}}"), build.Run("idle", "", f"python -c {idle!r} {{out}}")]
+    build.run_all(runs, lambda r: build.execute(r, tmp_path, quick=False, state=dict(CLEAN), quiet=True), jobs=2,
+                  waits={}, cost=lambda r: 0.0, quiet=True)
+    cpu = {r.id: json.loads((tmp_path / r.id / "run.json").read_text())["cpu_s"] for r in runs}
+    assert cpu["burn"] >= 0.35 and cpu["idle"] < 0.3, cpu  # the child's 0.4 s counted once, in its own run
+
+
 def test_a_run_depends_on_its_own_code_paths(tmp_path: Path) -> None:
     """``code``: a script a run names joins the cache key (its blob hash after psg_data's and pyproject's)."""
     base, extra = build.code_state(), build.code_state(("results/build.py",))
