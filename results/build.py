@@ -14,6 +14,7 @@ A document holds its generated parts between markers; everything outside them is
                                        spread=std: ± the std across draws; interval=yes: the interval's ends;
                                        std=yes: a column of the stds across draws)
     <!-- results:state door-published -->...<!-- /results -->             a real-benchmark run's tables
+    <!-- results:text sim-adaptive sim_table.txt start="overall SR" -->...<!-- /results -->  a text file of a run
     <!-- results:value main-job tables.0.rows[method=fremen].values.balanced_accuracy.mean -->0.597<!-- /results -->
     <!-- results:run main-job -->...<!-- /results -->                     the run's command, revision, date
     <!-- results:runs -->...<!-- /results -->                             the manifest: every run, its machine and time
@@ -384,7 +385,7 @@ class Renderer:
         pos, opts = _options(args, kind)
         fn = getattr(self, "_" + kind.replace("-", "_"), None)
         if fn is None:
-            raise BuildError(f"results:{kind}: unknown block kind (table, columns, state, value, run, runs, revision)")
+            raise BuildError(f"results:{kind}: unknown block kind (table, columns, state, text, value, run, runs, revision)")
         return str(fn(pos, opts))
 
     def _table(self, pos: list[str], opts: dict[str, str]) -> str:
@@ -500,6 +501,21 @@ class Renderer:
         grids = state_tables(doc, title)[:3]
         return "\n" + render([g for g, n in zip(grids, names) if n in want], "markdown") + "\n"
 
+    def _text(self, pos: list[str], opts: dict[str, str]) -> str:
+        """A text file the run wrote (``RUN FILE``), verbatim in a code block; ``start=`` / ``end=``: from the first
+        line holding ``start`` up to (not including) the next line holding ``end``.
+        """
+        if len(pos) != 2 or "/" in pos[1] or pos[1].startswith("."):
+            raise BuildError("expected RUN FILE (a file name in the run's folder)")
+        try:
+            lines = (self._folder(pos[0]) / pos[1]).read_text(encoding="utf-8").splitlines()
+        except OSError as exc:
+            raise BuildError(f"cannot read {pos[1]} of run {pos[0]} ({exc.strerror})") from None
+        first = _line_index(lines, opts.get("start"), 0, pos)
+        last = _line_index(lines, opts.get("end"), first + 1, pos) if "end" in opts else len(lines)
+        body = "\n".join(ln.rstrip() for ln in lines[first:last]).strip("\n")
+        return "\n```\n" + body + "\n```\n"
+
     def _value(self, pos: list[str], opts: dict[str, str]) -> str:
         """One value, or with ``{a|b|c}`` in the path each alternative's, joined by ``sep`` (default " / ")."""
         if len(pos) != 2:
@@ -538,6 +554,16 @@ class Renderer:
         if len(codes) <= 1:
             return revs[0] if revs else "-"
         return f"(not one: the runs were made at {', '.join(revs)}; `python results/build.py` reruns the stale ones)"
+
+
+def _line_index(lines: list[str], text: str | None, begin: int, pos: list[str]) -> int:
+    """The index of the first line from ``begin`` holding ``text`` (``begin`` itself when ``text`` is None)."""
+    if text is None:
+        return begin
+    for k in range(begin, len(lines)):
+        if text in lines[k]:
+            return k
+    raise BuildError(f"{pos[1]} of run {pos[0]}: no line holding {text!r} (after line {begin})")
 
 
 def _value_text(s: Any, scale: float, digits: int, spread: str) -> str:

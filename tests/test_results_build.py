@@ -136,6 +136,23 @@ def _table_run(folder: Path, rows: dict[str, tuple[str, float, float]],
     save_results(EvalResults("persistence", [table]), folder)
 
 
+def test_text_block_puts_a_file_of_the_run_in_a_code_block(tmp_path: Path) -> None:
+    """``results:text RUN FILE``: the file verbatim (trailing spaces cut) in a code block; ``start``/``end`` cut a
+    part of it; a missing file, a path outside the run, a start no line holds: one error naming the block.
+    """
+    r = _renderer(tmp_path, {"v": 1})
+    (tmp_path / "r" / "out.txt").write_text("title\nA table  \n 1 2\n\nB table\n 3 4\n", encoding="utf-8")
+    doc = "<!-- results:text r out.txt -->old<!-- /results -->"
+    assert build.render_text(doc, r, "D.md") == ("<!-- results:text r out.txt -->\n```\ntitle\nA table\n 1 2\n\n"
+                                                  "B table\n 3 4\n```\n<!-- /results -->")
+    part = '<!-- results:text r out.txt start="A table" end="B table" -->old<!-- /results -->'
+    assert "```\nA table\n 1 2\n```" in build.render_text(part, r, "D.md")
+    for bad, message in (("r nope.txt", "cannot read nope.txt"), ("r ../x.txt", "a file name in the run's folder"),
+                         ('r out.txt start="C table"', "no line holding 'C table'")):
+        with pytest.raises(build.BuildError, match=re.escape(message)):
+            build.render_text(f"<!-- results:text {bad} -->x<!-- /results -->", r, "D.md")
+
+
 def test_columns_block_sets_runs_side_by_side(tmp_path: Path) -> None:
     """Each run's columns after the last's, rows in the first run's order then the others', '-' where a run
     has no row, each column's best non-ceiling value bold on its own, extra metrics and interval ends.
