@@ -105,7 +105,7 @@ def test_a_bad_block_names_document_and_line(tmp_path: Path, block: str, message
 def test_every_block_of_the_documents_names_a_manifest_run_and_a_known_kind() -> None:
     """RESULTS.md and README.md: every marker parses, names a known kind and a run of the manifest."""
     ids = {r.id for r in build.load_manifest()}
-    kinds = {"table", "columns", "state", "value", "run", "runs", "revision"}
+    kinds = {"table", "columns", "state", "text", "value", "run", "runs", "revision"}
     seen = 0
     for name in build.DOCUMENTS:
         for m in build.BLOCK.finditer((ROOT / name).read_text(encoding="utf-8")):
