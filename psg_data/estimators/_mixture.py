@@ -153,6 +153,7 @@ class MixtureFilter:
         self.tau = 0.0
         self.lsf: list[float] = [0.0] * k
         self.last_t: float | None = None
+        self._dom: tuple[list[float], list[float], NDArray[np.float64], float, int, float] | None = None
 
     @property
     def started(self) -> bool:
@@ -178,6 +179,18 @@ class MixtureFilter:
     def dominant(self) -> int:
         """Index of the component with the largest posterior weight."""
         return int(np.argmax(self.log_prior + self.component_log_evidence()))
+
+    def dominant_evidence(self) -> tuple[int, float]:
+        """(:meth:`dominant`, its :meth:`component_log_evidence`): the values :meth:`step` computed on
+        floats when the state is still the one it left (the same operations: ``logaddexp``'s cases,
+        the first largest weight), else computed here.
+        """
+        d = self._dom
+        if d is not None and d[0] is self.ly and d[1] is self.lsf and d[2] is self._log_prior and d[3] == self.l:
+            return d[4], d[5]
+        cle = self.component_log_evidence()
+        k = int(np.argmax(self.log_prior + cle))
+        return k, float(cle[k])
 
     # ------------------------------------------------------------------ batch scan
     def scan(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> ScanResult:
@@ -333,6 +346,8 @@ class MixtureFilter:
         self.tau = tau
         self.n += 1
         self.last_t = float(t)
+        # a NaN weight: np.argmax's answer may differ from the loop's, dominant_evidence computes it
+        self._dom = (ly, lsf, self._log_prior, l, bi, ebest) if ev == ev else None
         p = l + lsf[bi] - ebest
         return ev, math.exp(p if p < 0.0 else 0.0)
 

@@ -61,8 +61,7 @@ class _Terms:
     def __init__(self, m: MixtureFilter) -> None:
         self.key = (m.ly, m.lsf, m.log_prior)
         self.floats = (m.l, m.origin, m.tau)
-        self.k = m.dominant()
-        self.e = float(m.component_log_evidence()[self.k])
+        self.k, self.e = m.dominant_evidence()
         self.p1, self.p2 = m.survival.p1[self.k], m.survival.p2[self.k]
 
     def holds(self, m: MixtureFilter) -> bool:

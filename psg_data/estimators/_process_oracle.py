@@ -300,10 +300,10 @@ class ProcessOracleFilter(BaseFilter):
         return t[order], [labels[i] for i in order], y[order]
 
     def _likelihood(self, label: str, y: int) -> NDArray[np.float64]:
-        from psg_data.synth._process import observation_likelihood
-
         out = self._likelihoods.get((label, y))
         if out is None:
+            from psg_data.synth._process import observation_likelihood
+
             lik = observation_likelihood(self._entity, label, y, self._p_m, self._p_f)
             out = self._likelihoods[(label, y)] = np.asarray(lik, np.float64)[None, :, None]
         return out
@@ -343,8 +343,6 @@ class ProcessOracleFilter(BaseFilter):
 
     def _current(self) -> Any:
         """The forward belief at the step of the last update, with every allowed observation absorbed."""
-        from psg_data.synth._process import ForwardBelief
-
         H = self._last_t
         self._inherited = False
         tracker_n = len(self._tracker.t) if self._tracker is not None else 0
@@ -354,6 +352,8 @@ class ProcessOracleFilter(BaseFilter):
                 self._restart()
         self._seen_tracker = tracker_n
         if self._belief is None:
+            from psg_data.synth._process import ForwardBelief
+
             self._belief, self._belief_h = ForwardBelief(self._process, self._entity).start(), -np.inf
             self._fc, self._chain, self._checkpoints, self._tainted = None, None, [], False
         if H is None or H <= self._belief_h:

@@ -170,11 +170,9 @@ class ForwardBelief:
         """
         c = self._slot(k)
         tot = beta.sum(axis=(1, 2))
-        out = np.empty_like(beta)
-        out[:, :, :-1] = beta[:, :, 1:]
-        out[:, :, -1] = 0.0
         jumped = np.einsum("ps,pst->pt", beta[:, :, 0], self.entity.jump)
-        out += jumped[:, :, None] * self.U
+        out = jumped[:, :, None] * self.U  # the hold term (dwell - 1) added to it: x + 0 = x at the last dwell
+        out[:, :, :-1] += beta[:, :, 1:]
         out *= c.one_minus_rho
         flat = out.reshape(-1, out.shape[2])  # a view: (pattern, state) rows
         flat[c.rows] += c.rho * (tot[:, None] * c.u_routine)
