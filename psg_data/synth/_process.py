@@ -269,8 +269,12 @@ def weekday_pattern_marginals(process: StepProcess, entity: EntityProcess, weeks
     p = normalize_rows(entity.pattern_initial * entity.pattern_allowed[process.clock.weekday(0)])
     plain = StepProcess(process.timezone, process.start_date, process.days, process.step_hours,
                         {entity.entity_id: entity})
+    by_weekday: dict[int, NDArray[np.float64]] = {}  # no shifted days: a day's matrix is its weekday's
     for day in range(1, 7 * weeks):
-        p = p @ plain.day_matrix(entity, day)
+        wd = plain.clock.weekday(day)
+        if wd not in by_weekday:
+            by_weekday[wd] = plain.day_matrix(entity, day)
+        p = p @ by_weekday[wd]
         if day >= 7 * (weeks - 8):
             acc[plain.clock.weekday(day)] += p
     return normalize_rows(acc)
