@@ -87,6 +87,6 @@ def test_one_job_per_edge_equals_one_filter_per_period(tmp_path: Path) -> None:
         sq = []
         for job in edge_jobs(p.truth, b.scored, hist, {}, k, b.timezone):
             _, _, issues, trace = run_edge("persistence_filter", 0, est, job, score_config("predictive", 7200.0))
-            assert not issues
+            assert not issues and trace is not None
             sq.append(((trace.belief - trace.truth) ** 2)[trace.truth >= 0])
         assert run.values["persistence_filter"][k]["mse"] == pytest.approx(np.mean(np.concatenate(sq)), rel=1e-12)
