@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream
-from psg_data.evaluation._edge_run import fit_estimator, run_edge
+from psg_data.evaluation._edge_run import EdgeJob, EdgeOutcome, ScoreConfig, fit_estimator, run_edge
 from psg_data.evaluation._hints import EstimatorSpec
 from psg_data.evaluation._persistence_task import RegistryFactory, seeds_for
 from psg_data.evaluation._state_protocols import PatrolPlan, edge_jobs, patrol_streams, score_config
@@ -209,43 +209,132 @@ class _WithHistory:
         return copy.deepcopy(self._ready[edge])
 
 
-def _row_job(bench: Any, row: StateRow, opts: StateRunOptions) -> tuple[list[dict[str, float]], list[str], Any]:
-    """Fit ``row`` (each seed) and score every period: per-period values (mean over seeds), problems, fit summary."""
-    factory = RegistryFactory(row.spec.name, row.spec.settings)
-    seeds = seeds_for(factory, opts.seeds)
-    train, tests = _streams(bench, opts)
-    hist = {s.edge: s for s in train}
-    cfg = score_config(opts.setting, opts.horizon_s)
-    per_seed, errors, summary = [], [], None
-    for seed in seeds:
-        vals, est = [], None
-        if row.role != "hindsight":
-            est, err = fit_estimator(row.label, factory, seed, train, None, bench.timezone)
-            if est is None:
-                errors.append(f"estimator {row.label!r} seed {seed}: fit raised {err}")
-                per_seed.append([{m: math.nan for m in METRICS} for _ in bench.periods])
-                continue
-            summary = summary or getattr(est, "fit_summary_", None)
-        prepared: Any = _WithHistory(est, hist) if est is not None else None
-        for k, p in enumerate(bench.periods):
-            e: Any = prepared
-            h: dict[EdgeKey, EdgeStream] = {}
-            te, truth = tests[k], _scored(p.truth, opts.windows)
-            if row.role == "hindsight":  # fitted on the period's own scored rows, then asked with nothing else
-                own = [EdgeStream(x, t[y >= 0], y[y >= 0]) for x, (t, y) in truth.items()]
-                e, msg = fit_estimator(row.label, factory, seed, own, None, bench.timezone)
-                h, te = {}, {}
-                if e is None:
-                    errors.append(f"{row.label} {p.label}: fit raised {msg}")
-                    vals.append({m: math.nan for m in METRICS})
+@dataclass(frozen=True)
+class _Setup:
+    """What every job of a run shares: the training streams and each period's edge jobs (one per scored edge)."""
+
+    train: list[EdgeStream]
+    hist: dict[EdgeKey, EdgeStream]
+    jobs: list[list[EdgeJob]]
+    truths: list[dict[EdgeKey, Any]]
+    cfg: ScoreConfig
+    timezone: str
+
+    @classmethod
+    def of(cls, bench: Any, opts: StateRunOptions) -> _Setup:
+        train, tests = _streams(bench, opts)
+        truths = [_scored(p.truth, opts.windows) for p in bench.periods]
+        jobs = [edge_jobs(truths[k], bench.scored, {}, tests[k], k, bench.timezone) for k in range(len(truths))]
+        return cls(train, {s.edge: s for s in train}, jobs, truths, score_config(opts.setting, opts.horizon_s),
+                   bench.timezone)
+
+
+def _edge_task(label: str, seed: int, est: Any, history: EdgeStream | None, jobs: list[EdgeJob],
+               cfg: ScoreConfig) -> list[EdgeOutcome]:
+    """One edge of a fitted row: its filter fed the edge's training history once, then every period scored."""
+    prepared: Any = _WithHistory(est, {} if history is None else {history.edge: history})
+    return [run_edge(label, seed, prepared, j, cfg) for j in jobs]
+
+
+def _hindsight_task(label: str, factory: Any, seed: int, truth: dict[EdgeKey, Any], jobs: list[EdgeJob],
+                    cfg: ScoreConfig, timezone: str) -> tuple[list[EdgeOutcome] | None, str | None]:
+    """The hindsight row on one period: fitted on the period's own scored rows, then asked with nothing else."""
+    own = [EdgeStream(x, t[y >= 0], y[y >= 0]) for x, (t, y) in truth.items()]
+    est, msg = fit_estimator(label, factory, seed, own, None, timezone)
+    if est is None:
+        return None, msg
+    return [run_edge(label, seed, est, j, cfg) for j in jobs], None
+
+
+_Key = tuple[Any, ...]
+"""A task: ("fit", row, seed), ("edge", row, seed, edge index) or ("hindsight", row, seed, period)."""
+
+
+class _Tasks:
+    """The tasks of a run and their results: a fit per row and seed, then one task per edge of the fitted row
+    (the hindsight row: one per period); :meth:`assemble` reads the results in the rows' order whatever order
+    they completed in.
+    """
+
+    def __init__(self, bench: Any, rows: Sequence[StateRow], opts: StateRunOptions) -> None:
+        self.bench, self.rows, self.setup = bench, list(rows), _Setup.of(bench, opts)
+        self.factories = [RegistryFactory(r.spec.name, r.spec.settings) for r in self.rows]
+        self.seeds = [seeds_for(f, opts.seeds) for f in self.factories]
+        self.results: dict[_Key, Any] = {}
+        self.left = [0] * len(self.rows)
+
+    def first(self) -> list[_Key]:
+        """The tasks runnable at once: every fit (and every hindsight period); the rows fitted once first.
+
+        A row with one seed has one fit that cannot be split (on the room-presence benchmark the
+        persistence filter's, 229 of about 1,000 CPU-s), while a row's seeds run side by side: started
+        first, the long single fit overlaps the others instead of running alone at the end.
+        """
+        out: list[_Key] = []
+        for i in sorted(range(len(self.rows)), key=lambda i: len(self.seeds[i]) > 1):
+            r = self.rows[i]
+            for s in self.seeds[i]:
+                out += [("hindsight", i, s, k) for k in range(len(self.setup.jobs))] if r.role == "hindsight" \
+                    else [("fit", i, s)]
+        for key in out:
+            self.left[key[1]] += 1
+        return out
+
+    def call(self, key: _Key) -> tuple[Callable[..., Any], tuple[Any, ...]]:
+        """The function and arguments of a task."""
+        kind, i, seed, j = (*key, None)[:4]
+        r, su = self.rows[i], self.setup
+        if kind == "fit":
+            return fit_estimator, (r.label, self.factories[i], seed, su.train, None, su.timezone)
+        if kind == "hindsight":
+            return _hindsight_task, (r.label, self.factories[i], seed, su.truths[j], su.jobs[j], su.cfg, su.timezone)
+        edge = self.bench.scored[j]
+        return _edge_task, (r.label, seed, self.results[("fit", i, seed)][0], su.hist.get(edge),
+                            [jobs[j] for jobs in su.jobs], su.cfg)
+
+    def done(self, key: _Key, value: Any) -> tuple[list[_Key], bool]:
+        """Record a result: the tasks it makes runnable (a fit's edges) and whether its row is complete."""
+        self.results[key] = value
+        i = key[1]
+        new: list[_Key] = []
+        if key[0] == "fit" and value[0] is not None:
+            new = [("edge", i, key[2], j) for j in range(len(self.bench.scored))]
+        self.left[i] += len(new) - 1
+        return new, self.left[i] == 0
+
+    def assemble(self) -> tuple[dict[str, list[dict[str, float]]], list[str], dict[str, Any]]:
+        """Per-period values (mean over seeds), problems and fit digests of every row, in the rows' order."""
+        values, errors, fits = {}, [], {}
+        for i, r in enumerate(self.rows):
+            values[r.label], errs, fits[r.label] = self._row(i)
+            errors += errs
+        return values, errors, fits
+
+    def _row(self, i: int) -> tuple[list[dict[str, float]], list[str], Any]:
+        r, periods = self.rows[i], self.bench.periods
+        nan = {m: math.nan for m in METRICS}
+        per_seed, errors, summary = [], [], None
+        for seed in self.seeds[i]:
+            vals: list[dict[str, float]] = []
+            if r.role != "hindsight":
+                est, err = self.results[("fit", i, seed)]
+                if est is None:
+                    errors.append(f"estimator {r.label!r} seed {seed}: fit raised {err}")
+                    per_seed.append([dict(nan) for _ in periods])
                     continue
-            jobs = edge_jobs(truth, bench.scored, h, te, k, bench.timezone)
-            outs = [run_edge(row.label, seed, e, j, cfg) for j in jobs]
-            errors += [i.message for o in outs for i in o[2]]
-            vals.append(_period_values(outs, bench.one_hot))
-        per_seed.append(vals)
-    mean = [{m: float(np.mean([s[k][m] for s in per_seed])) for m in METRICS} for k in range(len(bench.periods))]
-    return mean, errors, _fit_digest(summary)
+                summary = summary or getattr(est, "fit_summary_", None)
+                edges = [self.results[("edge", i, seed, j)] for j in range(len(self.bench.scored))]
+            for k, p in enumerate(periods):
+                outs = [e[k] for e in edges] if r.role != "hindsight" else self.results[("hindsight", i, seed, k)][0]
+                if outs is None:
+                    errors.append(f"{r.label} {p.label}: fit raised {self.results[('hindsight', i, seed, k)][1]}")
+                    vals.append(dict(nan))
+                    continue
+                errors += [x.message for o in outs for x in o[2]]
+                vals.append(_period_values(outs, self.bench.one_hot))
+            per_seed.append(vals)
+        mean = [{m: float(np.mean([s[k][m] for s in per_seed])) for m in METRICS} for k in range(len(periods))]
+        return mean, errors, _fit_digest(summary)
 
 
 def _fit_digest(summary: Any) -> Any:
@@ -267,31 +356,49 @@ def run_state_benchmark(bench: Any, rows: Sequence[StateRow], opts: StateRunOpti
         bench: the benchmark.
         rows: from :func:`state_rows`.
         opts: protocol, setting, horizon, patrol and seeds.
-        executor: a ``concurrent.futures.Executor`` (one job per row), or None (inline).
-        progress: called as ``progress(done_rows, total_rows)``.
+        executor: a ``concurrent.futures.Executor``, or None (inline): a fit per row and seed, then one job
+            per scored edge of the fitted row (the hindsight row: one per period); the results are
+            assembled in the rows' order, the same as inline.
+        progress: called as ``progress(done_rows, total_rows)`` when a row's last job is done.
     """
-    values: dict[str, list[dict[str, float]]] = {}
-    errors: list[str] = []
-    fits: dict[str, Any] = {}
-    if executor is None:
-        results = {}
-        for k, r in enumerate(rows, 1):
-            results[r.label] = _row_job(bench, r, opts)
-            if progress is not None:
-                progress(k, len(rows))
-    else:
-        from concurrent.futures import as_completed
+    tasks = _Tasks(bench, rows, opts)
+    done_rows = 0
 
-        futs = {executor.submit(_row_job, bench, r, opts): r.label for r in rows}
-        results = {}
-        for k, fut in enumerate(as_completed(futs), 1):
-            results[futs[fut]] = fut.result()
-            if progress is not None:
-                progress(k, len(rows))
-    for r in rows:
-        values[r.label], errs, fits[r.label] = results[r.label]
-        errors += errs
+    def finished(key: _Key, value: Any) -> list[_Key]:
+        nonlocal done_rows
+        new, complete = tasks.done(key, value)
+        done_rows += complete
+        if complete and progress is not None:
+            progress(done_rows, len(rows))
+        return new
+
+    if executor is None:
+        todo = tasks.first()
+        while todo:
+            key = todo.pop(0)
+            fn, args = tasks.call(key)
+            todo[:0] = finished(key, fn(*args))
+    else:
+        _run_pool(tasks, executor, finished)
+    values, errors, fits = tasks.assemble()
     return StateRun(values, [p.label for p in bench.periods], errors, fits, opts, dict(bench.info))
+
+
+def _run_pool(tasks: _Tasks, executor: Any, finished: Callable[[_Key, Any], list[_Key]]) -> None:
+    """Submit the tasks, a fit's edge tasks as soon as it is done (so both workers stay busy to the end)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    def submit(key: _Key) -> Any:
+        fn, args = tasks.call(key)
+        return executor.submit(fn, *args)
+
+    pending = {submit(k): k for k in tasks.first()}
+    while pending:
+        ready, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+        for fut in ready:
+            key = pending.pop(fut)
+            for new in finished(key, fut.result()):
+                pending[submit(new)] = new
 
 
 def _interval(x: NDArray[np.float64]) -> tuple[float, float, float]:
@@ -364,7 +471,7 @@ def evaluate_state_benchmark(bench: Any, estimators: Sequence[str | EstimatorSpe
         estimators: registry names, or :class:`EstimatorSpec` with settings.
         protocol: ``published`` (fit on the training rows, forecast each period) or ``patrol``.
         references: also score the paper's methods and the reference rows (hindsight, baselines, chance).
-        jobs: worker processes (one row per job); 1 runs inline.
+        jobs: worker processes (a fit per row and seed, then one job per scored edge); 1 runs inline.
         **options: fields of :class:`StateRunOptions` (``setting``, ``horizon_s``, ``patrol``, ``seeds``,
             ``windows``).
 
