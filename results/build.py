@@ -696,12 +696,14 @@ def _waits(todo: list[Run], quick: bool) -> dict[str, set[str]]:
 
 
 def _last_cpu(runs_dir: Path, run: Run) -> float:
-    """The CPU seconds of the run's last recorded run (0: none): the longest start first."""
+    """The CPU seconds of the run's last recorded run: the longest start first; a run never made (inf) before
+    all, since it may be the longest (a new run left to the end would run alone).
+    """
     try:
         v = float(json.loads((runs_dir / run.id / "run.json").read_text(encoding="utf-8"))["cpu_s"])
     except (OSError, ValueError, KeyError, TypeError):
-        return 0.0
-    return v if math.isfinite(v) else 0.0
+        return math.inf
+    return v if math.isfinite(v) else math.inf
 
 
 def run_all(todo: list[Run], do: Any, *, jobs: int, waits: dict[str, set[str]], cost: Any, quiet: bool) -> None:

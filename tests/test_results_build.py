@@ -370,6 +370,14 @@ def test_an_alone_run_has_nothing_beside_it_and_a_failure_stops_new_starts() -> 
     assert started == ["bad"]
 
 
+def test_the_cost_of_a_run_is_its_last_cpu_and_a_new_run_goes_first(tmp_path: Path) -> None:
+    """Runs start costliest first by their last run.json's CPU seconds; a run never made counts as the costliest."""
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "run.json").write_text(json.dumps({"cpu_s": 12.5}))
+    assert build._last_cpu(tmp_path, build.Run("old", "", "x")) == 12.5
+    assert build._last_cpu(tmp_path, build.Run("new", "", "x")) == float("inf")
+
+
 def test_waits_name_used_runs_and_the_first_run_of_a_shared_setup() -> None:
     """Runs with one shared setup wait for the first of them (it builds {work}); a setup naming {out} is its
     own; ``uses`` of runs not being made are no wait.
