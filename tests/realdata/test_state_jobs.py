@@ -16,9 +16,10 @@ from psg_data.loaders.raw import read_door_benchmark, read_room_presence_benchma
 from tests.realdata._layout import write_door, write_rooms
 
 
-def _rows(specs: tuple[str, ...]):
+def _rows(specs: tuple[str | EstimatorSpec, ...]):
     """The user's rows and the reference rows (Perpetua and Perpetua*, slow on minute rows, left out)."""
-    return [r for r in state_rows([EstimatorSpec.of(s) for s in specs]) if r.label not in ("perpetua", "perpetua_star")]
+    specs_ = [s if isinstance(s, EstimatorSpec) else EstimatorSpec.of(s) for s in specs]
+    return [r for r in state_rows(specs_) if r.label not in ("perpetua", "perpetua_star")]
 
 
 def _doc(run: StateRun) -> str:
@@ -62,9 +63,10 @@ def test_pool_equals_inline_and_reports_rows(tmp_path: Path) -> None:
     from psg_data._pool import process_pool
 
     b = _bench("rooms", tmp_path)
-    rows = _rows(("fremen:max_order=3", "persistence_filter"))
+    rows = _rows((EstimatorSpec.of("fremen", max_order=3), "persistence_filter"))
     opts = StateRunOptions(protocol="patrol")
     inline = run_state_benchmark(b, rows, opts)
+    assert not inline.errors and "fremen:max_order=3" in inline.values  # a row with settings, fitted
     seen: list[tuple[int, int]] = []
     with process_pool(2) as pool:
         pooled = run_state_benchmark(b, rows, opts, executor=pool, progress=lambda d, n: seen.append((d, n)))
