@@ -20,12 +20,14 @@ this file through results/manifest.json's run ``fremen-orders``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # docs/: the shared results_out helper
+from results_out import refuse, write  # noqa: E402
 
 RULES = {"reference_on": "fremen", "reference_off": "fremen:order_rule=reference,duration_rule=off",
          "mae_on": "fremen:order_rule=mae,duration_rule=on", "mae_off": "fremen:order_rule=mae,duration_rule=off"}
@@ -54,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--dataset", default=None, help="a lab dataset folder (default: the demo lab)")
     p.add_argument("--train-weeks", type=int, default=4, help="the benchmark's training weeks (default 4)")
     a = p.parse_args(argv)
-    if (problem := _refuse(a.out)) is not None:
+    if (problem := refuse(a.out)) is not None:
         print(problem, file=sys.stderr)
         return 1
     import psg_data
@@ -67,30 +69,12 @@ def main(argv: list[str] | None = None) -> int:
            "lab": {k: orders_of(lab, s) for k, s in RULES.items()},
            "benchmark": {"draw": 0, "train_weeks": a.train_weeks,
                          **{k: orders_of(bench, s) for k, s in RULES.items()}}}
-    _write(a.out, doc)
+    write(a.out, doc)
     return 0
 
 
-def _write(out: Path, doc: dict[str, Any]) -> None:
-    """``out/results.json`` through psg-data's safe-output rule (staged beside ``out``, committed by rename)."""
-    from psg_data.writers._safe_output import commit_tree, make_staging
-
-    stage = make_staging(out.with_name(out.name + ".partial"))
-    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    commit_tree(stage, out, kind="results")
 
 
-def _refuse(out: Path | None) -> str | None:
-    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
-    from psg_data.errors import PsgDataError
-    from psg_data.writers._safe_output import check_output
-
-    try:
-        if out is not None:
-            check_output(out, overwrite=False, kind="results")
-    except PsgDataError as exc:
-        return f"error: {exc}"
-    return None
 
 
 if __name__ == "__main__":

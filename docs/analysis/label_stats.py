@@ -15,10 +15,12 @@ RESULTS.md section 5 renders its label statistics from this file (results/manife
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # docs/: the shared results_out helper
+from results_out import refuse, write  # noqa: E402
 
 
 def source_stats(dataset: Any, source: str) -> dict[str, Any]:
@@ -87,18 +89,16 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from psg_data.errors import PsgDataError
     from psg_data.loaders import open_dataset
-    from psg_data.writers._safe_output import check_output, commit_tree, make_staging
-
+    if (problem := refuse(a.out)) is not None:
+        print(problem, file=sys.stderr)
+        return 1
     try:
-        check_output(a.out, overwrite=False, kind="results")
         ds = open_dataset(a.dataset)
         doc = {"dataset": str(a.dataset), "sources": {src.split(":", 1)[0]: source_stats(ds, src) for src in a.source}}
     except PsgDataError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    stage = make_staging(a.out.with_name(a.out.name + ".partial"))
-    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    commit_tree(stage, a.out, kind="results")
+    write(a.out, doc)
     return 0
 
 

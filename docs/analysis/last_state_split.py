@@ -15,12 +15,13 @@ diagnostic, not the table's B-Acc, which is computed per edge and then averaged 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # docs/: the shared results_out helper
+from results_out import refuse, write  # noqa: E402
 
 NAMES = ("perpetua_star", "perpetua_star_annealed", "fremen", "time_of_week_frequency", "last_seen")
 
@@ -40,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="also write DIR/results.json (DIR must not exist)")
     a = ap.parse_args(argv)
-    if (problem := _refuse(a.out)) is not None:
+    if (problem := refuse(a.out)) is not None:
         print(problem, file=sys.stderr)
         return 1
     import psg_data
@@ -78,30 +79,12 @@ def main(argv: list[str] | None = None) -> int:
                          "tnr": float(tnr), "mean_rate": float((tpr + tnr) / 2)})
     if a.out is not None:
         table_bacc = {n: float(res.summary[n]["balanced_accuracy"].mean) for n in NAMES}
-        _write(a.out, {"horizon_s": horizon, "balanced_accuracy": table_bacc, "rows": rows})
+        write(a.out, {"horizon_s": horizon, "balanced_accuracy": table_bacc, "rows": rows})
     return 0
 
 
-def _write(out: Path, doc: dict[str, Any]) -> None:
-    """``out/results.json`` through psg-data's safe-output rule (staged beside ``out``, committed by rename)."""
-    from psg_data.writers._safe_output import commit_tree, make_staging
-
-    stage = make_staging(out.with_name(out.name + ".partial"))
-    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    commit_tree(stage, out, kind="results")
 
 
-def _refuse(out: Path | None) -> str | None:
-    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
-    from psg_data.errors import PsgDataError
-    from psg_data.writers._safe_output import check_output
-
-    try:
-        if out is not None:
-            check_output(out, overwrite=False, kind="results")
-    except PsgDataError as exc:
-        return f"error: {exc}"
-    return None
 
 
 if __name__ == "__main__":

@@ -18,6 +18,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # docs/: the shared results_out helper
+from results_out import refuse, write  # noqa: E402
+
 LABELS = ("gt", "noisy:0.1", "noisy:0.2", "privileged")
 
 
@@ -44,37 +47,15 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="write DIR/results.json (DIR must not exist) instead of printing")
     a = ap.parse_args(argv)
-    if (problem := _refuse(a.out)) is not None:
+    if (problem := refuse(a.out)) is not None:
         print(problem, file=sys.stderr)
         return 1
     doc = {"fits": fit_summaries()}
     if a.out is None:
         sys.stdout.write(json.dumps(doc, indent=1, default=str) + "\n")
     else:
-        _write(a.out, doc)
+        write(a.out, doc)
     return 0
 
 
-def _write(out: Path, doc: dict[str, Any]) -> None:
-    """``out/results.json`` through psg-data's safe-output rule (staged beside ``out``, committed by rename)."""
-    from psg_data.writers._safe_output import commit_tree, make_staging
 
-    stage = make_staging(out.with_name(out.name + ".partial"))
-    (stage / "results.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    commit_tree(stage, out, kind="results")
-
-
-def _refuse(out: Path | None) -> str | None:
-    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
-    from psg_data.errors import PsgDataError
-    from psg_data.writers._safe_output import check_output
-
-    try:
-        if out is not None:
-            check_output(out, overwrite=False, kind="results")
-    except PsgDataError as exc:
-        return f"error: {exc}"
-    return None
-
-if __name__ == "__main__":
-    sys.exit(main())

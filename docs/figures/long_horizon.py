@@ -15,11 +15,13 @@ absent and last seen present.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # docs/: the shared results_out helper
+from results_out import refuse, write  # noqa: E402
 
 
 def main(out: Path) -> dict[str, dict[str, float]]:
@@ -89,30 +91,9 @@ def cli(argv: list[str] | None = None) -> int:
     if a.out is None:
         main(a.png)
         return 0
-    if (problem := _refuse(a.out)) is not None:
+    if (problem := refuse(a.out)) is not None:
         print(problem, file=sys.stderr)
         return 1
-    from psg_data.writers._safe_output import commit_tree, make_staging
-
-    stage = make_staging(a.out.with_name(a.out.name + ".partial"))
-    averages = main(stage / "perpetua_star_long_horizon.png")
-    (stage / "results.json").write_text(json.dumps({"far_from_last_observation": averages}, indent=1) + "\n",
-                                        encoding="utf-8")
-    commit_tree(stage, a.out, kind="results")
+    write(a.out, lambda stage: {"far_from_last_observation": main(stage / "perpetua_star_long_horizon.png")})
     return 0
 
-
-def _refuse(out: Path | None) -> str | None:
-    """One error line if ``out`` may not be written (it exists, or lies in an input), else None."""
-    from psg_data.errors import PsgDataError
-    from psg_data.writers._safe_output import check_output
-
-    try:
-        if out is not None:
-            check_output(out, overwrite=False, kind="results")
-    except PsgDataError as exc:
-        return f"error: {exc}"
-    return None
-
-if __name__ == "__main__":
-    sys.exit(cli())
