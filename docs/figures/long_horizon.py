@@ -97,3 +97,6 @@ def cli(argv: list[str] | None = None) -> int:
     write(a.out, lambda stage: {"far_from_last_observation": main(stage / "perpetua_star_long_horizon.png")})
     return 0
 
+
+if __name__ == "__main__":
+    sys.exit(cli())
