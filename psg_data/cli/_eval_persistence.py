@@ -28,30 +28,29 @@ def _executor(jobs: int, scheduler: str | None) -> Any:
     return open_executor(jobs, scheduler)
 
 
-def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int, scheduler: str | None,
+def _one_dataset(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int, executor: Any,
                  quiet: bool, references: bool, keep_all: bool, label_seed: int) -> tuple[Any, Any, dict[str, Any]]:
     from psg_data.cli._eval_inputs import persistence_task_for, require_hints
     from psg_data.evaluation._persistence_job import fit_counts, persistence_rows, run_persistence_rows
     from psg_data.evaluation._report import choose_plot_edges
 
-    with _executor(jobs, scheduler) as executor:  # its workers start (import) while the dataset is read
-        task = persistence_task_for(choice, labels=labels, quiet=quiet, label_seed=label_seed)
-        require_hints(specs, task.estimator_hints, choice.label)
-        rows, roles = persistence_rows(specs, task.estimator_hints, references=references)
-        total = fit_counts(rows, task, options) * len(task.ground_truth)
-        keep = list(task.ground_truth) if keep_all else choose_plot_edges(task.ground_truth, k=4)
-        with Progress("evaluating", total=total, unit="edge runs", quiet=quiet) as prog:
-            def progress(done: int, _total: int) -> None:
-                prog.done = done
-                prog.update(0)
+    task = persistence_task_for(choice, labels=labels, quiet=quiet, label_seed=label_seed)
+    require_hints(specs, task.estimator_hints, choice.label)
+    rows, roles = persistence_rows(specs, task.estimator_hints, references=references)
+    total = fit_counts(rows, task, options) * len(task.ground_truth)
+    keep = list(task.ground_truth) if keep_all else choose_plot_edges(task.ground_truth, k=4)
+    with Progress("evaluating", total=total, unit="edge runs", quiet=quiet) as prog:
+        def progress(done: int, _total: int) -> None:
+            prog.done = done
+            prog.update(0)
 
-            result = run_persistence_rows(rows, task, options, jobs=jobs,
-                                          executor=executor, progress=progress, keep_predictions=keep)
+        result = run_persistence_rows(rows, task, options, jobs=jobs,
+                                      executor=executor, progress=progress, keep_predictions=keep)
     return result, task, roles
 
 
-def _scenes(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int, scheduler: str | None,
-            quiet: bool, references: bool, keep_all: bool = False) -> tuple[Any, Any, dict[str, Any]]:
+def _scenes(specs: list[Any], choice: Any, options: Any, labels: str, executor: Any,
+            quiet: bool, references: bool) -> tuple[Any, Any, dict[str, Any]]:
     """A folder of scene datasets (the navigation benchmark): each scene a draw, one job per scene."""
     from psg_data.cli._eval_inputs import available_hints
     from psg_data.datasets import navigation_benchmark_scenes
@@ -59,8 +58,7 @@ def _scenes(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int,
 
     paths = navigation_benchmark_scenes(choice.path)
     rows, roles = persistence_rows(specs, available_hints(choice.label), references=references)
-    with Progress(f"evaluating {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog, \
-            _executor(jobs, scheduler) as executor:
+    with Progress(f"evaluating {len(paths)} scenes", total=len(paths), unit="scenes", quiet=quiet) as prog:
         def progress(done: int, _total: int) -> None:
             prog.done = done
             prog.update(0)
@@ -69,16 +67,15 @@ def _scenes(specs: list[Any], choice: Any, options: Any, labels: str, jobs: int,
     return result, task, roles
 
 
-def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_seeds: tuple[int, ...], jobs: int,
-               scheduler: str | None, quiet: bool, references: bool,
-               label_seed: int) -> tuple[Any, Any, dict[str, Any]]:
+def _lab_draws(specs: list[Any], choice: Any, options: Any, labels: str, lab_seeds: tuple[int, ...],
+               executor: Any, quiet: bool, references: bool, label_seed: int) -> tuple[Any, Any, dict[str, Any]]:
     from psg_data.evaluation._persistence_job import draw_task, persistence_rows, run_lab_draws
 
     kind = "benchmark" if choice.kind == "benchmark" else "lab"
     hints = draw_task(kind, 0, labels).estimator_hints if kind == "lab" else {"schedules": {}}
     rows, roles = persistence_rows(specs, hints, references=references)
     with Progress(f"evaluating {len(lab_seeds)} regenerated {'labs' if kind == 'lab' else 'benchmark draws'}",
-                  total=len(lab_seeds), unit="draws", quiet=quiet) as prog, _executor(jobs, scheduler) as executor:
+                  total=len(lab_seeds), unit="draws", quiet=quiet) as prog:
         def progress(done: int, _total: int) -> None:
             prog.done = done
             prog.update(0)
@@ -99,20 +96,24 @@ def run_persistence(specs: list[Any], dataset: str | None, options: Any, labels:
 
     if lab_seeds is not None:
         choice = resolve_dataset(dataset, quiet=quiet) if dataset == "persistence-benchmark" else _lab_choice()
-        result, task, roles = _lab_draws(specs, choice, options, labels, lab_seeds, jobs, scheduler, quiet, references,
-                                         label_seed)
     else:
         choice = resolve_dataset(dataset, quiet=quiet)
-        if choice.kind == "scenes":
-            result, task, roles = _scenes(specs, choice, options, labels, jobs, scheduler, quiet, references,
-                                          keep_all=rerun_file is not None)
+    # one executor for the run and its figures; its workers start (import) while the dataset is read
+    with _executor(jobs, scheduler) as executor:
+        if lab_seeds is not None:
+            result, task, roles = _lab_draws(specs, choice, options, labels, lab_seeds, executor, quiet, references,
+                                             label_seed)
+        elif choice.kind == "scenes":
+            result, task, roles = _scenes(specs, choice, options, labels, executor, quiet, references)
         else:
-            result, task, roles = _one_dataset(specs, choice, options, labels, jobs, scheduler, quiet, references,
+            result, task, roles = _one_dataset(specs, choice, options, labels, jobs, executor, quiet, references,
                                                keep_all=rerun_file is not None, label_seed=label_seed)
-    info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **task.info,
-                       "lab_seeds": None if lab_seeds is None else list(lab_seeds),
-                       "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)} for s in specs}})
-    results = write_persistence_outputs(result, out, info=info, roles=roles, timezone=task.timezone, plots=not no_plots)
+        info = provenance({"task": "persistence", "dataset_label": choice.label, "labels": labels, **task.info,
+                           "lab_seeds": None if lab_seeds is None else list(lab_seeds),
+                           "estimator_specs": {s.label: {"name": s.name, "settings": dict(s.settings)}
+                                               for s in specs}})
+        results = write_persistence_outputs(result, out, info=info, roles=roles, timezone=task.timezone,
+                                            plots=not no_plots, executor=executor)
     if rerun_file is not None:
         _save_beliefs(result, rerun_file, overwrite)
     if table_format == "text":

@@ -185,26 +185,21 @@ def fit_counts(specs: Sequence[EstimatorSpec], task: PersistenceTask, options: P
 
 
 def write_persistence_outputs(result: PersistenceResult, out: Path, *, info: dict[str, Any], roles: Roles,
-                              timezone: str, plots: bool = True) -> Any:
+                              timezone: str, plots: bool = True, executor: Executor | None = None) -> Any:
     """Write the results schema, the CSV files and (``plots``) belief.png, bars.png, horizon.png.
+
+    With ``executor``, the figures are drawn there while this process writes the results
+    (:mod:`psg_data.evaluation._persistence_figures`); the files are the same.
 
     Returns:
         The :class:`~psg_data.evaluation.EvalResults` written.
     """
-    from psg_data.evaluation._persistence_plots import plot_beliefs, plot_horizon, plot_metric_bars
+    from psg_data.evaluation._persistence_figures import figure_calls, submit_figures, write_figures
     from psg_data.evaluation._report import persistence_results, write_persistence_results
 
     results = persistence_results(result, roles=roles, info=info)
+    calls = figure_calls(result, results, roles, timezone) if plots else {}
+    started = submit_figures(calls, executor)
     write_persistence_results(result, out, info=info, roles=roles, results=results)
-    if plots:
-        flat = [n for n, (role, _) in roles.items() if role == "chance"] + \
-            [n for n in result.estimators if n.endswith("output=median")]
-        if result.traces:
-            from psg_data.evaluation._report import choose_plot_edges
-
-            truth = {t.edge: (t.t_s, t.truth) for t in result.traces}
-            keep = set(choose_plot_edges(truth, k=4))  # all traces are kept when --rerun asks for them
-            plot_beliefs([t for t in result.traces if t.edge in keep], out / "belief.png", timezone=timezone, skip=flat)
-        plot_metric_bars(results, out / "bars.png")
-        plot_horizon(result, out / "horizon.png", skip=[n for n in flat if n != "always_absent"] + ["always_absent"])
+    write_figures(calls, out, started)
     return results
