@@ -81,6 +81,11 @@ class _EntityData:
     y: NDArray[np.int8]
 
 
+def median_of(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The 0/1 median of P(present) = ``p``: 1 where ``p >= 0.5`` (``output="median"``)."""
+    return (np.asarray(p) >= 0.5).astype(np.float64)
+
+
 class ProcessOracleEstimator(BaseEstimator):
     """The exact posterior under a synthetic dataset's stored generator model (see the module docstring).
 
@@ -120,6 +125,15 @@ class ProcessOracleEstimator(BaseEstimator):
         self.p_f = p_f
         self.share_updates = share_updates
         self.output = output
+
+    def derived_output(self) -> tuple[dict[str, Any], Any] | None:
+        """With ``output="median"``: (the parameters of the probability row, :func:`median_of`): its
+        predictions are the median of that row's, so psg-eval scores it from them (one filter per
+        edge); None otherwise.
+        """
+        if self.output != "median":
+            return None
+        return {**self.get_params(), "output": "probability"}, median_of
 
     def _load(self) -> Any:
         from psg_data.schemas._generator_model import load_process
@@ -392,7 +406,7 @@ class ProcessOracleFilter(BaseFilter):
             chain.append(self._fc_belief.snapshot())
             fc.append(float(self._fc_belief.state_marginal()[self._index]))
         p = np.asarray(fc)[steps]
-        return (p >= 0.5).astype(np.float64) if self._median else p
+        return median_of(p) if self._median else p
 
     def get_state(self) -> dict[str, Any]:
         return {"estimator": ProcessOracleEstimator.name, "edge": [self.edge[0], self.edge[1]],

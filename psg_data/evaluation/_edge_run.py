@@ -7,7 +7,7 @@ Runs inline or in worker processes (everything here is picklable plain data). Se
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +26,8 @@ from psg_data.evaluation._persistence_types import (
 )
 from psg_data.metrics._classification import _bacc_of, _f1_of
 
-__all__ = ["EdgeJob", "ScoreConfig", "run_edge", "run_chunk", "fit_estimator", "HORIZON_BINS_S", "horizon_bin_names"]
+__all__ = ["EdgeJob", "ScoreConfig", "run_edge", "run_edge_rows", "run_chunk", "fit_estimator", "HORIZON_BINS_S",
+           "horizon_bin_names"]
 
 HORIZON_BINS_S: tuple[float, ...] = (2 * 3600.0, 12 * 3600.0, 48 * 3600.0)
 """Upper edges of the horizon breakdown bins: < 2 h, 2-12 h, 12-48 h, > 48 h since the last observation."""
@@ -182,65 +183,105 @@ def _failure(what: str, e: Exception) -> str:
 
 
 EdgeOutcome = tuple[EdgeResult, list[BreakdownRow], list[EvaluationIssue], PredictionTrace | None]
+Derived = tuple[str, Callable[[NDArray[np.float64]], NDArray[np.float64]]]
+"""A row scored from another row's predictions: (its name, the map from those predictions to its own)."""
 
 
-def run_edge(name: str, seed: int, est: PersistenceEstimator, job: EdgeJob, cfg: ScoreConfig) -> EdgeOutcome:
-    """Filter, predict and score one edge for one fitted estimator; plugin failures become issues."""
+def _issue(name: str, seed: int, job: EdgeJob, stage: str, t: float | None, msg: str, n: int = 1) -> EvaluationIssue:
     obj, rec = str(job.edge[0]), str(job.edge[1])
+    where = f"estimator {name!r} seed {seed} edge ({obj!r}, {rec!r})"
+    when = f" at t_s={t!r}" if t is not None else ""
+    return EvaluationIssue(name, seed, obj, rec, stage, t, f"{where}: {msg}{when}", n)
 
-    def issue(stage: str, t: float | None, msg: str, n: int = 1) -> EvaluationIssue:
-        where = f"estimator {name!r} seed {seed} edge ({obj!r}, {rec!r})"
-        when = f" at t_s={t!r}" if t is not None else ""
-        return EvaluationIssue(name, seed, obj, rec, stage, t, f"{where}: {msg}{when}", n)
 
-    def result(status: str, n_points: int = 0, span: float = 0.0,
-               metrics: dict[str, float] | None = None) -> EdgeResult:
-        return EdgeResult(name, seed, obj, rec, status, n_points, span, int(job.hist_t.size), int(job.test_t.size),
-                          metrics if metrics is not None else nan_metrics(), job.draw)
+def _edge_result(name: str, seed: int, job: EdgeJob, status: str, n_points: int = 0, span: float = 0.0,
+                 metrics: dict[str, float] | None = None) -> EdgeResult:
+    return EdgeResult(name, seed, str(job.edge[0]), str(job.edge[1]), status, n_points, span, int(job.hist_t.size),
+                      int(job.test_t.size), metrics if metrics is not None else nan_metrics(), job.draw)
 
+
+Failure = tuple[str, "float | None", str]
+"""Where an edge's filter failed: (stage, time, message)."""
+
+
+def _filter_edge(est: PersistenceEstimator, job: EdgeJob, cfg: ScoreConfig
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | Failure:
+    """(beliefs, time of the last observation per evaluation time), or the failure; plugin failures
+    are caught here, never raised.
+    """
     try:
         f = est.make_filter(job.edge)
         if job.hist_t.size:
             f.update_many(job.hist_t, job.hist_y)
     except Exception as e:  # noqa: BLE001 - plugin failures are reported, not raised
         t0 = float(job.hist_t[0]) if job.hist_t.size else None
-        msg = _failure("filter creation/update with the training history", e)
-        return result("error"), [], [issue("history", t0, msg)], None
+        return "history", t0, _failure("filter creation/update with the training history", e)
     at = _Progress()
     try:
-        p, last = _predictions(f, job, cfg, at)
+        return _predictions(f, job, cfg, at)
     except PluginError as e:
         if e.invalid and e.t_s is not None:  # NaN or out of range: stage "prediction", at the first bad time
-            msg = "prediction is " + e.detail.removeprefix("returned ")
-            return result("error"), [], [issue("prediction", e.t_s, msg)], None
-        return result("error"), [], [issue(at.stage, at.t, str(e))], None
+            return "prediction", e.t_s, "prediction is " + e.detail.removeprefix("returned ")
+        return at.stage, at.t, str(e)
     except Exception as e:  # noqa: BLE001
         what = "update with a test observation" if at.stage == "update" else "predict"
-        return result("error"), [], [issue(at.stage, at.t, _failure(what, e))], None
+        return at.stage, at.t, _failure(what, e)
+
+
+def _score_edge(name: str, seed: int, job: EdgeJob, p: NDArray[np.float64], last: NDArray[np.float64],
+                cfg: ScoreConfig) -> EdgeOutcome:
+    """Check and score one row's beliefs ``p`` on one edge."""
     bad = ~np.isfinite(p) | (p < 0.0) | (p > 1.0)
     if np.any(bad):
         i = int(np.argmax(bad))
         kind = "NaN" if np.isnan(p[i]) else f"{float(p[i])!r} outside [0, 1]"
         msg = f"prediction is {kind} ({int(bad.sum())} of {p.size} evaluation times invalid)"
-        return result("error"), [], [issue("prediction", float(job.eval_t[i]), msg, int(bad.sum()))], None
+        iss = _issue(name, seed, job, "prediction", float(job.eval_t[i]), msg, int(bad.sum()))
+        return _edge_result(name, seed, job, "error"), [], [iss], None
     trace = (PredictionTrace(name, seed, job.edge, job.eval_t, p, job.eval_y, job.test_t, job.test_y, job.eval_w,
                              job.draw) if job.keep else None)
     from psg_data.metrics import mask_codes
 
     valid = mask_codes(job.eval_y, cfg.codes)
     if not valid.any():
-        return result("unscored"), [], [], trace
+        return _edge_result(name, seed, job, "unscored"), [], [], trace
     yv, pv, wv = job.eval_y[valid], p[valid], job.eval_w[valid]
     hb = _horizon_bins(job.eval_t[valid] - last[valid], cfg.horizon_bins_s)
     rows = _breakdowns(name, seed, job, yv, pv, wv, job.eval_wd[valid], hb, cfg)
     span = float(np.sum(wv))
     status = "ok" if span > 0 and math.isfinite(span) else "unscored"
-    return result(status, int(yv.size), span, _score(yv, pv, wv, cfg)), rows, [], trace
+    return _edge_result(name, seed, job, status, int(yv.size), span, _score(yv, pv, wv, cfg)), rows, [], trace
 
 
-def run_chunk(name: str, seed: int, est: PersistenceEstimator, jobs: Sequence[EdgeJob], cfg: ScoreConfig
-              ) -> list[EdgeOutcome]:
-    return [run_edge(name, seed, est, j, cfg) for j in jobs]
+def run_edge(name: str, seed: int, est: PersistenceEstimator, job: EdgeJob, cfg: ScoreConfig) -> EdgeOutcome:
+    """Filter, predict and score one edge for one fitted estimator; plugin failures become issues."""
+    return run_edge_rows(name, seed, est, job, cfg)[0]
+
+
+def run_edge_rows(name: str, seed: int, est: PersistenceEstimator, job: EdgeJob, cfg: ScoreConfig,
+                  derived: Sequence[Derived] = ()) -> list[EdgeOutcome]:
+    """:func:`run_edge`, and each ``derived`` row scored from the same predictions (one filter run);
+    a filter failure is an issue of every row.
+
+    Returns:
+        The outcome of ``name``, then one per derived row, in their order.
+    """
+    out = _filter_edge(est, job, cfg)
+    names = [name, *(d[0] for d in derived)]
+    if isinstance(out[0], str):
+        stage, t, msg = out  # type: ignore[misc]
+        return [(_edge_result(n, seed, job, "error"), [], [_issue(n, seed, job, stage, t, msg)], None) for n in names]
+    p, last = out
+    outcomes = [_score_edge(name, seed, job, p, last, cfg)]
+    for dname, fn in derived:
+        outcomes.append(_score_edge(dname, seed, job, np.asarray(fn(p), dtype=np.float64), last, cfg))
+    return outcomes
+
+
+def run_chunk(name: str, seed: int, est: PersistenceEstimator, jobs: Sequence[EdgeJob], cfg: ScoreConfig,
+              derived: Sequence[Derived] = ()) -> list[list[EdgeOutcome]]:
+    """:func:`run_edge` of each job: per job, the outcomes of ``name`` and of each derived row."""
+    return [run_edge_rows(name, seed, est, j, cfg, derived) for j in jobs]
 
 
 def fit_estimator(name: str, factory: Any, seed: int, train: Sequence[Any], val: Sequence[Any] | None,

@@ -55,14 +55,16 @@ from psg_data.errors import EvaluationError
 from psg_data.estimators._base import EdgeKey, EdgeStream, PersistenceEstimator
 from psg_data.estimators._guard import build, guarded_call
 from psg_data.evaluation._dataset_task import PersistenceTask
+from psg_data.evaluation._derived_rows import derived_rows
 from psg_data.evaluation._edge_run import (
+    Derived,
     EdgeJob,
     EdgeOutcome,
     ScoreConfig,
     fit_estimator,
     nan_metrics,
     run_chunk,
-    run_edge,
+    run_edge_rows,
 )
 from psg_data.evaluation._options import AUTO_SEEDS, PersistenceOptions
 from psg_data.evaluation._persistence_result import PersistenceResult
@@ -299,9 +301,24 @@ class _Run:
         self.fitted: dict[tuple[str, int], PersistenceEstimator | None] = {}
         self.fit_issues: dict[tuple[str, int], EvaluationIssue] = {}
         self.total = sum(len(s) for s in self.seeds.values()) * len(self.jobs)
+        self.derived = derived_rows({n: (f.name, dict(f.settings)) for n, f in self.factories.items()
+                                     if isinstance(f, RegistryFactory)}, self.seeds)
+        self.children: dict[str, list[Derived]] = {}
+        for d, row in self.derived.items():
+            self.children.setdefault(row.base, []).append((d, row.fn))
 
     def pairs(self) -> list[tuple[str, int]]:
         return [(n, s) for n in self.factories for s in self.seeds[n]]
+
+    def fit_pairs(self) -> list[tuple[str, int]]:
+        """The pairs that are fitted and filtered: all but the rows scored from another row's predictions."""
+        return [(n, s) for n, s in self.pairs() if n not in self.derived]
+
+    def store(self, name: str, seed: int, i: int, outs: list[EdgeOutcome]) -> None:
+        """Job ``i``'s outcomes of ``name`` and of its derived rows (:func:`run_edge_rows`' order)."""
+        for n, out in zip([name, *(d for d, _ in self.children.get(name, ()))], outs):
+            self.outcomes[(n, seed, i)] = out
+        self.advance(len(outs))
 
     def advance(self, k: int) -> None:
         self.done += k
@@ -309,13 +326,15 @@ class _Run:
             self.progress(self.done, self.total)
 
     def fit_failed(self, name: str, seed: int, msg: str) -> None:
-        self.fit_issues[(name, seed)] = EvaluationIssue(name, seed, None, None, "fit", None,
-                                                        f"estimator {name!r} seed {seed}: {msg}")
-        for i, j in enumerate(self.jobs):
-            self.outcomes[(name, seed, i)] = (EdgeResult(name, seed, j.edge[0], j.edge[1], "error", 0, 0.0,
-                                                         int(j.hist_t.size), int(j.test_t.size), nan_metrics(),
-                                                         j.draw), [], [], None)
-        self.advance(len(self.jobs))
+        """Every edge of ``name`` (and of its derived rows, whose fit is this one) an error."""
+        for n in [name, *(d for d, _ in self.children.get(name, ()))]:
+            self.fit_issues[(n, seed)] = EvaluationIssue(n, seed, None, None, "fit", None,
+                                                         f"estimator {n!r} seed {seed}: {msg}")
+            for i, j in enumerate(self.jobs):
+                self.outcomes[(n, seed, i)] = (EdgeResult(n, seed, j.edge[0], j.edge[1], "error", 0, 0.0,
+                                                          int(j.hist_t.size), int(j.test_t.size), nan_metrics(),
+                                                          j.draw), [], [], None)
+            self.advance(len(self.jobs))
 
     def fit_args(self, name: str, seed: int) -> tuple[Any, ...]:
         t = self.task
@@ -324,15 +343,14 @@ class _Run:
 
 
 def _execute_inline(run: _Run) -> None:
-    for name, seed in run.pairs():
+    for name, seed in run.fit_pairs():
         est, err = fit_estimator(*run.fit_args(name, seed))
         run.fitted[(name, seed)] = est
         if est is None:
             run.fit_failed(name, seed, str(err))
             continue
         for i, j in enumerate(run.jobs):
-            run.outcomes[(name, seed, i)] = run_edge(name, seed, est, j, run.cfg)
-            run.advance(1)
+            run.store(name, seed, i, run_edge_rows(name, seed, est, j, run.cfg, run.children.get(name, ())))
 
 
 def _worker_error(name: str, seed: int, jobs: int, e: BaseException) -> EvaluationError:
@@ -353,7 +371,7 @@ def _execute_pool(run: _Run, pool: Executor, jobs: int) -> None:
         except Exception as e:  # noqa: BLE001
             raise EvaluationError(f"estimator {name!r}: factory cannot be sent to worker processes (jobs={jobs}): "
                                   f"{type(e).__name__}: {e}; use jobs=1 or a picklable factory") from None
-    for name, seed in run.pairs():
+    for name, seed in run.fit_pairs():
         pending[pool.submit(fit_estimator, *run.fit_args(name, seed))] = ("fit", name, seed, [])
     while pending:
         finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
@@ -364,9 +382,8 @@ def _execute_pool(run: _Run, pool: Executor, jobs: int) -> None:
             except Exception as e:  # noqa: BLE001 - transport failures are configuration errors
                 raise _worker_error(name, seed, jobs, e) from None
             if kind == "edges":
-                for i, out in zip(idx, value):
-                    run.outcomes[(name, seed, i)] = out
-                run.advance(len(idx))
+                for i, outs in zip(idx, value):
+                    run.store(name, seed, i, outs)
                 continue
             est, err = value
             run.fitted[(name, seed)] = est
@@ -374,7 +391,8 @@ def _execute_pool(run: _Run, pool: Executor, jobs: int) -> None:
                 run.fit_failed(name, seed, str(err))
                 continue
             for ch in chunks:
-                fut2 = pool.submit(run_chunk, name, seed, est, [run.jobs[i] for i in ch], run.cfg)
+                fut2 = pool.submit(run_chunk, name, seed, est, [run.jobs[i] for i in ch], run.cfg,
+                                   run.children.get(name, []))
                 pending[fut2] = ("edges", name, seed, ch)
 
 
@@ -403,6 +421,9 @@ def _resolve_jobs(jobs: int) -> int:
 def _estimator_params(run: _Run) -> dict[str, Any]:
     params: dict[str, Any] = {}
     for name in run.factories:
+        if name in run.derived:
+            params[name] = run.derived[name].params
+            continue
         est = next((run.fitted[(name, s)] for s in run.seeds[name] if run.fitted.get((name, s)) is not None), None)
         try:
             params[name] = est.get_params() if est is not None else None
@@ -421,6 +442,7 @@ def _config(run: _Run, opts: PersistenceOptions) -> dict[str, Any]:
         "estimator_seeds": {n: list(s) for n, s in run.seeds.items()},
         "estimators": list(run.factories), "estimator_params": _estimator_params(run),
         "threshold_rule": "present iff belief >= threshold", "excluded_codes": list(opts.codes),
+        **({"derived_rows": {d: row.base for d, row in run.derived.items()}} if run.derived else {}),
         "n_edges": len(run.jobs), "n_objects": len({j.edge[0] for j in run.jobs}),
         "n_test_observations": int(sum(j.test_t.size for j in run.jobs)),
         "edge_weighting": "time-integrated metrics: scored time; sample metrics: scored points",
