@@ -187,17 +187,20 @@ def _prefix_products(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArr
 
     def scale(x: NDArray[np.float64]) -> NDArray[np.float64]:
         flat = x.reshape(x.shape[0], x.shape[1], n_s * n_s)
-        mx = flat[:, :, 0].copy()
-        for j in range(1, n_s * n_s):  # elementwise: much faster than a reduction over a tiny axis
-            np.maximum(mx, flat[:, :, j], out=mx)
+        if n_s > 3:  # a reduction over the S * S entries (measured faster from S = 4 on)
+            mx = flat.max(axis=2)
+        else:  # elementwise: much faster than a reduction over a tiny axis
+            mx = flat[:, :, 0].copy()
+            for j in range(1, n_s * n_s):
+                np.maximum(mx, flat[:, :, j], out=mx)
         np.maximum(mx, 1e-300, out=mx)
         x /= mx[:, :, None, None]
         return np.log(mx)
 
-    def matmul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    def matmul(a: NDArray[np.float64], b: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
         if n_s > 3:
-            return np.matmul(a, b)
-        out = np.zeros(a.shape)
+            return np.matmul(a, b, out=out)
+        out[...] = 0.0
         for i in range(n_s):
             for k in range(n_s):
                 for j in range(n_s):
@@ -205,12 +208,14 @@ def _prefix_products(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArr
         return out
 
     p = m.copy()
+    nxt = np.empty_like(p)  # each pass writes its products here, then the two swap (no copy of the T - d new ones)
     c = scale(p)
     d = 1
     while d < n_t:
-        q = matmul(p[:, :-d], p[:, d:])
+        q = matmul(p[:, :-d], p[:, d:], nxt[:, d:])
         cq = scale(q)
-        p[:, d:] = q
+        nxt[:, :d] = p[:, :d]
+        p, nxt = nxt, p
         c[:, d:] += c[:, :-d].copy() + cq
         d *= 2
     return p, c
