@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar, TypeVar
 
@@ -240,6 +241,8 @@ class BaseFilter:
     def predict(self, t_s: ArrayLike) -> NDArray[np.float64]:
         """P(present) at times ``t_s`` (any shape); times before the last observation are clamped to it."""
         t = np.asarray(t_s, dtype=np.float64)
+        if t.size == 1:
+            return self._predict_one(t)
         if not np.isfinite(t).all():
             raise EstimatorError(f"edge {self.edge}: query times must be finite")
         if self._last_t is not None:
@@ -249,6 +252,22 @@ class BaseFilter:
             return out  # a plugin's values as they are: psg-eval checks them and reports NaN or out of range
         # NaN -> 0.5, then [0, 1] (+-inf clip to 1 and 0, as nan_to_num's +-max would; two ufuncs, not nan_to_num)
         return np.clip(np.where(np.isnan(out), 0.5, out), 0.0, 1.0)
+
+    def _predict_one(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`predict` of a single time with Python floats around ``_predict``: the same numbers
+        without numpy's per-call cost (psg-eval's adaptive loop asks for one time per call).
+        """
+        x = float(t.reshape(-1)[0])
+        if not math.isfinite(x):
+            raise EstimatorError(f"edge {self.edge}: query times must be finite")
+        if self._last_t is not None and x < self._last_t:
+            x = self._last_t
+        out = np.asarray(self._predict(np.array([x])), dtype=np.float64).reshape(t.shape)
+        if not self._repairs_predictions:
+            return out
+        v = float(out.reshape(-1)[0])
+        v = 0.5 if v != v else 0.0 if v < 0.0 else 1.0 if v > 1.0 else v  # np.clip(np.where(isnan, 0.5, .)): -0.0 kept
+        return np.full(t.shape, v)
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:  # pragma: no cover
         raise NotImplementedError
