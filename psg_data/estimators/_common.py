@@ -267,7 +267,7 @@ class BaseFilter:
             return out
         v = float(out.reshape(-1)[0])
         v = 0.5 if v != v else 0.0 if v < 0.0 else 1.0 if v > 1.0 else v  # np.clip(np.where(isnan, 0.5, .)): -0.0 kept
-        return np.full(t.shape, v)
+        return np.float64(v) if t.ndim == 0 else np.full(t.shape, v)  # as numpy's ufuncs return a 0-d result
 
     def _update_many(self, t: NDArray[np.float64], y: NDArray[np.int8]) -> None:  # pragma: no cover
         raise NotImplementedError

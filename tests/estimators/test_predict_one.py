@@ -66,4 +66,5 @@ def test_repair_of_one_value_equals_the_array_repair(value: float) -> None:
     f.value = value
     one = f.predict(T0)
     assert one.tobytes() == f.predict(np.array([T0, T0]))[:1].tobytes()
+    assert type(one) is type(np.clip(np.asarray(value), 0.0, 1.0))  # a numpy scalar, as the array path gives
     assert 0.0 <= one <= 1.0
